@@ -1,0 +1,24 @@
+"""One exception tree. Library code raises these; only ``cli.py`` turns them into a line and an exit code."""
+
+from __future__ import annotations
+
+__all__ = ["ConfigError", "GndReplayError", "LogFormatError", "ScanMatchError"]
+
+
+class GndReplayError(Exception):
+    """Root of every error gndreplay raises on purpose (bad input, bad config)."""
+
+
+class LogFormatError(GndReplayError):
+    """A log cannot be read: missing, unknown format, truncated, corrupt, or no scans.
+
+    The message names the file and, when known, the line or record: ``"run3.clf line 42: ..."``.
+    """
+
+
+class ConfigError(GndReplayError):
+    """A configuration file or option is invalid; the message names the key (and the file)."""
+
+
+class ScanMatchError(GndReplayError):
+    """A scan-matching setup error (not a failed match: a failed match is a value, see MatchResult)."""

@@ -1,0 +1,1 @@
+"""Figures, tables and exports of a run directory."""

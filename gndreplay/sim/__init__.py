@@ -1,0 +1,1 @@
+"""Simulated worlds and logs (sample logs with ground truth, closed-loop scenarios)."""

@@ -1,0 +1,128 @@
+"""The records that flow between stages: Pose2D, Scan, Odometry, Command, Tick.
+
+Times are int nanoseconds (``t_ns``) everywhere inside; ``t_s`` properties convert at the edges. Every
+record is a frozen dataclass; arrays inside are not copied, treat them as read-only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .geometry import compose, inverse, wrap_angle
+
+__all__ = ["Command", "Odometry", "Pose2D", "Scan", "Tick"]
+
+NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True, slots=True)
+class Pose2D:
+    """A planar pose: x, y [m], theta [rad] wrapped to (-pi, pi]."""
+
+    x: float
+    y: float
+    theta: float
+
+    @staticmethod
+    def from_array(a: NDArray[np.float64]) -> Pose2D:
+        return Pose2D(float(a[0]), float(a[1]), float(wrap_angle(a[2])))
+
+    def as_array(self) -> NDArray[np.float64]:
+        return np.array([self.x, self.y, self.theta], dtype=np.float64)
+
+    def compose(self, other: Pose2D) -> Pose2D:
+        """self ∘ other."""
+        return Pose2D.from_array(compose(self.as_array(), other.as_array()))
+
+    def inverse(self) -> Pose2D:
+        return Pose2D.from_array(inverse(self.as_array()))
+
+
+IDENTITY = Pose2D(0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Scan:
+    """One 2D laser scan in the sensor frame.
+
+    Attributes:
+        t_ns: sensor time of the scan (header stamp / CARMEN ipc_timestamp), int ns.
+        ranges_m: (N,) float64. A finite value in [min_range_m, max_range_m) is a hit; ``+inf`` is a
+            no-return beam (at/beyond max range, or the log's no-return marker); ``nan`` is an invalid
+            beam (negative, below min range, corrupt). Neither inf nor nan adds an obstacle.
+        angles_rad: (N,) float64 beam bearings in the sensor frame, counter-clockwise, 0 ahead.
+        max_range_m: the sensor's maximum range [m].
+        min_range_m: the sensor's minimum range [m].
+        sensor_pose: the laser pose in the robot (base) frame.
+    """
+
+    t_ns: int
+    ranges_m: NDArray[np.float64]
+    angles_rad: NDArray[np.float64]
+    max_range_m: float
+    min_range_m: float = 0.0
+    sensor_pose: Pose2D = IDENTITY
+
+    @property
+    def t_s(self) -> float:
+        return self.t_ns / NS_PER_S
+
+    @property
+    def hits(self) -> NDArray[np.bool_]:
+        """(N,) mask of beams that returned an obstacle."""
+        return np.isfinite(self.ranges_m)
+
+    def points(self) -> NDArray[np.float64]:
+        """(M, 2) hit points in the sensor frame."""
+        ok = self.hits
+        r, a = self.ranges_m[ok], self.angles_rad[ok]
+        return np.column_stack([r * np.cos(a), r * np.sin(a)])
+
+
+@dataclass(frozen=True, slots=True)
+class Odometry:
+    """A robot odometry sample: pose in the odometry frame, optional twist (v [m/s], w [rad/s])."""
+
+    t_ns: int
+    pose: Pose2D
+    v_mps: float = float("nan")
+    w_radps: float = float("nan")
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """A velocity command: forward v [m/s], lateral vy [m/s] (holonomic only), turn rate w [rad/s]."""
+
+    t_ns: int
+    v_mps: float
+    w_radps: float
+    vy_mps: float = 0.0
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Tick:
+    """One step of a replay: a scan with the odometry interpolated at its stamp.
+
+    Attributes:
+        index: 0-based position in the time-ordered stream.
+        t_ns: the scan's sensor time.
+        scan: the scan.
+        odom: robot pose in the odometry frame at ``t_ns`` (interpolated).
+        cmd: the last recorded velocity command at or before ``t_ns``, if the log has any.
+        truth: a ground-truth / reference pose at ``t_ns`` if the log has one.
+    """
+
+    index: int
+    t_ns: int
+    scan: Scan
+    odom: Pose2D
+    cmd: Command | None = None
+    truth: Pose2D | None = None
+    extra: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def t_s(self) -> float:
+        return self.t_ns / NS_PER_S
