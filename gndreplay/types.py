@@ -6,6 +6,7 @@ record is a frozen dataclass; arrays inside are not copied, treat them as read-o
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -13,9 +14,32 @@ from numpy.typing import NDArray
 
 from .geometry import compose, inverse, wrap_angle
 
-__all__ = ["Command", "Odometry", "Pose2D", "Scan", "Tick"]
+__all__ = ["Command", "Flag", "Odometry", "Pose2D", "Scan", "Tick"]
 
 NS_PER_S = 1_000_000_000
+
+
+class Flag(enum.IntFlag):
+    """Exception flags a tick can raise (several at once). Names are what reports and CSVs show."""
+
+    NONE = 0
+    MATCH_FAILED = enum.auto()
+    PLANNER_NO_PATH = enum.auto()
+    PLANNER_TIMEOUT = enum.auto()
+    GOAL_IN_OBSTACLE = enum.auto()
+    REACTOR_NO_REGION = enum.auto()
+    EMERGENCY_STOP = enum.auto()
+    STALE_SCAN = enum.auto()
+    TRAP_DETECTED = enum.auto()
+    GOAL_REACHED = enum.auto()
+    MATCH_OVER_BUDGET = enum.auto()
+    MODEL_OVER_BUDGET = enum.auto()
+    PLANNER_OVER_BUDGET = enum.auto()
+    REACTOR_OVER_BUDGET = enum.auto()
+
+    def names(self) -> list[str]:
+        """Member names set in this value, in declaration order (stable for CSV output)."""
+        return [m.name for m in Flag if m.value and (self & m) == m and m.name]
 
 
 @dataclass(frozen=True, slots=True)
