@@ -1,0 +1,379 @@
+"""Model builder: the robot-centred ternary occupancy grid of GND and of the wheelchair paper.
+
+The grid is square, world-aligned (never rotated) and follows the robot's position in whole cells. Each scan
+is traced with Bresenham from the laser pose: the cells on the way become FREE, the hit cell OCCUPIED, so
+every new scan overwrites what it covers and people who walked away disappear (GND Fig. 2). When the robot
+leaves the central control zone the whole array is shifted by an integer number of cells in one slice copy
+(new cells UNKNOWN), so no cell is ever resampled.
+
+Frames and indices: ``cells[row, col]`` with row along world y and col along world x. The grid sits on a
+world lattice of pitch ``cell_m``: local cell (row, col) is world lattice cell
+(``offset_cells[0] + row``, ``offset_cells[1] + col``) and covers
+``[(offset + index) * cell_m, (offset + index + 1) * cell_m)`` on each axis. The offset is an integer,
+so a shift preserves every cell's world position exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import ConfigError
+from ..types import Pose2D, Scan
+
+__all__ = [
+    "FREE",
+    "GRID_200",
+    "GRID_400",
+    "OCCUPIED",
+    "UNKNOWN",
+    "GridParams",
+    "IntegrateStats",
+    "RobotCentredGrid",
+    "shift_cells",
+]
+
+UNKNOWN = np.uint8(0)
+FREE = np.uint8(1)
+OCCUPIED = np.uint8(2)
+
+
+@dataclass(frozen=True, slots=True)
+class GridParams:
+    """Size and update rules of the robot-centred grid.
+
+    Attributes:
+        size_cells: N, the grid is N x N cells.
+        cell_m: cell side [m].
+        control_zone_m: side of the central square the robot may move in before the grid is re-centred
+            [m]; None means N * cell_m / 4 (**choice**, the papers give no value).
+        free_clip_m: a no-return beam clears free space up to min(max_range_m, free_clip_m) [m]
+            (**choice**: 8 m; a no-return says nothing certain about far space).
+        invalid_clears: whether an invalid (nan) beam also clears free space like a no-return.
+            **Choice**, default False: an invalid beam may be a reading below the minimum range, i.e. an
+            obstacle touching the sensor, so clearing along it could erase a real obstacle. Logs that
+            encode no-return as NaN should be mapped to +inf by their reader, or set this to True.
+    """
+
+    size_cells: int = 400
+    cell_m: float = 0.05
+    control_zone_m: float | None = None
+    free_clip_m: float = 8.0
+    invalid_clears: bool = False
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.size_cells, int) or self.size_cells < 4:
+            raise ConfigError(f"grid.size_cells must be an int >= 4, got {self.size_cells!r}")
+        if not self.cell_m > 0.0:
+            raise ConfigError(f"grid.cell_m must be > 0, got {self.cell_m!r}")
+        side = self.size_cells * self.cell_m
+        if self.control_zone_m is not None and not 0.0 <= self.control_zone_m <= side:
+            raise ConfigError(
+                f"grid.control_zone_m must be in [0, {side:g}] (the grid side), got {self.control_zone_m!r}"
+            )
+        if not self.free_clip_m >= 0.0:
+            raise ConfigError(f"grid.free_clip_m must be >= 0, got {self.free_clip_m!r}")
+
+    @property
+    def side_m(self) -> float:
+        """Side of the grid [m]."""
+        return self.size_cells * self.cell_m
+
+    @property
+    def control_zone_side_m(self) -> float:
+        """Resolved control-zone side [m]."""
+        return self.side_m / 4.0 if self.control_zone_m is None else self.control_zone_m
+
+
+GRID_400 = GridParams(400, 0.05)  # wheelchair paper: 20 x 20 m
+GRID_200 = GridParams(200, 0.05)  # GND on the XR4000: 10 x 10 m
+
+
+@dataclass(frozen=True, slots=True)
+class IntegrateStats:
+    """What one ``integrate`` call did.
+
+    Attributes:
+        shifted_cells: (d_row, d_col) the grid moved by before tracing; (0, 0) without re-centring.
+        beams_traced: beams that changed the grid (hits and clearing no-return beams inside the grid).
+        hits: beams whose hit fell inside the grid and was marked OCCUPIED.
+    """
+
+    shifted_cells: tuple[int, int]
+    beams_traced: int
+    hits: int
+
+
+def shift_cells(cells: NDArray[np.uint8], d_row: int, d_col: int) -> NDArray[np.uint8]:
+    """Grid contents after moving the grid origin by (d_row, d_col) cells: ``new[r, c] = old[r + d_row,
+    c + d_col]``; cells with no source are UNKNOWN. One slice copy into a fresh (R, C) uint8 array."""
+    n_r, n_c = cells.shape
+    out = np.full_like(cells, UNKNOWN)
+    if abs(d_row) >= n_r or abs(d_col) >= n_c:
+        return out
+    out[max(-d_row, 0) : n_r - max(d_row, 0), max(-d_col, 0) : n_c - max(d_col, 0)] = cells[
+        max(d_row, 0) : n_r + min(d_row, 0), max(d_col, 0) : n_c + min(d_col, 0)
+    ]
+    return out
+
+
+@njit(cache=True)
+def _clip_segment(
+    x0: float, y0: float, x1: float, y1: float, hi: float
+) -> tuple[bool, float, float, float, float, bool]:
+    """Liang-Barsky clip of a segment (cell units) to the box [0, hi]^2.
+
+    Returns (visible, x0, y0, x1, y1, end_inside)."""
+    dx, dy = x1 - x0, y1 - y0
+    t0, t1 = 0.0, 1.0
+    for p, q in ((-dx, x0), (dx, hi - x0), (-dy, y0), (dy, hi - y0)):
+        if p == 0.0:
+            if q < 0.0:
+                return False, x0, y0, x1, y1, False
+        else:
+            t = q / p
+            if p < 0.0:
+                t0 = max(t0, t)
+            else:
+                t1 = min(t1, t)
+    if t0 > t1:
+        return False, x0, y0, x1, y1, False
+    return True, x0 + t0 * dx, y0 + t0 * dy, x0 + t1 * dx, y0 + t1 * dy, t1 >= 1.0
+
+
+@njit(cache=True)
+def _trace_free(cells: NDArray[np.uint8], c0: int, r0: int, c1: int, r1: int, include_end: bool) -> None:
+    """Bresenham (8-connected, all octants) from cell (r0, c0) to (r1, c1): mark FREE, the end cell only
+    when ``include_end``. Both ends must be inside the grid."""
+    dc = abs(c1 - c0)
+    dr = -abs(r1 - r0)
+    sc = 1 if c0 < c1 else -1
+    sr = 1 if r0 < r1 else -1
+    err = dc + dr
+    c, r = c0, r0
+    while True:
+        if c == c1 and r == r1:
+            if include_end:
+                cells[r, c] = 1
+            return
+        cells[r, c] = 1
+        e2 = 2 * err
+        if e2 >= dr:
+            err += dr
+            c += sc
+        if e2 <= dc:
+            err += dc
+            r += sr
+
+
+@njit(cache=True)
+def _integrate_kernel(
+    cells: NDArray[np.uint8],
+    ranges: NDArray[np.float64],
+    angles: NDArray[np.float64],
+    sx: float,
+    sy: float,
+    sth: float,
+    inv_cell: float,
+    min_range: float,
+    max_range: float,
+    clear_range: float,
+    invalid_clears: bool,
+) -> tuple[int, int]:
+    """Trace every beam from the laser at (sx, sy) [cell units, local grid] with heading sth [rad].
+
+    Pass 1 clears free space along all rays; pass 2 marks the hits, so no ray of the same scan can erase
+    another ray's hit. Returns (beams_traced, hits)."""
+    n = cells.shape[0]
+    hi = n * (1.0 - 1e-12)  # floor(hi) == n - 1
+    m = ranges.shape[0]
+    end_r = np.empty(m, np.int64)
+    end_c = np.empty(m, np.int64)
+    is_hit = np.zeros(m, np.bool_)
+    traced = 0
+    for i in range(m):
+        r = ranges[i]
+        hit = False
+        if math.isnan(r) or r < min_range:
+            if not invalid_clears:
+                continue
+            length = clear_range
+        elif r >= max_range or math.isinf(r):  # +inf or a finite no-return marker
+            length = clear_range
+        else:
+            length = r
+            hit = True
+        if length <= 0.0:
+            continue
+        a = sth + angles[i]
+        ex = sx + length * inv_cell * math.cos(a)
+        ey = sy + length * inv_cell * math.sin(a)
+        visible, x0, y0, x1, y1, end_inside = _clip_segment(sx, sy, ex, ey, hi)
+        if not visible:
+            continue
+        c0 = min(max(math.floor(x0), 0), n - 1)
+        r0 = min(max(math.floor(y0), 0), n - 1)
+        c1 = min(max(math.floor(x1), 0), n - 1)
+        r1 = min(max(math.floor(y1), 0), n - 1)
+        hit = hit and end_inside
+        _trace_free(cells, c0, r0, c1, r1, not hit)
+        traced += 1
+        end_r[i], end_c[i], is_hit[i] = r1, c1, hit
+    hits = 0
+    for i in range(m):
+        if is_hit[i]:
+            cells[end_r[i], end_c[i]] = 2
+            hits += 1
+    return traced, hits
+
+
+class RobotCentredGrid:
+    """The robot-centred grid: the only state the model builder carries between ticks.
+
+    Attributes:
+        params: the grid parameters.
+        cells: (N, N) uint8 of UNKNOWN / FREE / OCCUPIED, ``cells[row, col]``, row along world y.
+            Re-centring replaces the array: read ``grid.cells`` again after each ``integrate``.
+    """
+
+    def __init__(self, params: GridParams = GRID_400, centre_xy: tuple[float, float] = (0.0, 0.0)) -> None:
+        """Create an all-UNKNOWN grid centred (to the cell) on ``centre_xy`` [m, world]."""
+        self.params = params
+        n = params.size_cells
+        self.cells: NDArray[np.uint8] = np.full((n, n), UNKNOWN, dtype=np.uint8)
+        self._off_row, self._off_col = self._centred_offset(centre_xy[0], centre_xy[1])
+
+    # ---- geometry -------------------------------------------------------------------------------
+
+    @property
+    def offset_cells(self) -> tuple[int, int]:
+        """(row, col) world-lattice index of local cell (0, 0)."""
+        return self._off_row, self._off_col
+
+    @property
+    def origin_xy(self) -> tuple[float, float]:
+        """World position [m] of the outer corner of cell (0, 0) (its minimum x and y)."""
+        c = self.params.cell_m
+        return self._off_col * c, self._off_row * c
+
+    def _centred_offset(self, x: float, y: float) -> tuple[int, int]:
+        """Offset that puts world point (x, y) in local cell (N // 2, N // 2)."""
+        c, half = self.params.cell_m, self.params.size_cells // 2
+        return math.floor(y / c) - half, math.floor(x / c) - half
+
+    def world_to_cell_float(self, xy: ArrayLike) -> NDArray[np.float64]:
+        """(M, 2) world points [m] -> (M, 2) continuous (row, col) in cell units: cell (r, c) spans
+        [r, r + 1) x [c, c + 1), its centre is (r + 0.5, c + 0.5). Not bounds-checked."""
+        p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        c = self.params.cell_m  # divide (not multiply by 1/c) so floor() agrees with world_to_cell
+        return np.column_stack([p[:, 1] / c - self._off_row, p[:, 0] / c - self._off_col])
+
+    def world_to_cell(self, xy: ArrayLike) -> NDArray[np.int64]:
+        """(M, 2) world points [m] -> (M, 2) int (row, col) of the cells containing them (may lie outside
+        the grid: see ``contains``)."""
+        p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        c = self.params.cell_m
+        rows = np.floor(p[:, 1] / c).astype(np.int64) - self._off_row
+        cols = np.floor(p[:, 0] / c).astype(np.int64) - self._off_col
+        return np.column_stack([rows, cols])
+
+    def cells_to_world(self, rc: ArrayLike) -> NDArray[np.float64]:
+        """(M, 2) (row, col) cell indices (int or float) -> (M, 2) world (x, y) [m] of the cell centres;
+        the integer lattice index is formed first so a cell's position is exact and shift-invariant."""
+        a = np.asarray(rc).reshape(-1, 2)
+        c = self.params.cell_m
+        if np.issubdtype(a.dtype, np.integer):
+            return np.column_stack([(a[:, 1] + self._off_col + 0.5) * c, (a[:, 0] + self._off_row + 0.5) * c])
+        a = a.astype(np.float64)
+        return np.column_stack([(a[:, 1] + (self._off_col + 0.5)) * c, (a[:, 0] + (self._off_row + 0.5)) * c])
+
+    def contains(self, rc: ArrayLike) -> NDArray[np.bool_]:
+        """(M,) mask of (row, col) indices inside the grid."""
+        a = np.asarray(rc).reshape(-1, 2)
+        n = self.params.size_cells
+        return (a[:, 0] >= 0) & (a[:, 0] < n) & (a[:, 1] >= 0) & (a[:, 1] < n)
+
+    def robot_cell(self, robot_pose: Pose2D) -> tuple[int, int]:
+        """(row, col) of the cell containing the robot's rotation centre."""
+        c = self.params.cell_m
+        return math.floor(robot_pose.y / c) - self._off_row, math.floor(robot_pose.x / c) - self._off_col
+
+    # ---- update ---------------------------------------------------------------------------------
+
+    def recentre(self, robot_pose: Pose2D) -> tuple[int, int]:
+        """If the robot is outside the control zone, shift the grid so it sits in the centre cell.
+
+        Returns the (d_row, d_col) shift applied, (0, 0) when the robot is inside the zone."""
+        p = self.params
+        half_zone = 0.5 * p.control_zone_side_m / p.cell_m
+        centre = 0.5 * p.size_cells
+        u = robot_pose.x / p.cell_m - self._off_col
+        v = robot_pose.y / p.cell_m - self._off_row
+        if abs(u - centre) <= half_zone and abs(v - centre) <= half_zone:
+            return 0, 0
+        off_row, off_col = self._centred_offset(robot_pose.x, robot_pose.y)
+        d_row, d_col = off_row - self._off_row, off_col - self._off_col
+        self.cells = shift_cells(self.cells, d_row, d_col)
+        self._off_row, self._off_col = off_row, off_col
+        return d_row, d_col
+
+    def integrate(self, scan: Scan, robot_pose: Pose2D) -> IntegrateStats:
+        """Re-centre if needed, then trace ``scan`` from the laser pose ``robot_pose ∘ scan.sensor_pose``.
+
+        Hits (finite ranges in [min_range_m, max_range_m)) clear the ray and mark the hit cell OCCUPIED;
+        no-return beams (+inf or >= max_range_m) clear up to min(max_range_m, free_clip_m) and add no
+        obstacle; invalid beams (nan or < min_range_m) are skipped unless ``params.invalid_clears``.
+        Rays are clipped at the grid border; a hit outside the grid adds no obstacle."""
+        shift = self.recentre(robot_pose)
+        p = self.params
+        sp = scan.sensor_pose
+        ct, st = math.cos(robot_pose.theta), math.sin(robot_pose.theta)
+        lx = robot_pose.x + ct * sp.x - st * sp.y
+        ly = robot_pose.y + st * sp.x + ct * sp.y
+        inv = 1.0 / p.cell_m
+        max_range = float(scan.max_range_m) if scan.max_range_m > 0.0 else math.inf  # nan/0: no limit
+        ranges = np.ascontiguousarray(scan.ranges_m, dtype=np.float64)
+        angles = np.ascontiguousarray(scan.angles_rad, dtype=np.float64)
+        if ranges.shape != angles.shape or ranges.ndim != 1:
+            raise ValueError(f"scan ranges {ranges.shape} and angles {angles.shape} must be equal 1-D shapes")
+        traced, hits = _integrate_kernel(
+            self.cells,
+            ranges,
+            angles,
+            lx / p.cell_m - self._off_col,
+            ly / p.cell_m - self._off_row,
+            robot_pose.theta + sp.theta,
+            inv,
+            float(scan.min_range_m),
+            max_range,
+            min(max_range, p.free_clip_m),
+            p.invalid_clears,
+        )
+        return IntegrateStats(shifted_cells=shift, beams_traced=int(traced), hits=int(hits))
+
+    # ---- views ----------------------------------------------------------------------------------
+
+    def occupied_points(self, robot_pose: Pose2D, radius_m: float) -> NDArray[np.float64]:
+        """(K, 2) centres of OCCUPIED cells within ``radius_m`` of the robot, in the ROBOT frame [m].
+
+        The reactor's memory: obstacles seen by earlier scans stay available while the grid keeps them.
+        Order is row-major over the grid (deterministic)."""
+        p = self.params
+        n, c = p.size_cells, p.cell_m
+        row, col = self.robot_cell(robot_pose)
+        h = math.ceil(radius_m / c) + 1
+        r0, r1 = max(row - h, 0), min(row + h + 1, n)
+        c0, c1 = max(col - h, 0), min(col + h + 1, n)
+        if r0 >= r1 or c0 >= c1:
+            return np.zeros((0, 2))
+        rows, cols = np.nonzero(self.cells[r0:r1, c0:c1] == OCCUPIED)
+        dx = (cols + (c0 + self._off_col) + 0.5) * c - robot_pose.x
+        dy = (rows + (r0 + self._off_row) + 0.5) * c - robot_pose.y
+        keep = dx * dx + dy * dy <= radius_m * radius_m
+        dx, dy = dx[keep], dy[keep]
+        ct, st = math.cos(robot_pose.theta), math.sin(robot_pose.theta)
+        return np.column_stack([ct * dx + st * dy, -st * dx + ct * dy])

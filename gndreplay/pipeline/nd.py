@@ -1,0 +1,587 @@
+"""ND+ reactor (Nearness Diagram navigation, ND+ form) for a circular or rectangular robot.
+
+One call, :func:`nd_step`, turns obstacle points around the robot (taken from the occupancy grid, which is
+the reactor's memory, not only the last scan) and a goal into a motion direction, a situation and a velocity
+command. The steps and laws follow ALGORITHMS.md section 5, checked against the authors' released ND+ code
+(J. Minguez, J. Osuna, "nd.c", as shipped in the Player ``nd`` driver); the differences are listed below.
+
+Frames and sectors
+    Robot frame: x forward, y left, angles counter-clockwise, 0 ahead, wrapped to (-pi, pi]; the origin is
+    the rotation centre (the driving axle of a differential robot). With ``n`` sectors of width
+    ``delta = 2 pi / n``, sector ``i`` covers the angles ``[(i - 1/2) delta, (i + 1/2) delta)`` (mod 2 pi)
+    and its bisector is ``i * delta`` wrapped: sector 0 is straight ahead, ``n/4`` is +pi/2 (left), ``n/2``
+    is pi (behind, its interval straddles the -pi/pi wrap) and ``3n/4`` is -pi/2 (right). Indices increase
+    counter-clockwise. A point exactly on a boundary goes to the counter-clockwise sector. A region
+    ``(first, last)`` runs counter-clockwise from ``first`` (its right end) to ``last`` (its left end); it
+    wraps through sector 0 (a region straight ahead) when ``first > last``.
+
+Per sector i: ``d_i`` the distance to the closest obstacle point (inf: no point closer than
+``max_range_m``), ``E_i`` the distance from the origin to the robot boundary along the bisector,
+``S_i`` the distance to the security perimeter (``ds_i = S_i - E_i``: security distance beyond the
+boundary). An obstacle is dangerous when ``d_i <= S_i``; its clearance ratio is ``(d_i - E_i) / ds_i``.
+
+Steps (ALGORITHMS.md section 5, ND+ code)
+    1. Sectors: the closest point of each sector (distance and its own angle), moved out to at least
+       ``E_i + contact_m``. Gaps: sectors i, i+1 with exactly one free, or distances differing by >= W
+       (robot width, or diameter for a circle). A gap's rising side is its farther (or free) side.
+    2. Free walking area: if the goal is in view (its sector free, or the goal nearer than the obstacle
+       there) and navigable, the goal's region; else the gaps in order of angular distance from the goal
+       sector (the nearer of left / right first, left on ties), each tested for navigability toward its
+       sub-goal (midpoint of its two points; far out along their bisector when one side is free); the
+       first navigable one selects the region on its rising side. None: ``Flag.REACTOR_NO_REGION``.
+       The navigability test uses the closest point of each sector, as the code does.
+    3. Situation: dangerous obstacles are split left / right of the region direction (goal or sub-goal).
+       None: HSGR (goal region), HSWR (region wider than smax), HSNR. One side: LSG (goal region) or LS1.
+       Both: LS2.
+    4. Direction: HSGR goal; HSNR region bisector; HSWR ``a_c -/+ atan2(W/2 + Ds, r_c)`` past the gap's
+       near point (the corner), into the region; LS1/LSG ``r theta_p + (1 - r) theta_b`` with theta_p the
+       HS direction and theta_b away from the closest dangerous obstacle, r its clearance ratio; LS2
+       ``theta_p + (cl - cr)/(cl + cr) (theta_p + pi/2)`` if cl <= cr else ``... (pi/2 - theta_p)``.
+    5. Speed ``v_ND = vmax * min(c_left, c_right)`` (1 for a side without dangerous obstacles), then the
+       mapping to the base (:func:`_drive`).
+
+Differences from ALGORITHMS.md / the released code, and why
+    * LS2 uses the documented law when the region direction theta_p is ahead (|theta_p| <= pi/2). For a
+      region behind, the law (written with the robot's lateral directions +-pi/2 as bounds) would steer
+      toward the closer obstacle, so it is applied in the frame turned by pi (the robot's back as front).
+    * Left/right of the region direction is decided on the wrapped difference ``wrap(a - theta_p) >= 0``;
+      the code compares raw angles, which misclassifies obstacles across the +-pi wrap.
+    * The LS1/LSG blend is clamped to +-(pi - 0.01) when it leaves (-pi, pi], keeping the turning side;
+      the code's negative clamp ``-(pi + 0.01)`` wraps to the wrong side.
+    * The goal is tested for navigability whenever it is in view (the code skips the test when there are
+      fewer than two discontinuities), and a region with one discontinuity uses its rising side (the code
+      always takes the same side because of a pointer-for-value slip).
+    * ``E_i`` of a rectangle is the exact rectangle about the rotation centre (the code replaces the front
+      edge by the circle through the front corners). The security perimeter is the code's: ``Ds/4`` behind
+      the rear edge, circles of ``Ds/4`` and ``Ds`` about the rear and front corners joined by their
+      tangent, and in front the circle of radius ``|front corner| + Ds`` about the rotation centre (what
+      the front corners sweep when the vehicle turns, plus Ds). So ``ds`` is ``Ds/4`` behind and
+      ``Ds + |front corner| - front`` straight ahead. A circle has ``ds = Ds`` all round (code).
+    * Not ported (the supervisor owns them): the code's front emergency stop, and the rectangular robot's
+      rear "cutting" correction, which needs the previous velocities.
+"""
+
+from __future__ import annotations
+
+import enum
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import ConfigError
+from ..robot import RobotConfig
+from ..types import Flag
+
+__all__ = [
+    "NdParams",
+    "NdResult",
+    "Situation",
+    "nd_step",
+    "robot_boundary_m",
+    "sector_angles",
+    "sector_of",
+    "security_boundary_m",
+]
+
+F64 = NDArray[np.float64]
+
+_FAR_M = 1e6  # distance of the sub-goal through a discontinuity whose far side is free (the code's)
+_HALF_PI = 0.5 * math.pi
+_LS_CLAMP = math.pi - 0.01
+_SECTOR_OFFSET = 0.5 + 1e-9  # round to the nearest bisector; a boundary goes counter-clockwise
+
+
+class Situation(enum.Enum):
+    """ND+ navigational situations (decision tree of ALGORITHMS.md section 5); NONE when no region."""
+
+    LS1 = "LS1"  # low safety, dangerous obstacles on one side, goal not in the region
+    LSG = "LSG"  # low safety, dangerous obstacles on one side, goal in the region
+    LS2 = "LS2"  # low safety, dangerous obstacles on both sides
+    HSGR = "HSGR"  # high safety, goal in the region
+    HSWR = "HSWR"  # high safety, wide region (> smax)
+    HSNR = "HSNR"  # high safety, narrow region
+    NONE = "NONE"  # no navigable region (Flag.REACTOR_NO_REGION)
+
+
+@dataclass(frozen=True, slots=True)
+class NdParams:
+    """ND+ settings.
+
+    Attributes:
+        n_sectors: number of sectors (180 = 2 deg each, the ND+ code); a multiple of 4, so that 0, +-pi/2
+            and pi are sector bisectors.
+        security_m: security distance Ds [m] (the ND+ code's ``dsmax``, 0.5 m default).
+        security_rear_ratio: rectangle only: security distance behind the rear edge as a fraction of Ds
+            (the code's ``dsmin = dsmax / 4``).
+        max_range_m: obstacle points farther than this [m] are ignored; a sector with none is free.
+            **Choice**: 5 m, the half-size of GND's 10 x 10 m grid.
+        smax_rad: regions wider than this [rad] are "wide" (HSWR; LS1 passes the corner), else narrow.
+        gap_m: width [m] a discontinuity must open and the navigability tunnel must keep free; ``None``
+            uses the robot's width (rectangle) or diameter (circle), as the code does.
+        contact_m: a point inside the robot boundary is moved out to ``E_i + contact_m`` [m] (code: 1 cm).
+    """
+
+    n_sectors: int = 180
+    security_m: float = 0.5
+    security_rear_ratio: float = 0.25
+    max_range_m: float = 5.0
+    smax_rad: float = _HALF_PI
+    gap_m: float | None = None
+    contact_m: float = 0.01
+
+    def __post_init__(self) -> None:
+        if self.n_sectors < 8 or self.n_sectors % 4:
+            raise ConfigError(f"reactor.n_sectors must be a multiple of 4 and >= 8, got {self.n_sectors}")
+        if not self.security_m > 0.0:
+            raise ConfigError(f"reactor.security_m must be > 0, got {self.security_m}")
+        if not 0.0 < self.security_rear_ratio <= 1.0:
+            raise ConfigError(
+                f"reactor.security_rear_ratio must be in (0, 1], got {self.security_rear_ratio}"
+            )
+        if not self.max_range_m > 0.0:
+            raise ConfigError(f"reactor.max_range_m must be > 0, got {self.max_range_m}")
+        if not 0.0 < self.smax_rad < 2.0 * math.pi:
+            raise ConfigError(f"reactor.smax_rad must be in (0, 2 pi), got {self.smax_rad}")
+        if self.gap_m is not None and not self.gap_m > 0.0:
+            raise ConfigError(f"reactor.gap_m must be > 0 or None, got {self.gap_m}")
+        if not self.contact_m > 0.0:
+            raise ConfigError(f"reactor.contact_m must be > 0, got {self.contact_m}")
+
+
+@dataclass(frozen=True, slots=True)
+class NdResult:
+    """What ND+ decided for one step.
+
+    Attributes:
+        situation: the situation (``Situation.NONE`` when no region).
+        flag: ``Flag.NONE``, or ``Flag.REACTOR_NO_REGION`` when no navigable region exists.
+        direction_rad: motion direction in the robot frame, (-pi, pi]; nan when no region.
+        v_mps: forward velocity [m/s] (>= 0 for a differential drive).
+        vy_mps: lateral velocity [m/s] (holonomic base only, else 0).
+        w_radps: turn rate [rad/s], counter-clockwise positive.
+        region: (first, last) sectors of the selected region, counter-clockwise; None when no region.
+        min_clearance_m: smallest distance from an obstacle point to the robot boundary [m], measured along
+            the sector bisector's boundary distance (negative: inside the footprint); inf without obstacles.
+    """
+
+    situation: Situation
+    flag: Flag
+    direction_rad: float
+    v_mps: float
+    vy_mps: float
+    w_radps: float
+    region: tuple[int, int] | None
+    min_clearance_m: float
+
+
+# --------------------------------------------------------------------------------------------------
+# Sectors and robot shape
+
+
+def sector_angles(n_sectors: int) -> F64:
+    """(n,) sector bisectors [rad], sector i at ``i * 2 pi / n`` wrapped to (-pi, pi] (0 ahead, n/2 = pi)."""
+    i = np.arange(n_sectors, dtype=np.float64)
+    frac = 2.0 * i / n_sectors  # exact for the multiples of n/4
+    return np.pi * np.where(frac > 1.0, frac - 2.0, frac)
+
+
+def sector_of(angles_rad: ArrayLike, n_sectors: int) -> NDArray[np.intp]:
+    """Sector index of each angle [rad]; a boundary angle (within 1e-9 sector) goes counter-clockwise."""
+    a = np.asarray(angles_rad, dtype=np.float64)
+    k = np.floor(a * (n_sectors / (2.0 * np.pi)) + _SECTOR_OFFSET).astype(np.intp)
+    return np.mod(k, n_sectors)
+
+
+def _check_robot(robot: RobotConfig) -> None:
+    if robot.shape == "circle":
+        if not robot.radius_m > 0.0:
+            raise ConfigError(f"robot.radius_m must be > 0, got {robot.radius_m}")
+    elif robot.shape == "rectangle":
+        if not (robot.width_m > 0.0 and robot.front_m > 0.0 and robot.rear_m > 0.0):
+            raise ConfigError(
+                "robot.width_m, front_m and rear_m must be > 0 for a rectangle, got "
+                f"{robot.width_m}, {robot.front_m}, {robot.rear_m}"
+            )
+    else:
+        raise ConfigError(f"robot.shape must be 'circle' or 'rectangle', got {robot.shape!r}")
+
+
+def robot_boundary_m(robot: RobotConfig, sector_angles_rad: ArrayLike) -> F64:
+    """E: distance [m] from the rotation centre to the robot boundary along each angle.
+
+    Circle: ``radius_m``. Rectangle: the exact ray / rectangle intersection with the rectangle spanning
+    ``[-rear_m, front_m] x [-width_m/2, width_m/2]`` about the rotation centre.
+    """
+    _check_robot(robot)
+    a = np.asarray(sector_angles_rad, dtype=np.float64)
+    if robot.shape == "circle":
+        return np.full(a.shape, float(robot.radius_m))
+    c, s = np.cos(a), np.abs(np.sin(a))
+    big = np.inf
+    along = np.where(c > 0.0, robot.front_m, robot.rear_m)
+    ex = np.divide(along, np.abs(c), out=np.full(a.shape, big), where=np.abs(c) > 1e-12)
+    ey = np.divide(0.5 * robot.width_m, s, out=np.full(a.shape, big), where=s > 1e-12)
+    e: F64 = np.minimum(ex, ey)
+    return e
+
+
+def security_boundary_m(robot: RobotConfig, sector_angles_rad: ArrayLike, *, security_m: float,
+                        rear_ratio: float = 0.25) -> F64:
+    """S: distance [m] from the rotation centre to the security perimeter along each angle.
+
+    Circle: ``radius_m + security_m``. Rectangle (ND+ code, ``InicializarDS``): with ``Ds = security_m``
+    and ``ds = rear_ratio * Ds``, per |angle| from behind to ahead: the line ``ds`` behind the rear edge,
+    the circle of radius ``ds`` about the rear corner, the tangent to the circle of radius ``Ds`` about the
+    front corner, that circle, and the arc of radius ``|front corner| + Ds`` about the rotation centre.
+
+    Raises:
+        ConfigError: when ``Ds - ds`` is not smaller than the robot's length (no tangent exists).
+    """
+    _check_robot(robot)
+    a = np.abs(np.asarray(sector_angles_rad, dtype=np.float64))
+    if robot.shape == "circle":
+        return np.full(a.shape, float(robot.radius_m) + security_m)
+    ds_max, ds_min = float(security_m), float(security_m) * rear_ratio
+    hw, front, rear = 0.5 * robot.width_m, robot.front_m, robot.rear_m
+    length = front + rear
+    b = ds_max - ds_min
+    if b >= length:
+        raise ConfigError(f"security distances {ds_max} / {ds_min} m differ by more than the robot length")
+    cos_t, sin_t = math.sqrt(length * length - b * b) / length, b / length
+    p1x, p1y = -rear, hw  # rear-left corner
+    p2x, p2y = front, hw  # front-left corner
+    q1x, q1y = p1x - ds_min, p1y
+    q2x, q2y = p1x - ds_min * sin_t, p1y + ds_min * cos_t
+    q3x, q3y = p2x - ds_max * sin_t, p2y + ds_max * cos_t
+    r_front = math.hypot(p2x, p2y) + ds_max
+    lim1, lim2 = math.atan2(q1y, q1x), math.atan2(q2y, q2x)
+    lim3, lim4 = math.atan2(q3y, q3x), math.atan2(p2y, p2x)
+    c, s = np.cos(a), np.sin(a)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r1 = q1x / c  # the line behind
+        t = p1x * c + p1y * s
+        r2 = t + np.sqrt(np.maximum(t * t - (p1x * p1x + p1y * p1y - ds_min * ds_min), 0.0))
+        bx, by = q3x - q2x, q3y - q2y
+        r3 = (bx * q2y - by * q2x) / (bx * s - by * c)  # the tangent line through q2, q3
+        t = p2x * c + p2y * s
+        r4 = t + np.sqrt(np.maximum(t * t - (p2x * p2x + p2y * p2y - ds_max * ds_max), 0.0))
+    return np.select([a >= lim1, a >= lim2, a >= lim3, a >= lim4], [r1, r2, r3, r4], default=r_front)
+
+
+@dataclass(frozen=True, slots=True)
+class _Geometry:
+    angles: F64  # sector bisectors
+    boundary: F64  # E
+    security: F64  # S
+    gap_m: float  # W
+
+
+@functools.lru_cache(maxsize=32)
+def _geometry(robot: RobotConfig, params: NdParams) -> _Geometry:
+    """Per-sector constants for a robot and settings (cached: both are frozen; arrays read-only)."""
+    ang = sector_angles(params.n_sectors)
+    e = robot_boundary_m(robot, ang)
+    s = security_boundary_m(robot, ang, security_m=params.security_m, rear_ratio=params.security_rear_ratio)
+    if params.gap_m is not None:
+        gap = params.gap_m
+    else:
+        gap = 2.0 * robot.radius_m if robot.shape == "circle" else robot.width_m
+    for arr in (ang, e, s):
+        arr.setflags(write=False)
+    return _Geometry(ang, e, s, float(gap))
+
+
+# --------------------------------------------------------------------------------------------------
+# Steps
+
+
+def _wrap(a: float) -> float:
+    """Wrap a scalar angle to (-pi, pi]."""
+    w = (a + math.pi) % (2.0 * math.pi) - math.pi
+    return math.pi if w <= -math.pi else w
+
+
+@njit(cache=True)
+def _sectorise_kernel(points: F64, scale: float, max_range_m: float, dist: F64, ang: F64) -> None:
+    """Fill ``dist`` (inf on entry) and ``ang`` (bisectors on entry) with the closest point per sector.
+
+    Same sector rule as :func:`sector_of`; non-finite points and points beyond ``max_range_m`` are skipped.
+    """
+    n = dist.size
+    max2 = max_range_m * max_range_m
+    for k in range(points.shape[0]):
+        x, y = points[k, 0], points[k, 1]
+        r2 = x * x + y * y
+        if not r2 <= max2:  # also skips nan / inf
+            continue
+        a = math.atan2(y, x)
+        i = math.floor(a * scale + _SECTOR_OFFSET) % n
+        if r2 < dist[i]:
+            dist[i] = r2
+            ang[i] = a
+    for i in range(n):
+        if dist[i] < np.inf:
+            dist[i] = math.sqrt(dist[i])
+
+
+def _sectorise(points: F64, bisectors: F64, max_range_m: float) -> tuple[F64, F64]:
+    """Per sector the distance and angle of the closest point (inf / bisector when none within range)."""
+    n = bisectors.size
+    dist = np.full(n, np.inf)
+    ang = bisectors.copy()
+    if points.shape[0]:
+        _sectorise_kernel(np.ascontiguousarray(points), n / (2.0 * np.pi), max_range_m, dist, ang)
+    return dist, ang
+
+
+def _discontinuities(dist: F64, gap_m: float) -> NDArray[np.bool_]:
+    """(n,) True where sectors i and i+1 (mod n) are separated by a gap: exactly one side free, or both
+    occupied with distances differing by at least ``gap_m`` (the robot fits through the jump)."""
+    nxt = np.concatenate((dist[1:], dist[:1]))
+    free, free_nxt = np.isinf(dist), np.isinf(nxt)
+    both = ~free & ~free_nxt
+    jump = np.zeros(dist.shape, dtype=bool)
+    jump[both] = np.abs(dist[both] - nxt[both]) >= gap_m
+    gaps: NDArray[np.bool_] = (free != free_nxt) | jump
+    return gaps
+
+
+@njit(cache=True)
+def _navigable(px: F64, py: F64, goal_r: float, goal_a: float, gap_m: float) -> bool:
+    """Navigability test: can a robot of width ``gap_m`` reach the sub-goal at (goal_r, goal_a)?
+
+    In the frame turned so the sub-goal lies on +x at ``goal_r``, only points with 0 <= x < goal_r and
+    |y| <= gap_m count; unreachable if one is within gap_m/2 of the sub-goal, or if a point on the left
+    (y > 0) and one on the right (y <= 0) are closer than gap_m to each other.
+    """
+    c, s = math.cos(goal_a), math.sin(goal_a)
+    m = px.size
+    xs = np.empty(m)
+    ys = np.empty(m)
+    cnt = 0
+    half2 = 0.25 * gap_m * gap_m
+    for k in range(m):
+        x = c * px[k] + s * py[k]
+        y = c * py[k] - s * px[k]
+        if x < 0.0 or x >= goal_r or abs(y) > gap_m:
+            continue
+        if (x - goal_r) * (x - goal_r) + y * y < half2:
+            return False
+        xs[cnt] = x
+        ys[cnt] = y
+        cnt += 1
+    gap2 = gap_m * gap_m
+    for i in range(cnt):
+        if ys[i] > 0.0:
+            for j in range(cnt):
+                if ys[j] <= 0.0:
+                    dx, dy = xs[i] - xs[j], ys[i] - ys[j]
+                    if dx * dx + dy * dy < gap2:
+                        return False
+    return True
+
+
+class _Kind(enum.Enum):
+    GOAL = 0  # the goal itself is the sub-goal
+    FIRST_EDGE = 1  # through the discontinuity at the region's clockwise end (corner: first - 1)
+    LAST_EDGE = 2  # through the discontinuity at the region's counter-clockwise end (corner: last + 1)
+
+
+@dataclass(frozen=True, slots=True)
+class _Region:
+    first: int
+    last: int
+    kind: _Kind
+    direction_rad: float  # direction of the sub-goal
+    corner: int  # sector of the discontinuity's near point (-1 for GOAL)
+
+
+def _select_region(dist: F64, ang: F64, bisectors: F64, goal_r: float, goal_a: float, gap_m: float,
+                   ) -> _Region | None:
+    """Free walking area: the goal's region if the goal is in view and navigable, else the first
+    navigable discontinuity found searching outward from the goal sector, alternating left and right
+    (the closer first, left on ties); the region is the one on the discontinuity's rising (far) side."""
+    n = dist.size
+    g = int(sector_of(goal_a, n))
+    occ = np.isfinite(dist)
+    px, py = dist[occ] * np.cos(ang[occ]), dist[occ] * np.sin(ang[occ])
+    in_view = (not occ[g]) or goal_r <= dist[g]
+    bounds = np.flatnonzero(_discontinuities(dist, gap_m))  # boundary k lies between k and k+1
+    if bounds.size == 0:
+        if in_view and _navigable(px, py, goal_r, goal_a, gap_m):
+            return _Region(0, n - 1, _Kind.GOAL, goal_a, -1)
+        return None
+    dl = (bounds - g) % n  # sectors from the goal counter-clockwise to the boundary's near side
+    dr = (g - bounds - 1) % n  # ... and clockwise
+    if in_view:
+        b_last, b_first = int(bounds[np.argmin(dl)]), int(bounds[np.argmin(dr)])
+        first, last = (b_first + 1) % n, b_last
+        rising = dist[first] > dist[(first - 1) % n] or dist[last] > dist[(last + 1) % n]
+        if not rising:  # the goal sits in front of a nearer obstacle: an "artificial" one-sector region
+            first = last = g
+        if _navigable(px, py, goal_r, goal_a, gap_m):
+            return _Region(first, last, _Kind.GOAL, goal_a, -1)
+    order = np.lexsort((dl > dr, np.minimum(dl, dr)))
+    nb = bounds.size
+    for m in order:
+        i = int(bounds[m])
+        j = (i + 1) % n
+        far, near = (j, i) if dist[j] > dist[i] else (i, j)
+        if np.isinf(dist[far]):
+            a_sub = ang[near] + 0.5 * _wrap(float(bisectors[far] - ang[near]))
+            r_sub = dist[near] + _FAR_M
+        else:
+            x = 0.5 * (dist[i] * math.cos(ang[i]) + dist[j] * math.cos(ang[j]))
+            y = 0.5 * (dist[i] * math.sin(ang[i]) + dist[j] * math.sin(ang[j]))
+            a_sub, r_sub = math.atan2(y, x), math.hypot(x, y)
+        a_sub = _wrap(float(a_sub))
+        if not _navigable(px, py, float(r_sub), a_sub, gap_m):
+            continue
+        if far == j:  # region counter-clockwise of the boundary: starts at j
+            return _Region(j, int(bounds[(m + 1) % nb]), _Kind.FIRST_EDGE, a_sub, i)
+        return _Region((int(bounds[(m - 1) % nb]) + 1) % n, i, _Kind.LAST_EDGE, a_sub, j)
+    return None
+
+
+def _ls2_direction(theta_p: float, c_left: float, c_right: float) -> float:
+    """LS2 law (ALGORITHMS.md): centre between the closest left and right dangerous obstacles.
+
+    theta = theta_p + (cl - cr)/(cl + cr) * (theta_p + pi/2) if cl <= cr, else
+    theta_p + (cl - cr)/(cl + cr) * (pi/2 - theta_p). Written for a region ahead; for |theta_p| > pi/2 it is
+    applied in the frame turned by pi so that it still steers away from the closer side.
+    """
+    behind = abs(theta_p) > _HALF_PI
+    tp = _wrap(theta_p - math.pi) if behind else theta_p
+    k = (c_left - c_right) / (c_left + c_right) if c_left + c_right > 0.0 else 0.0
+    th = tp + k * (tp + _HALF_PI) if c_left <= c_right else tp + k * (_HALF_PI - tp)
+    return _wrap(th + math.pi) if behind else _wrap(th)
+
+
+def _blend_away(theta_p: float, obstacle_a: float, ratio: float) -> float:
+    """LS1 / LSG law: r * theta_p + (1 - r) * theta_b, theta_b pointing away from the obstacle (unwrapped
+    next to theta_p); clamped to +-(pi - 0.01) if it leaves (-pi, pi], keeping the turning side."""
+    theta_b = _wrap(obstacle_a + math.pi - theta_p) + theta_p
+    th = ratio * theta_p + (1.0 - ratio) * theta_b
+    if th > math.pi:
+        th = _LS_CLAMP
+    elif th < -math.pi:
+        th = -_LS_CLAMP
+    return _wrap(th)
+
+
+def _drive(theta: float, v_nd: float, robot: RobotConfig) -> tuple[float, float, float]:
+    """(v, vy, w) for the base.
+
+    Differential (the paper law): theta clamped to [-pi/2, pi/2], w = wmax * theta / (pi/2),
+    v = v_ND * (1 - |theta| / (pi/2)); a direction at or beyond +-pi/2 gives a turn in place.
+    Holonomic (**choice**): translate along theta at v_ND, (vx, vy) = v_ND (cos, sin) theta, and turn the
+    front (the laser) toward the motion with the same law, w = wmax * clamp(theta, +-pi/2) / (pi/2).
+    """
+    tc = min(max(theta, -_HALF_PI), _HALF_PI)
+    w = robot.wmax_radps * tc / _HALF_PI
+    if robot.drive == "holonomic":
+        return v_nd * math.cos(theta), v_nd * math.sin(theta), w
+    return v_nd * (1.0 - abs(tc) / _HALF_PI), 0.0, w
+
+
+def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
+            params: NdParams = NdParams()) -> NdResult:
+    """One ND+ step: sectors, gaps, regions, free walking area, situation, direction and command.
+
+    Parameters
+    ----------
+    obstacles_xy : (M, 2) array
+        Obstacle points [m] in the robot frame (occupied grid cells around the robot); M may be 0.
+        Non-finite rows and points beyond ``params.max_range_m`` are ignored.
+    goal_xy : (2,) array
+        The goal (or the planner's sub-goal) [m] in the robot frame.
+    robot : RobotConfig
+        Shape (circle / rectangle about the rotation centre), drive and velocity limits.
+    params : NdParams
+        Reactor settings.
+
+    Returns
+    -------
+    NdResult
+        Situation, direction, command and selected region. Without a navigable region: situation NONE,
+        ``Flag.REACTOR_NO_REGION``, direction nan and a zero command (never NaN).
+
+    Raises
+    ------
+    ValueError
+        If ``obstacles_xy`` is not (M, 2) or ``goal_xy`` is not two finite numbers.
+    ConfigError
+        If the robot shape or the security distances are invalid.
+    """
+    pts = np.asarray(obstacles_xy, dtype=np.float64)
+    if pts.size == 0:
+        pts = pts.reshape(0, 2)
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise ValueError(f"obstacles_xy must have shape (M, 2), got shape {pts.shape}")
+    goal = np.asarray(goal_xy, dtype=np.float64).reshape(-1)
+    if goal.shape != (2,) or not np.all(np.isfinite(goal)):
+        raise ValueError(f"goal_xy must be two finite numbers, got {goal_xy!r}")
+
+    geo = _geometry(robot, params)
+    n = params.n_sectors
+    dist, ang = _sectorise(pts, geo.angles, params.max_range_m)
+    occ = np.isfinite(dist)
+    min_clearance = float(np.min(dist[occ] - geo.boundary[occ])) if occ.any() else math.inf
+    dist = np.where(occ, np.maximum(dist, geo.boundary + params.contact_m), dist)
+
+    goal_r, goal_a = math.hypot(goal[0], goal[1]), _wrap(math.atan2(goal[1], goal[0]))  # -0.0 y: pi
+    region = _select_region(dist, ang, geo.angles, goal_r, goal_a, geo.gap_m)
+    if region is None:
+        return NdResult(Situation.NONE, Flag.REACTOR_NO_REGION, math.nan, 0.0, 0.0, 0.0, None, min_clearance)
+
+    # Dangerous obstacles, split left / right of the region direction; closest = smallest ratio.
+    beta = region.direction_rad
+    ds = geo.security - geo.boundary
+    danger = occ & (dist <= geo.security)
+    ratio = np.clip((dist - geo.boundary) / ds, 0.0, 1.0)
+    rel = np.mod(ang - beta + math.pi, 2.0 * math.pi) - math.pi  # in [-pi, pi); -pi counts as left
+    left_side = (rel >= 0.0) | (rel <= -math.pi)
+    obs_l = _closest(danger & left_side, ratio)
+    obs_r = _closest(danger & ~left_side, ratio)
+    c_l = float(ratio[obs_l]) if obs_l >= 0 else 1.0
+    c_r = float(ratio[obs_r]) if obs_r >= 0 else 1.0
+
+    span = (region.last - region.first) % n
+    wide = span * (2.0 * math.pi / n) > params.smax_rad
+    if region.kind is _Kind.GOAL:
+        theta_p = beta
+    elif wide:  # pass the discontinuity's corner at (r_c, a_c), towards the inside of the region
+        off = math.atan2(0.5 * geo.gap_m + params.security_m, float(dist[region.corner]))
+        a_c = float(ang[region.corner])
+        theta_p = _wrap(a_c + off if region.kind is _Kind.FIRST_EDGE else a_c - off)
+    else:  # bisector of the region
+        theta_p = _wrap((region.first + 0.5 * span) * (2.0 * math.pi / n))
+
+    if obs_l < 0 and obs_r < 0:
+        if region.kind is _Kind.GOAL:
+            situation = Situation.HSGR
+        else:
+            situation = Situation.HSWR if wide else Situation.HSNR
+        theta = theta_p
+    elif obs_l >= 0 and obs_r >= 0:
+        situation = Situation.LS2
+        theta = _ls2_direction(beta, c_l, c_r)
+    else:
+        situation = Situation.LSG if region.kind is _Kind.GOAL else Situation.LS1
+        obs = obs_l if obs_l >= 0 else obs_r
+        theta = _blend_away(theta_p, float(ang[obs]), float(ratio[obs]))
+
+    v_nd = robot.vmax_mps * min(c_l, c_r)
+    v, vy, w = _drive(theta, v_nd, robot)
+    return NdResult(situation, Flag.NONE, theta, v, vy, w, (region.first, region.last), min_clearance)
+
+
+def _closest(mask: NDArray[np.bool_], ratio: F64) -> int:
+    """Index of the smallest ratio under mask, -1 if none."""
+    if not mask.any():
+        return -1
+    return int(np.flatnonzero(mask)[np.argmin(ratio[mask])])

@@ -1,0 +1,118 @@
+"""C-space: exact distance transform, disc inflation, doors, unknown handling."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage as ndi
+
+from gndreplay.pipeline.cspace import free_cspace, obstacle_distance_m, squared_distance_cells
+from gndreplay.pipeline.model import FREE, OCCUPIED, UNKNOWN
+
+
+def brute_force_distance(occupied: np.ndarray, cell_m: float) -> np.ndarray:
+    """Distance from every cell centre to every occupied cell centre, minimum; inf without obstacles."""
+    obs = np.argwhere(occupied).astype(np.float64)
+    allc = np.argwhere(np.ones_like(occupied)).astype(np.float64)
+    if obs.shape[0] == 0:
+        return np.full(occupied.shape, np.inf)
+    d2 = ((allc[:, None, :] - obs[None, :, :]) ** 2).sum(axis=2).min(axis=1)
+    return (np.sqrt(d2) * cell_m).reshape(occupied.shape)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 9), (9, 1), (13, 17), (31, 24)])
+@pytest.mark.parametrize("density", [0.0, 0.01, 0.1, 0.6, 1.0])
+def test_distance_matches_brute_force(shape: tuple[int, int], density: float) -> None:
+    rng = np.random.default_rng(hash((shape, density)) % 2**32)
+    occupied = rng.random(shape) < density
+    d = obstacle_distance_m(occupied, cell_m=0.05)
+    assert d.dtype == np.float32 and d.shape == shape
+    np.testing.assert_allclose(d, brute_force_distance(occupied, 0.05), rtol=1e-6)
+
+
+def test_distance_matches_scipy_on_a_large_grid() -> None:
+    rng = np.random.default_rng(7)
+    occupied = rng.random((200, 230)) < 0.003
+    expected = ndi.distance_transform_edt(~occupied)
+    np.testing.assert_allclose(np.sqrt(squared_distance_cells(occupied)), expected, rtol=1e-12)
+
+
+def test_single_obstacle_distances() -> None:
+    occupied = np.zeros((5, 5), dtype=bool)
+    occupied[0, 0] = True
+    d = obstacle_distance_m(occupied, cell_m=0.1)
+    assert d[0, 0] == 0.0
+    assert d[0, 3] == pytest.approx(0.3)
+    assert d[4, 3] == pytest.approx(0.5)
+    assert np.isinf(obstacle_distance_m(np.zeros((3, 4), dtype=bool), cell_m=0.1)).all()
+
+
+def door_grid(door_m: float, *, cell_m: float = 0.05) -> np.ndarray:
+    """A 4 x 4 m free room split by a one-cell wall along row 40 with a door of ``door_m`` in it."""
+    n = 80
+    cells = np.full((n, n), FREE, dtype=np.uint8)
+    cells[40, :] = OCCUPIED
+    gap = round(door_m / cell_m)  # free cells between the jambs
+    start = (n - gap) // 2
+    cells[40, start : start + gap] = FREE
+    return cells
+
+
+def passable(free: np.ndarray) -> bool:
+    """True when a free C-space cell below the wall connects (8-neighbours) to one above it."""
+    labels, _ = ndi.label(free, structure=np.ones((3, 3)))
+    below = set(np.unique(labels[5])) - {0}
+    above = set(np.unique(labels[-5])) - {0}
+    return bool(below & above)
+
+
+def test_door_of_90_cm_passes_a_wheelchair_half_width_and_blocks_a_wider_disc() -> None:
+    cells = door_grid(0.9)
+    assert passable(free_cspace(cells, cell_m=0.05, inflate_m=0.35 + 0.05))
+    assert passable(free_cspace(cells, cell_m=0.05, inflate_m=0.35))
+    assert not passable(free_cspace(cells, cell_m=0.05, inflate_m=0.5))
+    # the wall itself is never free, and free space keeps its distance from the wall
+    free = free_cspace(cells, cell_m=0.05, inflate_m=0.4)
+    assert not free[32:49, :10].any()
+    assert free[31, :10].all() and free[49, :10].all()
+    assert not passable(free_cspace(door_grid(0.7), cell_m=0.05, inflate_m=0.4))
+
+
+def test_free_cspace_agrees_with_thresholded_distance() -> None:
+    rng = np.random.default_rng(3)
+    cells = rng.choice([UNKNOWN, FREE, OCCUPIED], size=(60, 70), p=[0.2, 0.78, 0.02]).astype(np.uint8)
+    for inflate in [0.0, 0.05, 0.1, 0.2, 0.35, 0.45, 1.0]:
+        for unknown_is_free in [True, False]:
+            obstacle = (cells == OCCUPIED) | (~np.bool_(unknown_is_free) & (cells == UNKNOWN))
+            d = brute_force_distance(obstacle, 0.05)
+            expected = d > inflate + 1e-9  # exactly at the radius counts as blocked
+            got = free_cspace(cells, cell_m=0.05, inflate_m=inflate, unknown_is_free=unknown_is_free)
+            np.testing.assert_array_equal(got, expected)
+
+
+def test_unknown_handling() -> None:
+    # a known free pocket of 21 x 21 cells in unknown space, no obstacle at all
+    cells = np.full((41, 41), UNKNOWN, dtype=np.uint8)
+    cells[10:31, 10:31] = FREE
+    assert free_cspace(cells, cell_m=0.05, inflate_m=0.2).all()
+    free = free_cspace(cells, cell_m=0.05, inflate_m=0.2, unknown_is_free=False)
+    # unknown is an obstacle: only cells more than 4 cells (0.2 m) from any unknown cell remain
+    expected = np.zeros_like(free)
+    expected[14:27, 14:27] = True
+    np.testing.assert_array_equal(free, expected)
+
+
+def test_empty_grids() -> None:
+    assert free_cspace(np.zeros((0, 5), dtype=np.uint8), cell_m=0.05, inflate_m=0.3).shape == (0, 5)
+    assert obstacle_distance_m(np.zeros((4, 0), dtype=bool), cell_m=0.05).shape == (4, 0)
+
+
+def test_argument_errors_name_the_argument() -> None:
+    with pytest.raises(ValueError, match="grid_cells must be 2-D"):
+        free_cspace(np.zeros(5, dtype=np.uint8), cell_m=0.05, inflate_m=0.3)
+    with pytest.raises(ValueError, match="inflate_m"):
+        free_cspace(np.zeros((5, 5), dtype=np.uint8), cell_m=0.05, inflate_m=-0.1)
+    with pytest.raises(ValueError, match="cell_m"):
+        obstacle_distance_m(np.zeros((5, 5), dtype=bool), cell_m=0.0)
+    with pytest.raises(ValueError, match="obstacle must be a bool array"):
+        squared_distance_cells(np.zeros((5, 5), dtype=np.uint8))

@@ -1,0 +1,280 @@
+"""Model builder: Bresenham tracing, no-return / invalid beams, laser offset, re-centring, views."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from gndreplay.errors import ConfigError
+from gndreplay.pipeline.model import (
+    FREE,
+    GRID_200,
+    GRID_400,
+    OCCUPIED,
+    UNKNOWN,
+    GridParams,
+    RobotCentredGrid,
+    shift_cells,
+)
+from gndreplay.types import Pose2D, Scan
+
+AT_AXLE = Pose2D(0.0, 0.0, 0.0)
+SMALL = GridParams(size_cells=40, cell_m=0.1)  # 4 x 4 m, control zone 1 m
+
+
+def make_scan(
+    ranges: list[float] | np.ndarray,
+    angles: list[float] | np.ndarray,
+    *,
+    max_range_m: float = 30.0,
+    min_range_m: float = 0.0,
+    sensor_pose: Pose2D = AT_AXLE,
+) -> Scan:
+    return Scan(
+        t_ns=0,
+        ranges_m=np.asarray(ranges, dtype=np.float64),
+        angles_rad=np.asarray(angles, dtype=np.float64),
+        max_range_m=max_range_m,
+        min_range_m=min_range_m,
+        sensor_pose=sensor_pose,
+    )
+
+
+def bresenham_ref(c0: int, r0: int, c1: int, r1: int) -> list[tuple[int, int]]:
+    """Plain-Python Bresenham returning (row, col) cells from start to end inclusive."""
+    out = []
+    dc, dr = abs(c1 - c0), -abs(r1 - r0)
+    sc, sr = (1 if c0 < c1 else -1), (1 if r0 < r1 else -1)
+    err = dc + dr
+    while True:
+        out.append((r0, c0))
+        if (c0, r0) == (c1, r1):
+            return out
+        e2 = 2 * err
+        if e2 >= dr:
+            err, c0 = err + dr, c0 + sc
+        if e2 <= dc:
+            err, r0 = err + dc, r0 + sr
+
+
+def cells_with(grid: RobotCentredGrid, value: np.uint8) -> set[tuple[int, int]]:
+    return {(int(r), int(c)) for r, c in zip(*np.nonzero(grid.cells == value), strict=True)}
+
+
+# ---- tracing ------------------------------------------------------------------------------------
+
+
+def test_axis_beam_marks_free_cells_and_the_hit() -> None:
+    grid = RobotCentredGrid(SMALL)
+    pose = Pose2D(0.05, 0.05, 0.0)  # centre of cell (20, 20)
+    assert grid.robot_cell(pose) == (20, 20)
+    stats = grid.integrate(make_scan([1.0], [0.0]), pose)  # hit at x = 1.05 -> column 30
+    assert (stats.beams_traced, stats.hits, stats.shifted_cells) == (1, 1, (0, 0))
+    assert cells_with(grid, FREE) == {(20, c) for c in range(20, 30)}
+    assert cells_with(grid, OCCUPIED) == {(20, 30)}
+    assert int((grid.cells == UNKNOWN).sum()) == 40 * 40 - 11
+
+
+@pytest.mark.parametrize("angle", [0.3, 1.0, 2.2, -0.7, -2.9, math.pi / 4])
+def test_oblique_beam_follows_bresenham(angle: float) -> None:
+    grid = RobotCentredGrid(SMALL)
+    pose = Pose2D(0.05, 0.05, 0.0)
+    r = 1.5
+    grid.integrate(make_scan([r], [angle]), pose)
+    end = grid.world_to_cell([[0.05 + r * math.cos(angle), 0.05 + r * math.sin(angle)]])[0]
+    line = bresenham_ref(20, 20, int(end[1]), int(end[0]))
+    assert cells_with(grid, FREE) == set(line[:-1])
+    assert cells_with(grid, OCCUPIED) == {line[-1]}
+
+
+def test_laser_offset_and_heading_are_honoured() -> None:
+    # robot facing +y, laser 0.7 m ahead of the axle: a beam straight ahead starts at y = +0.7
+    grid = RobotCentredGrid(SMALL)
+    pose = Pose2D(0.05, 0.05, math.pi / 2)
+    scan = make_scan([0.5], [0.0], sensor_pose=Pose2D(0.7, 0.0, 0.0))
+    grid.integrate(scan, pose)
+    assert cells_with(grid, FREE) == {(r, 20) for r in range(27, 32)}
+    assert cells_with(grid, OCCUPIED) == {(32, 20)}
+    assert grid.cells[20, 20] == UNKNOWN  # the axle cell is not on the ray
+
+
+def test_no_return_clears_up_to_clip_and_adds_no_obstacle() -> None:
+    params = GridParams(size_cells=100, cell_m=0.1, free_clip_m=2.0)
+    grid = RobotCentredGrid(params)
+    pose = Pose2D(0.05, 0.05, 0.0)  # cell (50, 50)
+    stats = grid.integrate(make_scan([np.inf, 40.0], [0.0, math.pi / 2], max_range_m=30.0), pose)
+    assert stats.hits == 0 and stats.beams_traced == 2
+    assert not (grid.cells == OCCUPIED).any()
+    # clears to min(max_range, free_clip) = 2 m: x = 2.05 -> column 70, end cell included
+    assert cells_with(grid, FREE) == {(50, c) for c in range(50, 71)} | {(r, 50) for r in range(51, 71)}
+    # max range shorter than the clip
+    grid = RobotCentredGrid(params)
+    grid.integrate(make_scan([np.inf], [0.0], max_range_m=1.0), pose)
+    assert cells_with(grid, FREE) == {(50, c) for c in range(50, 61)}
+
+
+def test_invalid_beams_do_nothing_by_default_and_clear_on_request() -> None:
+    scan = make_scan([np.nan, 0.01, -np.inf], [0.0, 1.0, 2.0], min_range_m=0.05)
+    grid = RobotCentredGrid(SMALL)
+    stats = grid.integrate(scan, Pose2D(0.05, 0.05, 0.0))
+    assert stats.beams_traced == 0 and (grid.cells == UNKNOWN).all()
+    grid = RobotCentredGrid(GridParams(size_cells=40, cell_m=0.1, free_clip_m=1.0, invalid_clears=True))
+    stats = grid.integrate(scan, Pose2D(0.05, 0.05, 0.0))
+    assert stats.beams_traced == 3 and stats.hits == 0
+    assert not (grid.cells == OCCUPIED).any()
+    assert {(20, c) for c in range(20, 31)} <= cells_with(grid, FREE)
+
+
+def test_hit_is_not_erased_by_another_ray_of_the_same_scan() -> None:
+    # two beams on the same bearing: the longer one passes through the shorter one's hit
+    grid = RobotCentredGrid(SMALL)
+    grid.integrate(make_scan([0.5, 1.0], [0.0, 0.0]), Pose2D(0.05, 0.05, 0.0))
+    assert cells_with(grid, OCCUPIED) == {(20, 25), (20, 30)}
+    # ... and in the other order
+    grid = RobotCentredGrid(SMALL)
+    grid.integrate(make_scan([1.0, 0.5], [0.0, 0.0]), Pose2D(0.05, 0.05, 0.0))
+    assert cells_with(grid, OCCUPIED) == {(20, 25), (20, 30)}
+
+
+def test_new_scan_overwrites_what_it_covers() -> None:
+    # a person at 0.5 m walks away: the next scan sees the wall at 1 m and clears the old hit
+    grid = RobotCentredGrid(SMALL)
+    pose = Pose2D(0.05, 0.05, 0.0)
+    grid.integrate(make_scan([0.5], [0.0]), pose)
+    assert grid.cells[20, 25] == OCCUPIED
+    grid.integrate(make_scan([1.0], [0.0]), pose)
+    assert grid.cells[20, 25] == FREE and grid.cells[20, 30] == OCCUPIED
+
+
+def test_rays_are_clipped_at_the_border() -> None:
+    grid = RobotCentredGrid(SMALL)
+    pose = Pose2D(0.05, 0.05, 0.0)
+    stats = grid.integrate(make_scan([25.0, 25.0], [0.0, 0.6]), pose)  # hits far outside the 4 m grid
+    assert stats.hits == 0 and stats.beams_traced == 2
+    assert not (grid.cells == OCCUPIED).any()
+    assert cells_with(grid, FREE) >= {(20, c) for c in range(20, 40)}
+    # a hit exactly in the last column is kept
+    grid = RobotCentredGrid(SMALL)
+    assert grid.integrate(make_scan([1.9], [0.0]), pose).hits == 1  # x = 1.95
+    assert grid.cells[20, 39] == OCCUPIED
+
+
+def test_laser_outside_the_grid_is_clipped_at_entry() -> None:
+    # a (silly) 3 m laser offset puts the sensor outside the 4 m grid, looking back at the robot
+    grid = RobotCentredGrid(SMALL)
+    scan = make_scan([2.0, 0.5], [0.0, 0.0], sensor_pose=Pose2D(3.0, 0.0, math.pi))
+    stats = grid.integrate(scan, Pose2D(0.05, 0.05, 0.0))  # laser at x = 3.05, beams towards -x
+    assert (stats.beams_traced, stats.hits) == (1, 1)  # the 0.5 m beam never enters the grid
+    assert cells_with(grid, FREE) == {(20, c) for c in range(31, 40)}
+    assert cells_with(grid, OCCUPIED) == {(20, 30)}
+
+
+def test_finite_range_at_max_range_is_a_no_return() -> None:
+    grid = RobotCentredGrid(SMALL)
+    grid.integrate(make_scan([8.0], [0.0], max_range_m=8.0), Pose2D(0.05, 0.05, 0.0))
+    assert not (grid.cells == OCCUPIED).any()
+
+
+def test_mismatched_scan_shapes_raise() -> None:
+    grid = RobotCentredGrid(SMALL)
+    with pytest.raises(ValueError, match="must be equal 1-D shapes"):
+        grid.integrate(make_scan([1.0, 2.0], [0.0]), Pose2D(0.0, 0.0, 0.0))
+
+
+# ---- re-centring --------------------------------------------------------------------------------
+
+
+def test_shift_cells_moves_contents_and_fills_unknown() -> None:
+    rng = np.random.default_rng(1)
+    a = rng.integers(1, 3, size=(6, 7)).astype(np.uint8)
+    for d_row in range(-7, 8):
+        for d_col in range(-8, 9):
+            out = shift_cells(a, d_row, d_col)
+            for r in range(6):
+                for c in range(7):
+                    sr, sc = r + d_row, c + d_col
+                    expected = a[sr, sc] if 0 <= sr < 6 and 0 <= sc < 7 else UNKNOWN
+                    assert out[r, c] == expected
+
+
+def test_shift_keeps_every_cells_world_position() -> None:
+    rng = np.random.default_rng(2)
+    grid = RobotCentredGrid(SMALL, centre_xy=(0.05, 0.05))
+    grid.cells[:] = rng.integers(1, 3, size=grid.cells.shape).astype(np.uint8)
+    before = grid.cells.copy()
+    rc = np.argwhere(np.ones_like(before, dtype=bool))
+    world_before = grid.cells_to_world(rc)
+    # leave the 1 m control zone diagonally (and not by a whole number of cells)
+    pose = Pose2D(0.05 + 0.83, 0.05 - 1.27, 0.4)
+    stats = grid.integrate(make_scan([], []), pose)
+    d_row, d_col = stats.shifted_cells
+    assert (d_row, d_col) == (-13, 8)
+    assert grid.robot_cell(pose) == (20, 20)
+    new_rc = rc - np.array([d_row, d_col])
+    inside = grid.contains(new_rc)
+    # same world position, bit for bit, and same content
+    np.testing.assert_array_equal(grid.cells_to_world(new_rc[inside]), world_before[inside])
+    np.testing.assert_array_equal(
+        grid.cells[new_rc[inside, 0], new_rc[inside, 1]], before[rc[inside, 0], rc[inside, 1]]
+    )
+    np.testing.assert_array_equal(grid.world_to_cell(world_before[inside]), new_rc[inside])
+    assert int((grid.cells == UNKNOWN).sum()) == 40 * 40 - int(inside.sum())
+
+
+def test_no_shift_inside_the_control_zone() -> None:
+    grid = RobotCentredGrid(SMALL)  # centre cell (20, 20) spans [0, 0.1); zone side 1 m around x = y = 0
+    for x, y in [(0.49, 0.0), (-0.5, 0.5), (0.3, -0.45)]:
+        assert grid.integrate(make_scan([], []), Pose2D(x, y, 0.0)).shifted_cells == (0, 0)
+    assert grid.integrate(make_scan([], []), Pose2D(0.52, 0.0, 0.0)).shifted_cells == (0, 5)
+    assert grid.robot_cell(Pose2D(0.52, 0.0, 0.0)) == (20, 20)
+
+
+def test_far_jump_gives_an_unknown_grid() -> None:
+    grid = RobotCentredGrid(SMALL)
+    grid.integrate(make_scan([1.0], [0.0]), Pose2D(0.0, 0.0, 0.0))
+    stats = grid.integrate(make_scan([], []), Pose2D(100.0, -50.0, 0.0))
+    assert stats.shifted_cells == (-500, 1000)
+    assert (grid.cells == UNKNOWN).all()
+
+
+def test_grid_origin_is_on_the_world_lattice() -> None:
+    grid = RobotCentredGrid(GRID_200, centre_xy=(1.234, -0.07))
+    assert grid.offset_cells == (-2 - 100, 24 - 100)
+    assert grid.origin_xy == pytest.approx((-76 * 0.05, -102 * 0.05))
+    assert grid.robot_cell(Pose2D(1.234, -0.07, 0.0)) == (100, 100)
+    f = grid.world_to_cell_float([[1.234, -0.07]])[0]
+    assert f == pytest.approx([100 + (-0.07 / 0.05 + 2), 100 + (1.234 / 0.05 - 24)])
+    np.testing.assert_allclose(grid.cells_to_world(np.floor(f)[None, :]), grid.cells_to_world([[100, 100]]))
+
+
+# ---- views --------------------------------------------------------------------------------------
+
+
+def test_occupied_points_in_robot_frame() -> None:
+    grid = RobotCentredGrid(SMALL)
+    grid.cells[20, 30] = OCCUPIED  # centre (1.05, 0.05)
+    grid.cells[25, 20] = OCCUPIED  # centre (0.05, 0.55)
+    grid.cells[20, 39] = OCCUPIED  # centre (1.95, 0.05): outside a 1.5 m radius
+    pose = Pose2D(0.05, 0.05, math.pi / 2)  # facing +y
+    pts = grid.occupied_points(pose, 1.5)
+    # robot frame: +x = world +y, +y = world -x
+    expected = {(0.0, -1.0), (0.5, 0.0)}
+    assert {(round(float(x), 9) + 0.0, round(float(y), 9) + 0.0) for x, y in pts} == expected
+    assert grid.occupied_points(pose, 0.3).shape == (0, 2)
+
+
+def test_presets_and_validation() -> None:
+    assert (GRID_400.size_cells, GRID_400.cell_m, GRID_400.side_m) == (400, 0.05, 20.0)
+    assert (GRID_200.size_cells, GRID_200.cell_m) == (200, 0.05)
+    assert GRID_400.control_zone_side_m == 5.0
+    assert GridParams(control_zone_m=2.0).control_zone_side_m == 2.0
+    with pytest.raises(ConfigError, match=r"grid\.cell_m"):
+        GridParams(cell_m=0.0)
+    with pytest.raises(ConfigError, match=r"grid\.size_cells"):
+        GridParams(size_cells=2)
+    with pytest.raises(ConfigError, match=r"grid\.control_zone_m"):
+        GridParams(size_cells=100, cell_m=0.05, control_zone_m=6.0)
+    with pytest.raises(ConfigError, match=r"grid\.free_clip_m"):
+        GridParams(free_clip_m=-1.0)
