@@ -1,0 +1,781 @@
+"""NF1 planner of GND: wavefront navigation function, steepest-descent path, string pulling, direction.
+
+GND (Minguez & Montano) builds Latombe's minima-free navigation function NF1 over the C-space of the grid
+every tick, follows its gradient from the robot to the goal, tightens the path and hands the reactor the
+*instantaneous path direction*: the main direction of the first metre of the path. This module does that
+on a plain boolean C-space array, so it does not depend on how the grid or the C-space were built.
+
+Coordinates. ``free[row, col]`` with row along world y and col along world x (the grid never rotates).
+Two continuous conventions meet here, each matching ``model.RobotCentredGrid``:
+
+* the goal comes in *corner* coordinates (``world_to_cell_float``): cell (r, c) spans [r, r + 1) x
+  [c, c + 1), so its index is ``floor``;
+* waypoints go out in *index* coordinates (``cells_to_world``): (r, c) is the centre of cell (r, c).
+
+Directions are counter-clockwise from the +col (world +x) axis towards +row (world +y), in (-pi, pi].
+
+Choices (the papers are silent):
+
+* 4-connected wave with unit steps (Latombe's NF1, a BFS) by default; 8-connected with diagonal steps of
+  sqrt(2) as an option (exact Dijkstra on two FIFO queues, one per step length).
+  A diagonal step (wave or descent) needs both orthogonal cells beside it free: the path never squeezes
+  between two C-obstacle cells that only touch at a corner.
+* Steepest descent over the 8 neighbours: the neighbour with the largest drop per unit length wins (ties:
+  orthogonal before diagonal, then -row, +row, -col, +col). With the 4-connected wave a diagonal neighbour two
+  steps lower is steeper (2 / sqrt 2) than an orthogonal one, so the raw path is already less jagged.
+* The robot cell is seeded free: the wave may label it although it is C-obstacle (the robot stands closer
+  to a wall than the inflation radius), but never expands from it. If none of its neighbours is free the
+  wave cannot reach it; then the path *escapes* on a straight line to the nearest (Euclidean) cell the
+  wave reached within ``escape_m``. Why this is safe: the clearance (distance to the nearest obstacle) is
+  1-Lipschitz, the robot centre has clearance >= r (robot inner radius) and a free cell >= rho (inflation
+  radius), so a segment shorter than r + rho never touches an obstacle. Keep ``escape_m`` below that.
+* Early exit (GND's own suggestion to save time): the wave stops when it pops the robot cell. Every cell
+  the descent can visit has a lower value and is therefore already final, so the path is unchanged.
+* String pulling ("tightened using a recursive algorithm" in GND, no details): greedy, from each anchor
+  advance while the segment to the next path cell stays in free cells (supercover walk: every cell the
+  segment touches, both side cells at an exact corner crossing); then each interior waypoint slides along
+  the raw path to the visible cell that shortens its two segments most (this puts it back on the corner
+  the greedy pass overshot), and waypoints whose neighbours see each other are dropped.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numba import njit
+from numpy.typing import ArrayLike, NDArray
+
+from ..geometry import wrap_angle
+from ..types import Flag
+
+__all__ = [
+    "Nf1Params",
+    "PlanResult",
+    "descend",
+    "nf1_wavefront",
+    "path_direction",
+    "plan",
+    "project_goal",
+    "tighten",
+]
+
+DIAG_LEN = math.sqrt(2.0)
+"""Length of a diagonal step [cells]."""
+
+# Neighbour order: 4 orthogonal (-row, +row, -col, +col), then 4 diagonal.
+_DR = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)
+_DC = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
+
+
+@dataclass(frozen=True, slots=True)
+class Nf1Params:
+    """Settings of the NF1 planner.
+
+    Attributes:
+        connectivity: 4 (Latombe's NF1, unit steps) or 8 (diagonal steps of sqrt(2)) for the wavefront.
+            The descent always looks at the 8 neighbours.
+        lookahead_m: the instantaneous direction points at the point this far along the tightened path
+            [m] (GND: "the first metre").
+        escape_m: how far the path may run straight out of C-obstacle when the robot cell and all its
+            neighbours are C-obstacle [m]; 0 disables the escape. Keep it below robot inner radius +
+            inflation radius (see the module notes); 0.5 m is safe for both presets.
+        border_search_m: a goal outside the grid whose border cell is C-obstacle moves to the nearest free
+            border cell within this distance [m] (**choice**: the border point only stands in for a goal
+            beyond the grid, so a wall or a piece of furniture at the border should not make the goal
+            "in an obstacle"); 0 disables the search (GOAL_IN_OBSTACLE).
+        early_exit: stop the wave when it reaches the robot cell (same path, less work).
+    """
+
+    connectivity: Literal[4, 8] = 4
+    lookahead_m: float = 1.0
+    escape_m: float = 0.5
+    border_search_m: float = 1.0
+    early_exit: bool = True
+
+    def __post_init__(self) -> None:
+        if self.connectivity not in (4, 8):
+            raise ValueError(f"connectivity must be 4 or 8, got {self.connectivity!r}")
+        if not self.lookahead_m > 0.0:
+            raise ValueError(f"lookahead_m must be > 0, got {self.lookahead_m!r}")
+        if not self.escape_m >= 0.0:
+            raise ValueError(f"escape_m must be >= 0, got {self.escape_m!r}")
+        if not self.border_search_m >= 0.0:
+            raise ValueError(f"border_search_m must be >= 0, got {self.border_search_m!r}")
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PlanResult:
+    """Outcome of one planning call. A failure is a value: ``ok`` False, ``flag`` says why.
+
+    Attributes:
+        ok: a path from the robot cell to the goal cell exists.
+        flag: Flag.NONE, Flag.GOAL_IN_OBSTACLE or Flag.PLANNER_NO_PATH.
+        goal_cell: (row, col) of the goal cell planned to: the cell containing the goal, or for a goal
+            outside the grid its projection onto the border (moved to a free border cell nearby, see
+            ``Nf1Params.border_search_m``).
+        goal_projected: the goal lay outside the grid and was projected onto its border.
+        path_cells: (K, 2) int32 (row, col), raw path from the robot cell to the goal cell, consecutive
+            cells 8-adjacent; empty when not ok.
+        n_escape: how many leading cells of ``path_cells`` may be outside free C-space: 0 when the robot
+            cell is free, 1 when it is C-obstacle but the wave reached it from a free neighbour, more when
+            the path escapes on a straight segment (see the module notes).
+        waypoints_cells: (M, 2) float64 tightened path in index coordinates (cell centres), robot cell
+            first, goal cell last (M >= 2: two equal rows when robot and goal share a cell), consecutive
+            waypoints mutually visible through free cells (except on the escape segment); empty when
+            not ok.
+        direction_rad: instantaneous path direction in the grid/world frame (from the robot cell centre to
+            the point ``lookahead_m`` along the tightened path, or to the goal if the path is shorter);
+            nan when not ok.
+        length_m: length of the tightened path [m]; nan when not ok.
+        cost_m: NF1 value of the robot cell (the raw path length the wave measured) [m]; nan when not ok.
+    """
+
+    ok: bool
+    flag: Flag
+    goal_cell: tuple[int, int]
+    goal_projected: bool
+    path_cells: NDArray[np.int32]
+    n_escape: int
+    waypoints_cells: NDArray[np.float64]
+    direction_rad: float
+    length_m: float
+    cost_m: float
+
+
+# ---------------------------------------------------------------------------------------------------------
+# numba kernels
+
+
+@njit(cache=True)
+def _diag_open(free: NDArray[np.bool_], r: int, c: int, dr: int, dc: int) -> bool:
+    """A diagonal step from (r, c) by (dr, dc) is allowed: both orthogonal cells beside it are free."""
+    return free[r + dr, c] and free[r, c + dc]
+
+
+@njit(cache=True)
+def _bfs4(
+    free: NDArray[np.bool_], goal_r: int, goal_c: int, sink_r: int, sink_c: int, early_exit: bool
+) -> NDArray[np.float32]:
+    """4-connected wave (Latombe's NF1) as a plain BFS: the first label of a cell is final."""
+    h, w = free.shape
+    f = free.ravel()
+    dist = np.full(h * w, np.inf, dtype=np.float32)
+    q = np.empty(h * w, dtype=np.int32)
+    sink = sink_r * w + sink_c if sink_r >= 0 else -1
+    g = goal_r * w + goal_c
+    dist[g] = 0.0
+    q[0] = g
+    head, tail = 0, 1
+    while head < tail:
+        i = q[head]
+        head += 1
+        if i == sink:
+            if early_exit:
+                break
+            if not f[i]:
+                continue
+        d = dist[i] + np.float32(1.0)
+        r = i // w
+        c = i - r * w
+        for k in range(4):  # written out: a helper call per neighbour costs 10x here
+            if k == 0:
+                if r == 0:
+                    continue
+                j = i - w
+            elif k == 1:
+                if r == h - 1:
+                    continue
+                j = i + w
+            elif k == 2:
+                if c == 0:
+                    continue
+                j = i - 1
+            else:
+                if c == w - 1:
+                    continue
+                j = i + 1
+            if dist[j] == np.inf and (f[j] or j == sink):
+                dist[j] = d
+                q[tail] = j
+                tail += 1
+    return dist.reshape(h, w)
+
+
+@njit(cache=True)
+def _dijkstra8(
+    free: NDArray[np.bool_], goal_r: int, goal_c: int, sink_r: int, sink_c: int, early_exit: bool
+) -> NDArray[np.float32]:
+    """8-connected wave: exact Dijkstra with steps 1 and sqrt(2) on two FIFO queues, one per step length.
+    Values are popped in increasing order, so each queue receives its entries in increasing order and the
+    smaller of the two heads is always the next cell: O(1) per push, no heap."""
+    h, w = free.shape
+    n = h * w
+    f = free.ravel()
+    dist = np.full(n, np.inf, dtype=np.float32)
+    done = np.zeros(n, dtype=np.bool_)
+    cap = 4 * n + 1  # a cell pushes each neighbour at most once, when it is popped
+    qo = np.empty(cap, dtype=np.int32)  # cells and the value each was pushed with; a later, lower
+    qok = np.empty(cap, dtype=np.float32)  # label leaves a stale entry behind, skipped via ``done``
+    qd = np.empty(cap, dtype=np.int32)
+    qdk = np.empty(cap, dtype=np.float32)
+    sink = sink_r * w + sink_c if sink_r >= 0 else -1
+    g = goal_r * w + goal_c
+    dist[g] = 0.0
+    qo[0] = g
+    qok[0] = 0.0
+    ho, to, hd, td = 0, 1, 0, 0
+    one = np.float32(1.0)
+    root2 = np.float32(DIAG_LEN)
+    while ho < to or hd < td:
+        if hd < td and (ho >= to or qdk[hd] < qok[ho]):
+            i = qd[hd]
+            hd += 1
+        else:
+            i = qo[ho]
+            ho += 1
+        if done[i]:
+            continue
+        done[i] = True
+        if i == sink:
+            if early_exit:
+                break
+            if not f[i]:
+                continue
+        r = i // w
+        c = i - r * w
+        d1 = dist[i] + one
+        d2 = dist[i] + root2
+        for k in range(8):
+            dr = _DR[k]
+            dc = _DC[k]
+            rr = r + dr
+            cc = c + dc
+            if rr < 0 or rr >= h or cc < 0 or cc >= w:
+                continue
+            j = rr * w + cc
+            if not (f[j] or j == sink):
+                continue
+            if k < 4:
+                if d1 < dist[j]:
+                    dist[j] = d1
+                    qo[to] = j
+                    qok[to] = d1
+                    to += 1
+            elif d2 < dist[j] and f[i + dr * w] and f[i + dc]:  # no corner cutting
+                dist[j] = d2
+                qd[td] = j
+                qdk[td] = d2
+                td += 1
+    return dist.reshape(h, w)
+
+
+def _wave(
+    free: NDArray[np.bool_],
+    goal_r: int,
+    goal_c: int,
+    sink_r: int,
+    sink_c: int,
+    early_exit: bool,
+    diagonal: bool,
+) -> NDArray[np.float32]:
+    """Wavefront from the goal over free cells (C-contiguous ``free``); the sink (robot) cell, if >= 0, may
+    be labelled although not free but never expands."""
+    kernel = _dijkstra8 if diagonal else _bfs4
+    return kernel(free, goal_r, goal_c, sink_r, sink_c, early_exit)
+
+
+@njit(cache=True)
+def _descend(nf: NDArray[np.float32], free: NDArray[np.bool_], r: int, c: int) -> NDArray[np.int32]:
+    """Steepest descent over 8 neighbours from (r, c) to the zero of ``nf``; (0, 2) if (r, c) unreached."""
+    h, w = nf.shape
+    if not np.isfinite(nf[r, c]):
+        return np.empty((0, 2), dtype=np.int32)
+    cap = int(nf[r, c] * 1.01) + 3  # every step drops the value by >= 1 (up to float32 rounding)
+    out = np.empty((cap, 2), dtype=np.int32)
+    out[0, 0] = r
+    out[0, 1] = c
+    k = 1
+    inv_diag = 1.0 / DIAG_LEN
+    while nf[r, c] > 0.0 and k < cap:
+        v = nf[r, c]
+        best = 0.0
+        bk = -1
+        for q in range(8):
+            dr = _DR[q]
+            dc = _DC[q]
+            rr = r + dr
+            cc = c + dc
+            if rr < 0 or rr >= h or cc < 0 or cc >= w:
+                continue
+            vn = nf[rr, cc]
+            if not vn < v:  # also rejects inf (unreached)
+                continue
+            if q >= 4:
+                if not _diag_open(free, r, c, dr, dc):
+                    continue
+                score = (v - vn) * inv_diag
+            else:
+                score = v - vn
+            if score > best + 1e-4:
+                best = score
+                bk = q
+        if bk < 0:  # cannot happen on a wave output; keep the descent total anyway
+            break
+        r += _DR[bk]
+        c += _DC[bk]
+        out[k, 0] = r
+        out[k, 1] = c
+        k += 1
+    return out[:k].copy()
+
+
+@njit(cache=True)
+def _visible(free: NDArray[np.bool_], r0: int, c0: int, r1: int, c1: int) -> bool:
+    """Every cell the segment from the anchor (r0, c0) to the target (r1, c1) touches is free, the anchor
+    cell excepted (it may be the robot cell in C-obstacle).
+
+    Supercover walk between the cell centres (both side cells at an exact corner crossing). The walk is
+    symmetric, so two walkers start at both ends and stop where they meet: an obstruction near either end
+    is found after a few cells, which is where obstructions of nearly visible segments are.
+    """
+    if r0 == r1 and c0 == c1:
+        return True
+    if not free[r1, c1]:
+        return False
+    nx = abs(c1 - c0)
+    ny = abs(r1 - r0)
+    sx = 1 if c1 > c0 else -1
+    sy = 1 if r1 > r0 else -1
+    ra, ca, ax, ay = r0, c0, 0, 0  # walker from the anchor
+    rb, cb, bx, by = r1, c1, 0, 0  # walker from the target, moving by (-sy, -sx)
+    while ax + bx < nx or ay + by < ny:
+        d = (1 + 2 * ax) * ny - (1 + 2 * ay) * nx
+        if d == 0:
+            if not (free[ra, ca + sx] and free[ra + sy, ca]):
+                return False
+            ra += sy
+            ca += sx
+            ax += 1
+            ay += 1
+        elif d < 0:
+            ca += sx
+            ax += 1
+        else:
+            ra += sy
+            ay += 1
+        if not free[ra, ca]:
+            return False
+        if ax + bx >= nx and ay + by >= ny:
+            break
+        d = (1 + 2 * bx) * ny - (1 + 2 * by) * nx
+        if d == 0:
+            if not (free[rb, cb - sx] and free[rb - sy, cb]):
+                return False
+            rb -= sy
+            cb -= sx
+            bx += 1
+            by += 1
+        elif d < 0:
+            cb -= sx
+            bx += 1
+        else:
+            rb -= sy
+            by += 1
+        if (rb != r0 or cb != c0) and not free[rb, cb]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _line_cells(r0: int, c0: int, r1: int, c1: int) -> NDArray[np.int32]:
+    """(L, 2) cells on the segment between two cell centres, both ends included, consecutive cells
+    8-adjacent (the same walk as ``_visible``)."""
+    nx = abs(c1 - c0)
+    ny = abs(r1 - r0)
+    sx = 1 if c1 > c0 else -1
+    sy = 1 if r1 > r0 else -1
+    out = np.empty((nx + ny + 1, 2), dtype=np.int32)
+    r, c = r0, c0
+    out[0, 0] = r
+    out[0, 1] = c
+    k = 1
+    ix, iy = 0, 0
+    while ix < nx or iy < ny:
+        d = (1 + 2 * ix) * ny - (1 + 2 * iy) * nx
+        if d == 0:
+            r += sy
+            c += sx
+            ix += 1
+            iy += 1
+        elif d < 0:
+            c += sx
+            ix += 1
+        else:
+            r += sy
+            iy += 1
+        out[k, 0] = r
+        out[k, 1] = c
+        k += 1
+    return out[:k].copy()
+
+
+@njit(cache=True)
+def _tighten(path: NDArray[np.int32], free: NDArray[np.bool_]) -> NDArray[np.int64]:
+    """Indices into ``path`` of the string-pulled waypoints (first and last included). From each anchor
+    the stride along the path doubles while the line of sight holds (O(log K) checks instead of K); the
+    point reached is visible, the next cell is not."""
+    n = path.shape[0]
+    keep = np.empty(n, dtype=np.int64)
+    keep[0] = 0
+    m = 1
+    a = 0
+    while a < n - 1:
+        j = a + 1  # the next path cell is always reachable
+        step = 1  # gallop: double the stride while visible, halve it on a miss, stop on a miss at 1
+        while j < n - 1:
+            nj = min(j + step, n - 1)
+            if _visible(free, path[a, 0], path[a, 1], path[nj, 0], path[nj, 1]):
+                j = nj
+                step *= 2
+            elif step == 1:
+                break
+            else:
+                step //= 2
+        keep[m] = j
+        m += 1
+        a = j
+    return _refine(path, free, keep[:m].copy())
+
+
+@njit(cache=True)
+def _hyp(path: NDArray[np.int32], i: int, j: int) -> float:
+    return math.hypot(float(path[i, 0] - path[j, 0]), float(path[i, 1] - path[j, 1]))
+
+
+@njit(cache=True)
+def _refine(path: NDArray[np.int32], free: NDArray[np.bool_], keep: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Pull each interior waypoint along the raw path (between its neighbours) to the cell that shortens
+    the two segments most while both stay visible, then drop waypoints whose neighbours see each other.
+    The greedy pass stops where the line of sight first breaks, which can leave a waypoint past a corner;
+    this moves it back onto the corner."""
+    m = keep.shape[0]
+    for _ in range(4):
+        changed = False
+        for i in range(1, m - 1):
+            a = keep[i - 1]
+            b = keep[i + 1]
+            bj = keep[i]
+            best = _hyp(path, a, bj) + _hyp(path, bj, b)
+            for j in range(a + 1, b):
+                s = _hyp(path, a, j) + _hyp(path, j, b)
+                if s >= best - 1e-9:
+                    continue
+                # the shorter segment first: it is the one an obstruction near the corner blocks
+                va = _hyp(path, a, j) <= _hyp(path, j, b)
+                if va and not _visible(free, path[a, 0], path[a, 1], path[j, 0], path[j, 1]):
+                    continue
+                if not _visible(free, path[j, 0], path[j, 1], path[b, 0], path[b, 1]):
+                    continue
+                if not va and not _visible(free, path[a, 0], path[a, 1], path[j, 0], path[j, 1]):
+                    continue
+                best = s
+                bj = j
+            if bj != keep[i]:
+                keep[i] = bj
+                changed = True
+        if not changed:
+            break
+    out = np.empty(m, dtype=np.int64)
+    out[0] = keep[0]
+    k = 1
+    i = 0
+    while i < m - 1:
+        j = i + 1
+        while j + 1 < m and _visible(
+            free, path[keep[i], 0], path[keep[i], 1], path[keep[j + 1], 0], path[keep[j + 1], 1]
+        ):
+            j += 1
+        out[k] = keep[j]
+        k += 1
+        i = j
+    return out[:k].copy()
+
+
+# ---------------------------------------------------------------------------------------------------------
+# public functions
+
+
+def _as_free(free: ArrayLike) -> NDArray[np.bool_]:
+    a = np.asarray(free)
+    if a.ndim != 2 or a.dtype != np.bool_:
+        raise ValueError(f"free must be a 2-D bool array, got shape {a.shape} dtype {a.dtype}")
+    return np.ascontiguousarray(a)
+
+
+def _check_cell(name: str, rc: tuple[int, int], shape: tuple[int, ...]) -> tuple[int, int]:
+    r, c = int(rc[0]), int(rc[1])
+    if not (0 <= r < shape[0] and 0 <= c < shape[1]):
+        raise ValueError(f"{name} {(r, c)} is outside the grid of shape {shape}")
+    return r, c
+
+
+def project_goal(
+    start_rc: tuple[int, int], goal_rc_float: ArrayLike, shape: tuple[int, int]
+) -> tuple[int, int]:
+    """Goal cell: the cell containing the goal, or, for a goal outside the grid, the border cell where the
+    segment from the robot cell centre to the goal leaves the grid.
+
+    Args:
+        start_rc: (row, col) robot cell, inside the grid.
+        goal_rc_float: (row, col) goal in corner coordinates (cell (r, c) spans [r, r + 1) x [c, c + 1)).
+        shape: (rows, cols) of the grid.
+    Returns:
+        (row, col) of a cell inside the grid.
+    Raises:
+        ValueError: the goal is not finite or the robot cell is outside the grid.
+    """
+    h, w = int(shape[0]), int(shape[1])
+    r0, c0 = _check_cell("start_rc", start_rc, (h, w))
+    g = np.asarray(goal_rc_float, dtype=np.float64).reshape(2)
+    if not np.all(np.isfinite(g)):
+        raise ValueError(f"goal_rc_float must be finite, got {g.tolist()}")
+    gr, gc = math.floor(g[0]), math.floor(g[1])
+    if 0 <= gr < h and 0 <= gc < w:
+        return gr, gc
+    # in index coordinates (centres on integers) clip the segment start -> goal to [0, h-1] x [0, w-1]
+    p0 = np.array([r0, c0], dtype=np.float64)
+    d = (g - 0.5) - p0
+    t = 1.0
+    for axis, hi in ((0, h - 1), (1, w - 1)):
+        if d[axis] > 0.0:
+            t = min(t, (hi - p0[axis]) / d[axis])
+        elif d[axis] < 0.0:
+            t = min(t, -p0[axis] / d[axis])
+    q = p0 + max(t, 0.0) * d
+    return int(np.clip(np.rint(q[0]), 0, h - 1)), int(np.clip(np.rint(q[1]), 0, w - 1))
+
+
+def nf1_wavefront(
+    free: ArrayLike,
+    goal_rc: tuple[int, int],
+    *,
+    connectivity: Literal[4, 8] = 4,
+    robot_rc: tuple[int, int] | None = None,
+    early_exit: bool = False,
+) -> NDArray[np.float32]:
+    """NF1 navigation function: wavefront distance from the goal cell over free C-space cells.
+
+    Args:
+        free: (H, W) bool, True where the robot fits (free C-space).
+        goal_rc: (row, col) goal cell, always seeded (``plan`` refuses a goal cell that is not free).
+        connectivity: 4 (unit steps, Latombe's NF1) or 8 (diagonal steps of sqrt(2); no corner
+            cutting between two C-obstacle cells).
+        robot_rc: the robot cell, seeded free: labelled when a neighbour is reached, never expanded.
+        early_exit: stop when the robot cell is reached; then only values below the robot's are final
+            (all the descent needs), others may be too high or inf.
+    Returns:
+        (H, W) float32 distance to the goal along the wave [cells]; inf where not reached.
+    Raises:
+        ValueError: bad shape / dtype, a cell outside the grid, or a bad connectivity.
+    """
+    f = _as_free(free)
+    gr, gc = _check_cell("goal_rc", goal_rc, f.shape)
+    sr, sc = (-1, -1) if robot_rc is None else _check_cell("robot_rc", robot_rc, f.shape)
+    if connectivity not in (4, 8):
+        raise ValueError(f"connectivity must be 4 or 8, got {connectivity!r}")
+    return _wave(f, gr, gc, sr, sc, early_exit and robot_rc is not None, connectivity == 8)
+
+
+def descend(nf: NDArray[np.float32], free: ArrayLike, start_rc: tuple[int, int]) -> NDArray[np.int32]:
+    """Steepest-descent path over the 8 neighbours from ``start_rc`` down to the goal (value 0).
+
+    Args:
+        nf: (H, W) float32 navigation function from ``nf1_wavefront``.
+        free: (H, W) bool free C-space (diagonal steps need both side cells free).
+        start_rc: (row, col) start cell.
+    Returns:
+        (K, 2) int32 (row, col) cells, start first, goal last, consecutive cells 8-adjacent;
+        (0, 2) when the start was not reached by the wave.
+    """
+    f = _as_free(free)
+    r, c = _check_cell("start_rc", start_rc, f.shape)
+    return _descend(np.ascontiguousarray(nf, dtype=np.float32), f, r, c)
+
+
+def tighten(path_cells: NDArray[np.int32], free: ArrayLike) -> NDArray[np.int32]:
+    """String pulling: the subset of path cells, first and last kept, such that the segment between
+    consecutive ones stays in free cells (the first cell of each segment excepted, so a path may start in
+    C-obstacle). Greedy line of sight from each anchor, then waypoints slide back onto corners (see the
+    module notes).
+
+    Args:
+        path_cells: (K, 2) int (row, col), consecutive cells 8-adjacent (K >= 1).
+        free: (H, W) bool free C-space.
+    Returns:
+        (M, 2) int32 (row, col) waypoints, M <= K.
+    """
+    f = _as_free(free)
+    p = np.ascontiguousarray(path_cells, dtype=np.int32)
+    if p.shape[0] == 0:
+        return p.reshape(0, 2)
+    return p[_tighten(p, f)]
+
+
+def path_direction(waypoints: NDArray[np.float64], lookahead_cells: float) -> float:
+    """Bearing [rad, (-pi, pi]] from the first waypoint to the point ``lookahead_cells`` along the
+    polyline (its end if shorter); 0.0 for a polyline of zero length.
+
+    Args:
+        waypoints: (M, 2) (row, col) polyline, M >= 1.
+        lookahead_cells: arc length [cells] > 0.
+    """
+    w = np.asarray(waypoints, dtype=np.float64)
+    seg = np.diff(w, axis=0)
+    lens = np.hypot(seg[:, 0], seg[:, 1])
+    cum = np.concatenate([[0.0], np.cumsum(lens)])
+    if cum[-1] <= 0.0:
+        return 0.0
+    s = min(lookahead_cells, float(cum[-1]))
+    i = min(int(np.searchsorted(cum, s, side="right")) - 1, len(lens) - 1)
+    while lens[i] == 0.0:  # never stop on a zero-length segment
+        i -= 1
+    p = w[i] + seg[i] * ((s - cum[i]) / lens[i])
+    d = p - w[0]
+    return float(wrap_angle(math.atan2(d[0], d[1])))
+
+
+def _nearest(
+    centre: tuple[int, int],
+    radius_cells: float,
+    shape: tuple[int, ...],
+    valid: Callable[[slice, slice, NDArray[np.int64], NDArray[np.int64]], NDArray[np.bool_]],
+    key: NDArray[np.float32] | None = None,
+) -> tuple[int, int] | None:
+    """Nearest cell (Euclidean; ties: lower ``key``, then row-major) within ``radius_cells`` of ``centre``
+    where ``valid(rows, cols, rr, cc)`` holds on the window ``[rows, cols]`` with index grids rr, cc."""
+    r0, c0 = centre
+    k = math.floor(radius_cells)
+    if k < 1:
+        return None
+    rows = slice(max(r0 - k, 0), min(r0 + k + 1, shape[0]))
+    cols = slice(max(c0 - k, 0), min(c0 + k + 1, shape[1]))
+    rr, cc = np.mgrid[rows, cols]
+    d2 = (rr - r0) ** 2 + (cc - c0) ** 2
+    ok = valid(rows, cols, rr, cc) & (d2 <= radius_cells * radius_cells)
+    if not ok.any():
+        return None
+    keys = (np.zeros(int(ok.sum())) if key is None else key[rows, cols][ok], d2[ok])
+    i = np.lexsort(keys)[0]  # primary key: distance (lexsort sorts by the last key first)
+    return int(rr[ok][i]), int(cc[ok][i])
+
+
+def _escape_target(
+    nf: NDArray[np.float32], start: tuple[int, int], radius_cells: float
+) -> tuple[int, int] | None:
+    """Nearest cell the wave reached (ties: lower NF1) within ``radius_cells`` of the robot cell."""
+    return _nearest(start, radius_cells, nf.shape, lambda rs, cs, _rr, _cc: np.isfinite(nf[rs, cs]), nf)
+
+
+def _free_border_cell(
+    free: NDArray[np.bool_], goal: tuple[int, int], radius_cells: float
+) -> tuple[int, int] | None:
+    """Nearest free cell on the grid border within ``radius_cells`` of the projected goal cell."""
+    h, w = free.shape
+
+    def valid(rs: slice, cs: slice, rr: NDArray[np.int64], cc: NDArray[np.int64]) -> NDArray[np.bool_]:
+        return free[rs, cs] & ((rr == 0) | (rr == h - 1) | (cc == 0) | (cc == w - 1))
+
+    return _nearest(goal, radius_cells, free.shape, valid)
+
+
+def _fail(flag: Flag, goal: tuple[int, int], projected: bool) -> PlanResult:
+    return PlanResult(
+        ok=False,
+        flag=flag,
+        goal_cell=goal,
+        goal_projected=projected,
+        path_cells=np.zeros((0, 2), dtype=np.int32),
+        n_escape=0,
+        waypoints_cells=np.zeros((0, 2), dtype=np.float64),
+        direction_rad=math.nan,
+        length_m=math.nan,
+        cost_m=math.nan,
+    )
+
+
+def plan(
+    free: ArrayLike,
+    start_rc: tuple[int, int],
+    goal_rc_float: ArrayLike,
+    *,
+    cell_m: float,
+    params: Nf1Params = Nf1Params(),
+) -> PlanResult:
+    """Plan from the robot cell to the goal: NF1 wave, steepest descent, string pulling, direction.
+
+    Args:
+        free: (H, W) bool free C-space (True where the robot's inner disc fits).
+        start_rc: (row, col) robot cell (``RobotCentredGrid.robot_cell``); seeded free.
+        goal_rc_float: (row, col) goal in corner coordinates (``RobotCentredGrid.world_to_cell_float``);
+            outside the grid it is projected onto the border along the robot-goal line.
+        cell_m: cell side [m].
+        params: planner settings.
+    Returns:
+        PlanResult; ``ok`` False with GOAL_IN_OBSTACLE (goal cell not free) or PLANNER_NO_PATH (the wave
+        from the goal does not reach the robot, even through the escape).
+    Raises:
+        ValueError: bad array, robot cell outside the grid, non-finite goal or cell_m <= 0.
+    """
+    if not cell_m > 0.0:
+        raise ValueError(f"cell_m must be > 0, got {cell_m!r}")
+    f = _as_free(free)
+    start = _check_cell("start_rc", start_rc, f.shape)
+    g = np.asarray(goal_rc_float, dtype=np.float64).reshape(2)
+    goal = project_goal(start, g, f.shape)
+    projected = not (0 <= math.floor(g[0]) < f.shape[0] and 0 <= math.floor(g[1]) < f.shape[1])
+    if projected and not f[goal]:
+        goal = _free_border_cell(f, goal, params.border_search_m / cell_m) or goal
+    if not f[goal]:
+        return _fail(Flag.GOAL_IN_OBSTACLE, goal, projected)
+
+    nf = _wave(f, goal[0], goal[1], start[0], start[1], params.early_exit, params.connectivity == 8)
+    entry = start
+    prefix = np.zeros((0, 2), dtype=np.int32)
+    if not np.isfinite(nf[start]):
+        target = None if f[start] else _escape_target(nf, start, params.escape_m / cell_m)
+        if target is None:
+            return _fail(Flag.PLANNER_NO_PATH, goal, projected)
+        entry = target
+        prefix = _line_cells(start[0], start[1], target[0], target[1])[:-1]
+    descent = _descend(nf, f, entry[0], entry[1])
+    path = np.concatenate([prefix, descent]) if prefix.shape[0] else descent
+    n_escape = prefix.shape[0] if prefix.shape[0] else int(not f[start])
+
+    tight = descent[_tighten(descent, f)].astype(np.float64)
+    waypoints = np.concatenate([np.asarray([start], dtype=np.float64), tight]) if prefix.shape[0] else tight
+    if waypoints.shape[0] == 1:  # robot and goal share a cell
+        waypoints = np.concatenate([waypoints, waypoints])
+    seg = np.diff(waypoints, axis=0)
+    length_cells = float(np.hypot(seg[:, 0], seg[:, 1]).sum())
+    if length_cells > 0.0:
+        direction = path_direction(waypoints, params.lookahead_m / cell_m)
+    else:  # same cell: head for the goal point itself
+        d = g - 0.5 - np.asarray(start, dtype=np.float64)
+        direction = float(wrap_angle(math.atan2(d[0], d[1])))
+    cost_cells = float(nf[entry]) + float(np.hypot(*(np.subtract(entry, start))))
+    return PlanResult(
+        ok=True,
+        flag=Flag.NONE,
+        goal_cell=goal,
+        goal_projected=projected,
+        path_cells=path,
+        n_escape=n_escape,
+        waypoints_cells=waypoints,
+        direction_rad=direction,
+        length_m=length_cells * cell_m,
+        cost_m=cost_cells * cell_m,
+    )
