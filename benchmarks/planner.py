@@ -21,8 +21,9 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import distance_transform_edt
 
+from gndreplay.pipeline.cspace import free_cspace
+from gndreplay.pipeline.model import FREE, OCCUPIED
 from gndreplay.pipeline.nf1 import Nf1Params, descend, nf1_wavefront, plan, tighten
 
 N = 400
@@ -64,7 +65,8 @@ def office(rng: np.random.Generator, n: int = N) -> NDArray[np.bool_]:
 
 
 def cspace(occ: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    return distance_transform_edt(~occ) > INFLATE_M / CELL_M
+    cells = np.where(occ, OCCUPIED, FREE).astype(np.uint8)
+    return free_cspace(cells, cell_m=CELL_M, inflate_m=INFLATE_M)
 
 
 def timed(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[Any, float]:
