@@ -1,1 +1,182 @@
-"""Log readers: each yields time-ordered Ticks with constant memory; chosen by a small registry."""
+"""Log readers: each yields time-ordered Ticks with constant memory; chosen by a small registry.
+
+>>> with open_log(Path("mit-csail.clf.bz2")) as log:       # doctest: +SKIP
+...     for tick in log.ticks():
+...         tick.scan.ranges_m, tick.odom
+...     log.report.malformed
+
+The format comes from the path (``FORMAT_BY_SUFFIX``; ``.gz`` / ``.bz2`` by the inner suffix; a folder with
+``metadata.yaml`` is a ROS2 bag) or from ``fmt`` (``READERS`` keys, plus the alias "rosbag" for any ROS bag).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+from ..errors import LogFormatError
+from ..types import Tick
+from .base import LogDescription, LogReader, ReadReport, StreamInfo
+from .carmen import CarmenReader, write_carmen
+from .sync import DEFAULT_SYNC, SyncOptions
+
+__all__ = [
+    "FORMAT_BY_SUFFIX",
+    "READERS",
+    "LogDescription",
+    "LogReader",
+    "ReadReport",
+    "StreamInfo",
+    "SyncOptions",
+    "detect_format",
+    "open_log",
+    "read_ticks",
+    "write_carmen",
+]
+
+ReaderFactory = Callable[..., LogReader]
+
+
+def _rosbag(format_name: str) -> ReaderFactory:
+    def make(path: Path, **kw: Any) -> LogReader:
+        from .rosbag import RosbagReader  # rosbags is imported only when a bag is opened
+
+        return RosbagReader(path, format_name=format_name, **kw)
+
+    make.__name__ = f"open_{format_name}"
+    return make
+
+
+#: Format name -> reader factory (called as ``factory(path, scan_topic=..., ..., strict=..., sync=...)``).
+READERS: Mapping[str, ReaderFactory] = {
+    "carmen": CarmenReader,
+    "rosbag1": _rosbag("rosbag1"),
+    "rosbag2": _rosbag("rosbag2"),
+    "mcap": _rosbag("mcap"),
+}
+#: File suffix -> format name (compressed files by their inner suffix).
+FORMAT_BY_SUFFIX: Mapping[str, str] = {
+    ".clf": "carmen",
+    ".log": "carmen",
+    ".carmen": "carmen",
+    ".bag": "rosbag1",
+    ".mcap": "mcap",
+}
+_COMPRESSED = (".gz", ".bz2")
+_ALIASES = {"rosbag": None, "clf": "carmen", "ros1": "rosbag1", "ros2": "rosbag2"}
+KNOWN_FORMATS_HELP = (
+    "carmen (.clf, .log; plain, .gz or .bz2), rosbag1 (.bag), rosbag2 (folder with "
+    "metadata.yaml), mcap (.mcap)"
+)
+
+
+def _ros2_dir(path: Path) -> Path | None:
+    """The ROS2 bag folder for a folder or a file inside one (``.db3`` / ``.mcap``), else None."""
+    if path.is_dir():
+        return path if (path / "metadata.yaml").is_file() else None
+    if path.suffix.lower() == ".db3" and (path.parent / "metadata.yaml").is_file():
+        return path.parent
+    return None
+
+
+def detect_format(path: Path, fmt: str | None = None) -> tuple[str, Path]:
+    """Format name and the path to open (a ``.db3`` inside a ROS2 bag opens its folder).
+
+    Raises:
+        LogFormatError: missing path, unknown suffix or ``fmt`` (the message lists the known formats).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise LogFormatError(f"{path}: no such file or directory")
+    if fmt is not None:
+        name = fmt.lower()
+        if name in _ALIASES:
+            name = _ALIASES[name] or ""
+            if not name:  # "rosbag": any ROS bag, by its shape
+                ros_fmt, target = detect_format(path)
+                if ros_fmt == "carmen":
+                    raise LogFormatError(
+                        f"{path}: not a ROS bag (a .bag file, a ROS2 bag folder or an .mcap)"
+                    )
+                return ros_fmt, target
+        if name not in READERS:
+            raise LogFormatError(
+                f"{path}: unknown format {fmt!r}; known formats: {', '.join(READERS)} "
+                "(and 'rosbag' for any ROS bag)"
+            )
+        ros2 = _ros2_dir(path)
+        return name, ros2 if (ros2 is not None and name == "rosbag2") else path
+    ros2 = _ros2_dir(path)
+    if ros2 is not None:
+        return "rosbag2", ros2
+    if path.is_dir():
+        raise LogFormatError(
+            f"{path}: a folder without metadata.yaml is not a ROS2 bag; known formats: {KNOWN_FORMATS_HELP}"
+        )
+    suffixes = [s.lower() for s in path.suffixes]
+    suffix = suffixes[-1] if suffixes else ""
+    if suffix in _COMPRESSED:
+        suffix = suffixes[-2] if len(suffixes) >= 2 else ""
+        if FORMAT_BY_SUFFIX.get(suffix) != "carmen":
+            raise LogFormatError(
+                f"{path}: unknown log format (compressed {suffix or 'file'}); known formats: "
+                f"{KNOWN_FORMATS_HELP}; use --format"
+            )
+    found = FORMAT_BY_SUFFIX.get(suffix)
+    if found is None:
+        raise LogFormatError(
+            f"{path}: unknown log format (suffix {suffix!r}); known formats: "
+            f"{KNOWN_FORMATS_HELP}; use --format"
+        )
+    return found, path
+
+
+def open_log(
+    path: Path | str,
+    *,
+    fmt: str | None = None,
+    scan_topic: str | None = None,
+    odom_topic: str | None = None,
+    cmd_topic: str | None = None,
+    truth_topic: str | None = None,
+    strict: bool = False,
+    sync: SyncOptions = DEFAULT_SYNC,
+) -> LogReader:
+    """Open a log with the reader for its format (a context manager; see :class:`LogReader`).
+
+    Args:
+        path: the log file or ROS2 bag folder.
+        fmt: a ``READERS`` name (or "rosbag") instead of detecting it from the path.
+        scan_topic, odom_topic, cmd_topic, truth_topic: streams to use instead of the auto-detected ones
+            (ROS topics, or CARMEN message names such as ``FLASER`` / ``ODOM`` / ``TRUEPOS``).
+        strict: a malformed record is an error instead of being skipped and counted.
+        sync: reorder and wait bounds of the time synchronisation.
+
+    Raises:
+        LogFormatError: missing file, unknown format, unreadable or refused log, unknown or ambiguous topic
+            (messages name the file and list the candidates).
+    """
+    name, target = detect_format(Path(path), fmt)
+    return READERS[name](
+        target,
+        scan_topic=scan_topic,
+        odom_topic=odom_topic,
+        cmd_topic=cmd_topic,
+        truth_topic=truth_topic,
+        strict=strict,
+        sync=sync,
+    )
+
+
+def read_ticks(path: Path | str, **opts: Any) -> Iterator[Tick]:
+    """Convenience: open ``path`` (options as :func:`open_log`) and yield its ticks, closing it at the end.
+
+    Yields:
+        time-ordered ticks.
+
+    Raises:
+        LogFormatError: as :func:`open_log` and ``LogReader.ticks``.
+    """
+    with open_log(path, **opts) as log:
+        yield from log.ticks()

@@ -1,0 +1,486 @@
+"""``gndreplay info``: what a log contains, as a frozen :class:`LogInfo` (plus rows for display).
+
+CARMEN logs have no index, so they are streamed once through the same reader later commands use (the
+numbers are exactly what a replay sees: skipped lines, reordering, scans without odometry). ROS bags and
+MCAP files are summarised from their metadata (MCAP: the summary section, via the ``mcap`` library): message
+counts come from the index, scan stamps from the raw header bytes (no decoding), and the beam statistics from
+a decoded, evenly spaced sample of at most ``sample`` scans (``LogInfo.stats_scans`` says how many).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .io import SyncOptions, detect_format, open_log
+from .io.base import LogDescription, ReadReport
+from .io.sync import DEFAULT_SYNC
+from .types import NS_PER_S, Pose2D, Scan
+
+__all__ = ["LogInfo", "StreamStat", "log_info", "stream_rows", "summary_rows"]
+
+DEFAULT_SAMPLE = 500
+
+
+@dataclass(frozen=True, slots=True)
+class StreamStat:
+    """One stream (ROS topic / CARMEN message type): count and mean rate ((count - 1) / scan duration)."""
+
+    name: str
+    msgtype: str
+    role: str
+    count: int | None
+    rate_hz: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class LogInfo:
+    """Everything ``gndreplay info`` reports. Times are scan (sensor) stamps; angles in degrees for display.
+
+    Attributes:
+        path, format, size_bytes: the log.
+        scans: number of scans (ticks a replay gets).
+        start_ns, end_ns, duration_s: first / last scan stamp and their difference.
+        streams: per topic / message type counts and rates.
+        beams: distinct beam counts per scan.
+        angle_min_deg, angle_max_deg, resolution_deg, fov_deg: scan geometry (of the first scan).
+        range_min_m, range_max_m: sensor range limits (of the first scan).
+        invalid_fraction, no_return_fraction: fraction of beams that are nan / +inf.
+        stats_scans: scans the beam statistics were computed on (< scans when sampled).
+        laser_pose: the laser pose in the robot frame (x [m], y [m], theta [rad]).
+        odom_source, cmd_stream, truth_stream: where odometry, commands and ground truth come from.
+        time_reversals: records stamped before the previous record of the same stream (scans, for bags).
+        out_of_order: records stamped before a record read earlier (merged by time; CARMEN).
+        late_dropped: records too late to place in time order (dropped).
+        gaps, max_gap_s, gap_threshold_s: intervals between scans above the threshold; the longest.
+        malformed, malformed_examples: skipped records.
+        scans_without_odom_before, scans_without_odom_after: scans outside the odometry's time span
+            (None when not computed).
+        index_clock: the log had no timestamps.
+        summary_source: "full pass" or what the summary was read from.
+        warnings, notes: for the user.
+    """
+
+    path: str
+    format: str
+    size_bytes: int
+    scans: int
+    start_ns: int | None
+    end_ns: int | None
+    duration_s: float
+    streams: tuple[StreamStat, ...]
+    beams: tuple[int, ...]
+    angle_min_deg: float
+    angle_max_deg: float
+    resolution_deg: float
+    fov_deg: float
+    range_min_m: float
+    range_max_m: float
+    invalid_fraction: float
+    no_return_fraction: float
+    stats_scans: int
+    laser_pose: tuple[float, float, float]
+    odom_source: str
+    cmd_stream: str | None
+    truth_stream: str | None
+    time_reversals: int
+    out_of_order: int
+    late_dropped: int
+    gaps: int
+    max_gap_s: float
+    gap_threshold_s: float
+    malformed: int
+    malformed_examples: tuple[str, ...]
+    scans_without_odom_before: int | None
+    scans_without_odom_after: int | None
+    index_clock: bool
+    summary_source: str
+    warnings: tuple[str, ...] = ()
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def sampled(self) -> bool:
+        return self.stats_scans < self.scans
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (tuples become lists; the streams a list of dicts)."""
+        d = asdict(self)
+        d["sampled"] = self.sampled
+        d["start_s"] = None if self.start_ns is None else self.start_ns / NS_PER_S
+        d["end_s"] = None if self.end_ns is None else self.end_ns / NS_PER_S
+        out: dict[str, Any] = _jsonable(d)
+        return out
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {k: _jsonable(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
+
+
+# ---------------------------------------------------------------------------------------------------------
+
+
+@dataclass(slots=True)
+class _BeamStats:
+    """Accumulates beam statistics over scans (constant memory)."""
+
+    n: int = 0
+    beams: set[int] = field(default_factory=set)
+    total: int = 0
+    invalid: int = 0
+    no_return: int = 0
+    first: Scan | None = None
+
+    def add(self, scan: Scan) -> None:
+        r = scan.ranges_m
+        self.n += 1
+        self.beams.add(int(r.size))
+        self.total += int(r.size)
+        self.invalid += int(np.count_nonzero(np.isnan(r)))
+        self.no_return += int(np.count_nonzero(np.isposinf(r)))
+        if self.first is None:
+            self.first = scan
+
+
+def _geometry(
+    first: Scan | None,
+) -> tuple[float, float, float, float, float, float, tuple[float, float, float]]:
+    if first is None or first.angles_rad.size == 0:
+        nan = math.nan
+        return nan, nan, nan, nan, nan, nan, (0.0, 0.0, 0.0)
+    a = first.angles_rad
+    res = float(np.degrees((a[-1] - a[0]) / (a.size - 1))) if a.size > 1 else 0.0
+    amin, amax = float(np.degrees(a[0])), float(np.degrees(a[-1]))
+    sp: Pose2D = first.sensor_pose
+    return (
+        amin,
+        amax,
+        res,
+        abs(amax - amin),
+        float(first.min_range_m),
+        float(first.max_range_m),
+        (sp.x, sp.y, sp.theta),
+    )
+
+
+def log_info(
+    path: Path | str,
+    *,
+    fmt: str | None = None,
+    scan_topic: str | None = None,
+    odom_topic: str | None = None,
+    cmd_topic: str | None = None,
+    truth_topic: str | None = None,
+    strict: bool = False,
+    sample: int = DEFAULT_SAMPLE,
+    sync: SyncOptions = DEFAULT_SYNC,
+) -> LogInfo:
+    """Describe a log (see the module docstring for how each format is summarised).
+
+    Args:
+        path, fmt, scan_topic, odom_topic, cmd_topic, truth_topic, strict: as :func:`gndreplay.io.open_log`.
+        sample: at most this many scans are decoded for beam statistics of ROS bags / MCAP files.
+        sync: gap threshold and reorder bounds.
+
+    Raises:
+        LogFormatError: as :func:`gndreplay.io.open_log`; also a log without scans.
+    """
+    path = Path(path)
+    name, target = detect_format(path, fmt)
+    size = _size(target)
+    opts = dict(
+        scan_topic=scan_topic,
+        odom_topic=odom_topic,
+        cmd_topic=cmd_topic,
+        truth_topic=truth_topic,
+        strict=strict,
+        sync=sync,
+    )
+    if name == "carmen":
+        return _carmen_info(target, size, opts)
+    return _ros_info(target, name, size, opts, sample=sample, gap_ns=sync.gap_ns)
+
+
+def _size(path: Path) -> int:
+    if path.is_dir():
+        return sum(f.stat().st_size for f in path.iterdir() if f.is_file())
+    return path.stat().st_size
+
+
+def _streams(
+    desc: LogDescription, counts: dict[str, int] | None, duration_s: float
+) -> tuple[StreamStat, ...]:
+    out = []
+    for s in desc.streams:
+        count = counts.get(s.name, s.count) if counts is not None else s.count
+        periodic = count is not None and count > 1 and s.role not in ("param", "tf_static")
+        rate = (count - 1) / duration_s if periodic and duration_s > 0 else None  # type: ignore[operator]
+        out.append(StreamStat(s.name, s.msgtype, s.role, count, rate))
+    return tuple(out)
+
+
+def _carmen_info(path: Path, size: int, opts: dict[str, Any]) -> LogInfo:
+    from .io.carmen import CarmenReader
+
+    stats = _BeamStats()
+    first_t: int | None = None
+    last_t: int | None = None
+    with open_log(path, fmt="carmen", **opts) as log:
+        assert isinstance(log, CarmenReader)
+        for tick in log.ticks():
+            stats.add(tick.scan)
+            if first_t is None:
+                first_t = tick.t_ns
+            last_t = tick.t_ns
+        desc, rep, counts = log.describe(), log.report, log.message_counts
+    duration = (last_t - first_t) / NS_PER_S if first_t is not None and last_t is not None else 0.0
+    return _assemble(
+        path,
+        "carmen",
+        size,
+        desc,
+        rep,
+        stats,
+        first_t,
+        last_t,
+        duration,
+        _streams(desc, counts, duration),
+        opts["sync"].gap_ns,
+        "full pass",
+        rep.scans_without_odom_before,
+        rep.scans_without_odom_after,
+    )
+
+
+def _assemble(
+    path: Path,
+    fmt: str,
+    size: int,
+    desc: LogDescription,
+    rep: ReadReport,
+    stats: _BeamStats,
+    first_t: int | None,
+    last_t: int | None,
+    duration: float,
+    streams: tuple[StreamStat, ...],
+    gap_ns: int,
+    source: str,
+    before: int | None,
+    after: int | None,
+    *,
+    scans: int | None = None,
+    reversals: int | None = None,
+    gaps: int | None = None,
+    max_gap_s: float | None = None,
+    notes: tuple[str, ...] = (),
+) -> LogInfo:
+    amin, amax, res, fov, rmin, rmax, pose = _geometry(stats.first)
+    total = max(stats.total, 1)
+    return LogInfo(
+        path=str(path),
+        format=fmt,
+        size_bytes=size,
+        scans=rep.scans if scans is None else scans,
+        start_ns=first_t,
+        end_ns=last_t,
+        duration_s=duration,
+        streams=streams,
+        beams=tuple(sorted(stats.beams)),
+        angle_min_deg=amin,
+        angle_max_deg=amax,
+        resolution_deg=res,
+        fov_deg=fov,
+        range_min_m=rmin,
+        range_max_m=rmax,
+        invalid_fraction=stats.invalid / total,
+        no_return_fraction=stats.no_return / total,
+        stats_scans=stats.n,
+        laser_pose=pose,
+        odom_source=desc.odom_source,
+        cmd_stream=desc.cmd_stream,
+        truth_stream=desc.truth_stream,
+        time_reversals=rep.time_reversals if reversals is None else reversals,
+        out_of_order=rep.out_of_order,
+        late_dropped=rep.late_dropped,
+        gaps=rep.gaps if gaps is None else gaps,
+        max_gap_s=rep.max_gap_s if max_gap_s is None else max_gap_s,
+        gap_threshold_s=gap_ns / NS_PER_S,
+        malformed=rep.malformed,
+        malformed_examples=rep.malformed_examples,
+        scans_without_odom_before=before,
+        scans_without_odom_after=after,
+        index_clock=rep.index_clock,
+        summary_source=source,
+        warnings=rep.warnings,
+        notes=desc.notes + notes,
+    )
+
+
+@dataclass(slots=True)
+class _StampStats:
+    """Scan stamps in file order: span, reversals, gaps, scans outside the odometry span."""
+
+    gap_ns: int
+    odom_span: tuple[int, int] | None
+    seen: int = 0
+    first: int | None = None
+    last: int | None = None
+    prev: int | None = None
+    reversals: int = 0
+    gaps: int = 0
+    max_gap_ns: int = 0
+    before: int = 0
+    after: int = 0
+
+    def add(self, t: int) -> None:
+        self.seen += 1
+        if self.prev is not None:
+            if t < self.prev:
+                self.reversals += 1
+            elif t - self.prev > self.gap_ns:
+                self.gaps += 1
+            self.max_gap_ns = max(self.max_gap_ns, t - self.prev)
+        self.prev = t
+        self.first = t if self.first is None else min(self.first, t)
+        self.last = t if self.last is None else max(self.last, t)
+        if self.odom_span is not None:
+            self.before += t < self.odom_span[0]
+            self.after += t > self.odom_span[1]
+
+
+def _ros_info(path: Path, fmt: str, size: int, opts: dict[str, Any], *, sample: int, gap_ns: int) -> LogInfo:
+    from .errors import LogFormatError
+    from .io.mcap import mcap_files, read_mcap_summary
+    from .io.rosbag import ODOMETRY, RosbagReader, rosbags_errors
+
+    errors = rosbags_errors()
+    malformed: list[str] = []
+
+    def bad(i: int, topic: str, err: BaseException) -> None:
+        where = f"message {i} on {topic}: cannot decode: {type(err).__name__}: {err}"
+        if opts["strict"]:
+            raise LogFormatError(f"{path} {where}") from err
+        malformed.append(where)
+
+    with open_log(path, fmt=fmt, **opts) as log:
+        assert isinstance(log, RosbagReader)
+        desc = log.describe()
+        counts: dict[str, int] | None = None
+        source = "bag index / metadata"
+        if mcap_files(path):
+            summary = read_mcap_summary(path)
+            counts = {c.topic: c.count for c in summary.channels}
+            source = "MCAP summary section"
+        n_scans = (counts or {}).get(log.scan_topic) or next(
+            (s.count or 0 for s in desc.streams if s.name == log.scan_topic), 0
+        )
+        odom_span: tuple[int, int] | None = None  # from raw header stamps (Odometry topics only)
+        if log.odom_topic is not None and log.topics[log.odom_topic].msgtype == ODOMETRY:
+            stamps: list[int] = []
+            for i, (_, raw) in enumerate(log.raw_messages(log.odom_topic), start=1):
+                try:
+                    s = log.header_stamp(raw)
+                except errors as err:
+                    bad(i, log.odom_topic, err)
+                    continue
+                stamps = [min(stamps[0], s), max(stamps[1], s)] if stamps else [s, s]
+            odom_span = (stamps[0], stamps[1]) if stamps else None
+        every = max(1, math.ceil(n_scans / max(sample, 1)))
+        beams, times = _BeamStats(), _StampStats(gap_ns, odom_span)
+        for i, (t_log, raw) in enumerate(log.raw_messages(log.scan_topic)):
+            try:
+                times.add(log.header_stamp(raw) or t_log)
+                if i % every == 0:
+                    beams.add(log.decode_scan(raw, t_log))
+            except errors as err:
+                bad(i + 1, log.scan_topic, err)
+        if times.seen == 0:
+            raise LogFormatError(f"{path}: no scans on {log.scan_topic}")
+    rep = ReadReport(scans=times.seen, malformed=len(malformed), malformed_examples=tuple(malformed[:5]))
+    first_t, last_t = times.first, times.last
+    duration = (last_t - first_t) / NS_PER_S if first_t is not None and last_t is not None else 0.0
+    note = (f"beam statistics from {beams.n} of {times.seen} scans (every {every}th)",) if every > 1 else ()
+    return _assemble(
+        path, fmt, size, desc, rep, beams, first_t, last_t, duration, _streams(desc, counts, duration),
+        gap_ns, source, times.before if odom_span else None, times.after if odom_span else None,
+        reversals=times.reversals, gaps=times.gaps, max_gap_s=times.max_gap_ns / NS_PER_S, notes=note,
+    )  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------------------------------
+# formatting as data
+
+
+def _fmt_t(t_ns: int | None) -> str:
+    if t_ns is None:
+        return "-"
+    return f"{t_ns // NS_PER_S}.{t_ns % NS_PER_S // 1000:06d} s"
+
+
+def summary_rows(info: LogInfo) -> list[tuple[str, str]]:
+    """(label, value) rows for the summary table (the same facts as ``to_dict``)."""
+    x, y, th = info.laser_pose
+    beams = ", ".join(map(str, info.beams)) or "-"
+    sampled = f" (sampled: {info.stats_scans} of {info.scans} scans)" if info.sampled else ""
+    rows = [
+        ("file", info.path),
+        ("format", f"{info.format} ({info.size_bytes / 1e6:.1f} MB; {info.summary_source})"),
+        ("scans", f"{info.scans} of {beams} beams"),
+        ("start / end", f"{_fmt_t(info.start_ns)} / {_fmt_t(info.end_ns)}"),
+        ("duration", f"{info.duration_s:.1f} s"),
+        (
+            "field of view",
+            f"{info.fov_deg:.1f} deg ({info.angle_min_deg:.2f} to {info.angle_max_deg:.2f} deg, "
+            f"{info.resolution_deg:.3f} deg steps)",
+        ),
+        ("range limits", f"{info.range_min_m:g} - {info.range_max_m:g} m"),
+        ("invalid beams", f"{100 * info.invalid_fraction:.2f} %{sampled}"),
+        ("no-return beams", f"{100 * info.no_return_fraction:.2f} %{sampled}"),
+        ("laser pose in robot", f"x {x:g} m, y {y:g} m, theta {math.degrees(th):g} deg"),
+        ("odometry", info.odom_source),
+        ("commands", info.cmd_stream or "none"),
+        ("ground truth", info.truth_stream or "none"),
+        ("time reversals", str(info.time_reversals)),
+        ("out of file order", f"{info.out_of_order} (merged by timestamp)" if info.out_of_order else "0"),
+        ("gaps", f"{info.gaps} > {info.gap_threshold_s:g} s (longest {info.max_gap_s:.2f} s)"),
+    ]
+    if info.late_dropped:
+        rows.append(("dropped (too late)", str(info.late_dropped)))
+    if info.scans_without_odom_before is not None:
+        rows.append(
+            (
+                "scans outside odometry",
+                f"{info.scans_without_odom_before} before, {info.scans_without_odom_after} after",
+            )
+        )
+    malformed = str(info.malformed)
+    if info.malformed_examples:
+        malformed += " (" + "; ".join(info.malformed_examples) + ")"
+    rows.append(("malformed records", malformed))
+    if info.index_clock:
+        rows.append(("clock", "index clock (no timestamps in the log)"))
+    rows.extend(("note", n) for n in info.notes)
+    return rows
+
+
+def stream_rows(info: LogInfo) -> list[tuple[str, str, str, str, str]]:
+    """(stream, type, used as, count, rate) rows for the streams table."""
+    return [
+        (
+            s.name,
+            s.msgtype,
+            s.role if s.role != "other" else "",
+            "?" if s.count is None else str(s.count),
+            "" if s.rate_hz is None else f"{s.rate_hz:.2f} Hz",
+        )
+        for s in info.streams
+    ]

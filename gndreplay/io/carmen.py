@@ -1,0 +1,1009 @@
+"""CARMEN text logs (CLF; plain, ``.gz`` or ``.bz2``): a streaming reader and a writer.
+
+Reader decisions (see also ECOSYSTEM.md §3 and the datasets README):
+
+- Lines are parsed forward from their count fields; what follows the payload is the trailer
+  (``ipc_timestamp ipc_hostname logger_timestamp`` in standard logs). The stamp is the first numeric trailer
+  field: the ipc_timestamp in standard logs, the logger_timestamp in ``host logger_ts`` trailers, the ``0`` of
+  laserazos' ``0 0 name``. It is parsed from its decimal text to int ns exactly (no float round-off).
+- Scans: FLASER / RLASER (old style: geometry from the beam count, readlog.c: first beam at -90 deg, 180/181
+  beams 1 deg, 360/361 0.5 deg, 400/401 0.25 deg, else 180 deg over n-1 steps; ``PARAM
+  laser_{front,rear}_laser_{fov,resolution}`` [deg] override), RAWLASER1-4 and ROBOTLASER1/2 (geometry, max
+  range and, for ROBOTLASER, laser and robot pose in the line). Auto choice: ROBOTLASER1, FLASER, RAWLASER1,
+  then the rear lasers.
+- Ranges: a numeric value >= the max range is a no-return (+inf). Literal NaN / inf and negative values are
+  invalid (nan): laserazos writes NaN where nothing came back, but that is not a measured "free up to max
+  range", so it is kept as invalid rather than guessed to be a no-return. The max range comes from PARAM
+  (``laser_front_laser_max_range``), else from a saturation marker (a maximal value repeated across the first
+  scans, like ACES' 50.0), else readlog.c's 80 m.
+- Odometry: ODOM lines (interpolated at each scan stamp) when the log has them, else the odometry triple
+  inside the scan line. In ACES the FLASER odometry triple is the latest ODOM sample before the scan (stale by
+  ~0.1 s); interpolating ODOM at the scan stamp is closer in time and matches the ROS conversions of the log.
+  ``odom_topic="FLASER"`` picks the embedded triple instead.
+- The laser pose in the robot frame comes from ``PARAM robot_frontlaser_offset`` (+ ``_side_offset``,
+  ``_angular_offset``), the rear laser facing backwards; ROBOTLASER lines give it per line.
+- File order is not time order: records go through the bounded reorder heap of :mod:`.sync`.
+- Malformed lines are skipped and counted (``strict`` makes them an error); all-zero stamps get an index
+  clock.
+"""
+
+from __future__ import annotations
+
+import bz2
+import contextlib
+import gzip
+import itertools
+import logging
+import math
+import os
+import re
+import tempfile
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import IO, Self
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import LogFormatError
+from ..types import NS_PER_S, Odometry, Pose2D, Scan, Tick
+from .base import INDEX_CLOCK_PERIOD_NS, LogDescription, ReadReport, StreamInfo, StreamRole
+from .sync import (
+    DEFAULT_SYNC,
+    Event,
+    OdomEvent,
+    PoseMode,
+    ScanEvent,
+    SyncOptions,
+    SyncStats,
+    TruthEvent,
+    reorder,
+    synchronise,
+    with_index_clock,
+    wrap,
+)
+
+__all__ = [
+    "DEFAULT_MAX_RANGE_M",
+    "SCAN_MESSAGES",
+    "CarmenReader",
+    "flaser_angles",
+    "parse_time_ns",
+    "write_carmen",
+]
+
+log = logging.getLogger(__name__)
+
+F64 = NDArray[np.float64]
+
+#: readlog.c's maximum range; values at or beyond it are no-returns.
+DEFAULT_MAX_RANGE_M = 80.0
+#: Scan message names in the order the reader prefers them when several are present.
+SCAN_MESSAGES = (
+    "ROBOTLASER1", "FLASER", "RAWLASER1", "ROBOTLASER2", "RLASER", "RAWLASER2", "RAWLASER3", "RAWLASER4",
+)  # fmt: skip
+_OTHER_KNOWN = (  # readlog.c's "message formats defined" plus the old-style remission lines
+    "ODOM", "TRUEPOS", "PARAM", "SYNC", "LASER3", "LASER4", "ROBOTLASER0", "REMISSIONFLASER",
+    "REMISSIONRLASER", "REMISSIONLASER3", "REMISSIONLASER4", "POSITIONLASER", "NMEAGGA", "NMEARMC",
+)  # fmt: skip
+KNOWN_MESSAGES = frozenset(SCAN_MESSAGES + _OTHER_KNOWN)
+_NAME_RE = re.compile(rb"^[A-Za-z][A-Za-z0-9_\-]*$")
+_DEC_RE = re.compile(rb"^([+-]?)(\d+)(?:\.(\d*))?$")
+_HEAD_LINES = 5000
+_HEAD_SCANS = 50
+_MAX_BEAMS = 100_000
+_MAX_LINE = 4 << 20  # bytes; a 100k-beam line is ~1 MB
+_MAX_TRAILER = 3
+_SATURATION_MIN_COUNT = 5
+_SATURATION_MIN_SCANS = 3
+
+# which laser a message comes from: PARAM prefix and default mounting
+_FRONT, _REAR = "front", "rear"
+_SIDE = {
+    "FLASER": _FRONT,
+    "RLASER": _REAR,
+    "RAWLASER1": _FRONT,
+    "RAWLASER2": _REAR,
+    "RAWLASER3": None,
+    "RAWLASER4": None,
+    "ROBOTLASER1": _FRONT,
+    "ROBOTLASER2": _REAR,
+}
+_MAX_RANGE_PARAMS = ("laser_{s}_laser_max_range", "laser_{s}_laser_maxrange", "robot_{s}_laser_max")
+
+
+class _Bad(ValueError):
+    """A malformed line (internal; becomes a count or a LogFormatError)."""
+
+
+# ---------------------------------------------------------------------------------------------------------
+# small pure helpers
+
+
+def parse_time_ns(token: bytes | str) -> int:
+    """Seconds as decimal text -> int ns, exact for plain decimals (``"1134864629.895182"``).
+
+    Raises:
+        ValueError: not a finite number.
+    """
+    tok = token.encode() if isinstance(token, str) else token
+    m = _DEC_RE.match(tok)
+    if m is not None:
+        sign, sec, frac = m.groups()
+        ns = int(sec) * NS_PER_S + (int(frac[:9].ljust(9, b"0")) if frac else 0)
+        return -ns if sign == b"-" else ns
+    value = float(tok)
+    if not math.isfinite(value):
+        raise ValueError(f"timestamp {tok!r} is not finite")
+    return round(value * NS_PER_S)
+
+
+def format_time_s(t_ns: int) -> str:
+    """int ns -> exact decimal seconds (``parse_time_ns`` inverse)."""
+    sign = "-" if t_ns < 0 else ""
+    a = abs(t_ns)
+    return f"{sign}{a // NS_PER_S}.{a % NS_PER_S:09d}"
+
+
+def flaser_angles(n: int, *, fov_rad: float | None = None, resolution_rad: float | None = None) -> F64:
+    """Beam bearings [rad] of an n-beam FLASER/RLASER scan (readlog.c geometry unless fov/resolution given).
+
+    With ``fov_rad`` the scan is centred (first beam at -fov/2); with only ``resolution_rad`` it starts at
+    -pi/2. Without either: 180/181 beams at 1 deg, 360/361 at 0.5 deg, 400/401 at 0.25 deg, else pi/(n-1);
+    first beam at -pi/2.
+    """
+    if fov_rad is not None:
+        res = resolution_rad if resolution_rad is not None else (fov_rad / (n - 1) if n > 1 else 0.0)
+        return -fov_rad / 2.0 + res * np.arange(n, dtype=np.float64)
+    if resolution_rad is not None:
+        res = resolution_rad
+    elif n in (180, 181):
+        res = math.radians(1.0)
+    elif n in (360, 361):
+        res = math.radians(0.5)
+    elif n in (400, 401):
+        res = math.radians(0.25)
+    else:
+        res = math.pi / (n - 1) if n > 1 else 0.0
+    return -math.pi / 2.0 + res * np.arange(n, dtype=np.float64)
+
+
+def clean_ranges(raw: F64, max_range_m: float, min_range_m: float = 0.0) -> F64:
+    """Raw log ranges -> our convention, in place: >= max range -> +inf; nan/inf/negative/<min -> nan."""
+    valid = (raw >= max(min_range_m, 0.0)) & (raw < np.inf)  # False for nan, +-inf, negative
+    np.putmask(raw, raw >= max_range_m, np.inf)
+    np.putmask(raw, ~valid, np.nan)
+    return raw
+
+
+def _floats(tokens: list[bytes], what: str) -> list[float]:
+    try:
+        vals = [float(t) for t in tokens]
+    except ValueError:
+        raise _Bad(f"{what} is not numeric") from None
+    if not all(math.isfinite(v) for v in vals):
+        raise _Bad(f"{what} is not finite")
+    return vals
+
+
+def _count(tok: list[bytes], i: int, what: str) -> int:
+    try:
+        n = int(tok[i])
+    except (ValueError, IndexError):
+        raise _Bad(f"{what} count missing or not an integer") from None
+    if not 0 < n <= _MAX_BEAMS:
+        raise _Bad(f"{what} count {n} out of range")
+    return n
+
+
+def _need(tok: list[bytes], n_fields: int, what: str) -> None:
+    """Check that the payload (n_fields tokens) plus a 1-3 token trailer is what the line holds."""
+    extra = len(tok) - n_fields
+    if extra < 1:
+        raise _Bad(f"{what}: line ends early ({len(tok)} fields, expected {n_fields + 1} or more)")
+    if extra > _MAX_TRAILER:
+        raise _Bad(f"{what}: {extra - _MAX_TRAILER} unexpected extra fields")
+
+
+def _trailer_time(tok: list[bytes], start: int) -> int:
+    """First numeric field of the trailer, in ns."""
+    for t in tok[start:]:
+        with contextlib.suppress(ValueError):
+            return parse_time_ns(t)
+    raise _Bad("no timestamp")
+
+
+def _ranges(tok: list[bytes], a: int, n: int) -> F64:
+    try:
+        return np.array(tok[a : a + n], dtype=np.float64)
+    except ValueError:
+        raise _Bad("ranges are not numeric") from None
+
+
+def _pose(v: list[float]) -> Pose2D:
+    return Pose2D(v[0], v[1], wrap(v[2]))
+
+
+def _relative(a: Pose2D, b: Pose2D) -> Pose2D:
+    """inverse(a) ∘ b with scalar math (per line, so no numpy overhead)."""
+    c, s = math.cos(a.theta), math.sin(a.theta)
+    dx, dy = b.x - a.x, b.y - a.y
+    return Pose2D(c * dx + s * dy, -s * dx + c * dy, wrap(b.theta - a.theta))
+
+
+def _compose(a: Pose2D, b: Pose2D) -> Pose2D:
+    c, s = math.cos(a.theta), math.sin(a.theta)
+    return Pose2D(a.x + c * b.x - s * b.y, a.y + s * b.x + c * b.y, wrap(a.theta + b.theta))
+
+
+# ---------------------------------------------------------------------------------------------------------
+# opening
+
+
+def _open_binary(path: Path) -> IO[bytes]:
+    """Open plain / .gz / .bz2 by suffix, in binary mode (lines are parsed as bytes: faster)."""
+    suffix = path.suffix.lower()
+    if suffix == ".gz":
+        return gzip.open(path, "rb")  # type: ignore[return-value]
+    if suffix == ".bz2":
+        return bz2.open(path, "rb")
+    return open(path, "rb")
+
+
+def _lines(path: Path, fh: IO[bytes], lineno: int = 0) -> Iterator[tuple[int, bytes]]:
+    """Numbered lines after line ``lineno`` (at most ``_MAX_LINE`` bytes each: a binary file cannot fill
+    memory).
+
+    Raises:
+        LogFormatError: decompression or I/O error, naming the last line read.
+    """
+    readline = fh.readline
+    while True:
+        try:
+            line = readline(_MAX_LINE)
+        except (OSError, EOFError, ValueError) as err:  # gzip/bz2 raise all three on bad data
+            raise LogFormatError(f"{path}: truncated or corrupt data after line {lineno}: {err}") from err
+        if not line:
+            return
+        lineno += 1
+        yield lineno, line
+
+
+# ---------------------------------------------------------------------------------------------------------
+# the head of the file: what is in it, params, saturation marker, all-zero clock
+
+
+@dataclass(frozen=True, slots=True)
+class _Head:
+    names: Counter[str]
+    params: dict[str, str]
+    samples: dict[str, list[F64]]
+    any_stamp: bool
+    all_zero: bool
+    first_name: str | None
+
+
+@dataclass(slots=True)
+class _Opened:
+    """A file handle positioned after ``lines`` (kept so the first pass does not decompress them again)."""
+
+    fh: IO[bytes]
+    lines: list[tuple[int, bytes]]
+
+
+def _peek(path: Path) -> tuple[_Head, _Opened]:
+    """Read the head of the log (a few thousand lines at most); the handle stays open for the first pass.
+
+    Raises:
+        LogFormatError: missing / unreadable file, or not a CARMEN log.
+    """
+    try:
+        fh = _open_binary(path)
+    except OSError as err:
+        raise LogFormatError(f"{path}: cannot open: {err.strerror or err}") from err
+    opened = _Opened(fh, [])
+    try:
+        return _read_head(path, opened), opened
+    except BaseException:
+        fh.close()
+        raise
+
+
+def _read_head(path: Path, opened: _Opened) -> _Head:
+    names: Counter[str] = Counter()
+    params: dict[str, str] = {}
+    samples: dict[str, list[F64]] = {}
+    any_stamp, all_zero = False, True
+    first_name: str | None = None
+    scans = 0
+    for lineno, line in _lines(path, opened.fh):
+        opened.lines.append((lineno, line))
+        if lineno > _HEAD_LINES or scans >= _HEAD_SCANS:
+            break
+        tok = line.split()
+        if not tok or tok[0].startswith(b"#"):
+            continue
+        if first_name is None:
+            first_name = tok[0][:40].decode("ascii", "replace")
+        if not _NAME_RE.match(tok[0]):
+            continue
+        name = tok[0].decode()
+        names[name] += 1
+        if name == "PARAM" and len(tok) >= 3:
+            params[tok[1].decode("ascii", "replace")] = tok[2].decode("ascii", "replace")
+            continue
+        if name not in KNOWN_MESSAGES or name == "PARAM":
+            continue
+        with contextlib.suppress(_Bad, ValueError, IndexError):
+            raw, t_ns = _peek_record(name, tok)
+            any_stamp = True
+            all_zero = all_zero and t_ns == 0
+            if raw is not None:
+                scans += 1
+                samples.setdefault(name, []).append(raw)
+    if not any(n in KNOWN_MESSAGES for n in names):
+        what = f"first record starts with {first_name!r}" if first_name else "no records"
+        raise LogFormatError(f"{path}: not a CARMEN log (no CARMEN message in the first lines; {what})")
+    return _Head(names, params, samples, any_stamp, any_stamp and all_zero, first_name)
+
+
+def _peek_record(name: str, tok: list[bytes]) -> tuple[F64 | None, int]:
+    """Raw ranges (scan lines) and the stamp of one record, for the head sample."""
+    if name in ("FLASER", "RLASER"):
+        n = _count(tok, 1, name)
+        return _ranges(tok, 2, n), _trailer_time(tok, 2 + n + 6)
+    if name.startswith("RAWLASER") or name.startswith("ROBOTLASER"):
+        n = _count(tok, 8, name)
+        m = int(tok[9 + n])
+        tail = 11 if name.startswith("ROBOTLASER") else 0
+        return _ranges(tok, 9, n), _trailer_time(tok, 10 + n + m + tail)
+    if name == "ODOM":
+        return None, _trailer_time(tok, 7)
+    if name == "TRUEPOS":
+        return None, _trailer_time(tok, 7)
+    raise _Bad("not sampled")
+
+
+def detect_saturation(samples: list[F64]) -> float | None:
+    """A no-return marker below the default max range: the maximal value, repeated across scans.
+
+    ACES writes 50.0 where the beam saw nothing; such a value is the scan-wide maximum, occurs at least 5
+    times and in at least 3 scans of the sample. Returns None when there is no such value.
+    """
+    if not samples:
+        return None
+    allr = np.concatenate(samples)
+    fin = allr[np.isfinite(allr) & (allr > 0.0)]
+    if fin.size == 0:
+        return None
+    m = float(fin.max())
+    if m >= DEFAULT_MAX_RANGE_M:
+        return None
+    n_scans = sum(bool(np.any(s == m)) for s in samples)
+    if int(np.count_nonzero(fin == m)) >= _SATURATION_MIN_COUNT and n_scans >= _SATURATION_MIN_SCANS:
+        return m
+    return None
+
+
+# ---------------------------------------------------------------------------------------------------------
+# laser configuration from PARAMs
+
+
+@dataclass(frozen=True, slots=True)
+class _Laser:
+    """Per-laser settings that old-style lines do not carry."""
+
+    sensor_pose: Pose2D
+    max_range_m: float
+    max_range_source: str
+    min_range_m: float
+    fov_rad: float | None
+    resolution_rad: float | None
+
+
+def _param_float(params: Mapping[str, str], key: str) -> float | None:
+    v = params.get(key)
+    if v is None:
+        return None
+    try:
+        f = float(v)
+    except ValueError:
+        return None
+    return f if math.isfinite(f) else None
+
+
+def _laser_config(side: str | None, params: Mapping[str, str], saturation: float | None) -> _Laser:
+    if side is None:
+        return _Laser(Pose2D(0.0, 0.0, 0.0), DEFAULT_MAX_RANGE_M, "readlog.c default", 0.0, None, None)
+    x = _param_float(params, f"robot_{side}laser_offset") or 0.0
+    y = _param_float(params, f"robot_{side}laser_side_offset") or 0.0
+    th = _param_float(params, f"robot_{side}laser_angular_offset") or 0.0
+    pose = Pose2D(x, y, wrap(th + (math.pi if side == _REAR else 0.0)))
+    max_r, source = DEFAULT_MAX_RANGE_M, "readlog.c default"
+    for key in _MAX_RANGE_PARAMS:
+        v = _param_float(params, key.format(s=side))
+        if v is not None and v > 0:
+            max_r, source = v, f"PARAM {key.format(s=side)}"
+            break
+    else:
+        if saturation is not None:
+            max_r, source = saturation, f"no-return marker {saturation:g} m"
+    min_r = _param_float(params, f"laser_{side}_laser_min_range") or 0.0
+    fov = _param_float(params, f"laser_{side}_laser_fov")
+    res = _param_float(params, f"laser_{side}_laser_resolution")
+    return _Laser(
+        pose, max_r, source, min_r, math.radians(fov) if fov else None, math.radians(res) if res else None
+    )
+
+
+# ---------------------------------------------------------------------------------------------------------
+# the reader
+
+
+class CarmenReader:
+    """Streams a CARMEN log as time-ordered Ticks (see the module docstring for the rules).
+
+    Args:
+        path: the log (plain, .gz or .bz2).
+        scan_topic: scan message name (FLASER, RLASER, ROBOTLASER1/2, RAWLASER1-4); auto when None.
+        odom_topic: "ODOM" (interpolated ODOM lines) or the scan message name (its embedded odometry).
+        cmd_topic: CARMEN logs carry no velocity commands; giving one is an error.
+        truth_topic: "TRUEPOS", or the scan message name (its first pose triple, as a reference pose).
+        strict: a malformed line is an error instead of being skipped and counted.
+        sync: reorder / wait bounds.
+
+    Raises:
+        LogFormatError: missing file, not CARMEN, or a stream that is not in the log (lists the candidates).
+    """
+
+    format_name = "carmen"
+
+    def __init__(
+        self,
+        path: Path,
+        *,
+        scan_topic: str | None = None,
+        odom_topic: str | None = None,
+        cmd_topic: str | None = None,
+        truth_topic: str | None = None,
+        strict: bool = False,
+        sync: SyncOptions = DEFAULT_SYNC,
+    ) -> None:
+        self.path = Path(path)
+        self._strict = strict
+        self._sync = sync
+        self._stats = SyncStats()
+        self._fh: IO[bytes] | None = None
+        self._opened: _Opened | None = None
+        head, self._opened = _peek(self.path)
+        self._head = head
+        try:
+            self._choose(scan_topic, odom_topic, cmd_topic, truth_topic)
+        except BaseException:
+            self.close()
+            raise
+        self._saturation = detect_saturation(head.samples.get(self.scan_stream, []))
+        self._params: dict[str, str] = dict(head.params)
+        self._laser = _laser_config(_SIDE[self.scan_stream], self._params, self._saturation)
+        self._angles: dict[tuple[int, float, float], F64] = {}
+        self._stats_counts: dict[str, int] = {}
+
+    def _choose(
+        self, scan_topic: str | None, odom_topic: str | None, cmd_topic: str | None, truth_topic: str | None
+    ) -> None:
+        """Pick the scan, odometry and truth streams (see the class docstring).
+
+        Raises:
+            LogFormatError: a requested stream is not in the log (the message lists the candidates).
+        """
+        head = self._head
+        present = [n for n in SCAN_MESSAGES if n in head.names]
+        if scan_topic is None:
+            if not present:
+                raise LogFormatError(
+                    f"{self.path}: no scans: no laser message ({', '.join(SCAN_MESSAGES)}) in the first lines"
+                )
+            scan_topic = present[0]
+        elif scan_topic not in SCAN_MESSAGES:
+            raise LogFormatError(
+                f"{self.path}: {scan_topic!r} is not a CARMEN laser message; candidates: "
+                f"{', '.join(present) or 'none'}"
+            )
+        self.scan_stream = scan_topic
+        embeds_odom = not scan_topic.startswith("RAWLASER")
+        odom_candidates = (["ODOM"] if "ODOM" in head.names else []) + ([scan_topic] if embeds_odom else [])
+        if odom_topic is None:
+            self._odom_mode: PoseMode = (
+                "stream" if "ODOM" in head.names else ("embedded" if embeds_odom else "none")
+            )
+        elif odom_topic == "ODOM" and "ODOM" in head.names:
+            self._odom_mode = "stream"
+        elif odom_topic == scan_topic and embeds_odom:
+            self._odom_mode = "embedded"
+        else:
+            raise LogFormatError(
+                f"{self.path}: no odometry stream {odom_topic!r}; candidates: "
+                f"{', '.join(odom_candidates) or 'none'}"
+            )
+        if cmd_topic is not None:
+            raise LogFormatError(
+                f"{self.path}: no command stream {cmd_topic!r}; CARMEN logs record no "
+                "velocity commands (candidates: none)"
+            )
+        truth_candidates = (["TRUEPOS"] if "TRUEPOS" in head.names else []) + (
+            [scan_topic] if embeds_odom else []
+        )
+        if truth_topic is None:
+            self._truth_mode: PoseMode = "stream" if "TRUEPOS" in head.names else "none"
+        elif truth_topic == "TRUEPOS" and "TRUEPOS" in head.names:
+            self._truth_mode = "stream"
+        elif truth_topic == scan_topic and embeds_odom:
+            self._truth_mode = "embedded"
+        else:
+            raise LogFormatError(
+                f"{self.path}: no ground-truth stream {truth_topic!r}; candidates: "
+                f"{', '.join(truth_candidates) or 'none'}"
+            )
+
+    # -- context manager ---------------------------------------------------------------------------
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the file (of a pass in progress, or kept open since the reader was opened)."""
+        self._close_pass()
+        if self._opened is not None:
+            self._opened.fh.close()
+            self._opened = None
+
+    def _close_pass(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    # -- description -------------------------------------------------------------------------------
+    @property
+    def odom_source(self) -> str:
+        if self._odom_mode == "stream":
+            return "ODOM (interpolated at scan stamps)"
+        if self._odom_mode == "embedded":
+            return f"{self.scan_stream} (odometry triple in the scan line)"
+        return "none"
+
+    def describe(self) -> LogDescription:
+        """Streams seen in the head of the log (counts only after a full pass: see ``message_counts``)."""
+        roles: dict[str, StreamRole] = {self.scan_stream: "scan", "PARAM": "param"}
+        if self._odom_mode == "stream":
+            roles["ODOM"] = "odom"
+        if self._truth_mode == "stream":
+            roles["TRUEPOS"] = "truth"
+        counts = self._stats_counts
+        streams = tuple(
+            StreamInfo(n, n, counts.get(n) if counts else None, roles.get(n, "other"))
+            for n in sorted(self._head.names)
+        )
+        notes = [f"max range {self._laser.max_range_m:g} m ({self._laser.max_range_source})"]
+        if self._head.all_zero:
+            notes.append("timestamps are all zero: index clock")
+        return LogDescription(
+            path=self.path,
+            format=self.format_name,
+            streams=streams,
+            scan_stream=self.scan_stream,
+            odom_source=self.odom_source,
+            cmd_stream=None,
+            truth_stream="TRUEPOS"
+            if self._truth_mode == "stream"
+            else (self.scan_stream if self._truth_mode == "embedded" else None),
+            notes=tuple(notes),
+        )
+
+    @property
+    def message_counts(self) -> dict[str, int]:
+        """Lines per message name seen by the last complete pass (empty before one)."""
+        return dict(self._stats_counts)
+
+    @property
+    def report(self) -> ReadReport:
+        return self._stats.to_report()
+
+    # -- streaming ---------------------------------------------------------------------------------
+    def ticks(self) -> Iterator[Tick]:
+        """Time-ordered ticks; see the class docstring.
+
+        Yields:
+            one Tick per scan line, in stamp order.
+
+        Raises:
+            LogFormatError: truncated/corrupt compressed data, no scans, or (strict) a malformed line.
+        """
+        stats = SyncStats()
+        self._stats = stats
+        events = self._events(stats)
+        yield from synchronise(
+            reorder(events, stats, self._sync),
+            stats,
+            odom_mode=self._odom_mode,
+            truth_mode=self._truth_mode,
+            opts=self._sync,
+        )
+        if stats.scans == 0:
+            raise LogFormatError(f"{self.path}: no scans ({self.scan_stream} lines) in the log")
+
+    def _events(self, stats: SyncStats) -> Iterator[Event]:
+        counts: Counter[str] = Counter()
+        index_clock = self._head.all_zero
+        if index_clock:
+            stats.index_clock = True
+            msg = (
+                f"{self.path}: all timestamps are zero; using an index clock "
+                f"({INDEX_CLOCK_PERIOD_NS / NS_PER_S:g} s per scan)"
+            )
+            stats.warnings.append(msg)
+            log.warning(msg)
+        handlers = self._handlers()
+        n_scans = 0
+        scan_name = self.scan_stream.encode()
+        self._close_pass()
+        if self._opened is not None:  # the first pass continues from the head that was read to open
+            opened, self._opened = self._opened, None
+            self._fh = opened.fh
+            lines: Iterable[tuple[int, bytes]] = itertools.chain(
+                opened.lines, _lines(self.path, opened.fh, opened.lines[-1][0] if opened.lines else 0)
+            )
+        else:
+            try:
+                self._fh = _open_binary(self.path)
+            except OSError as err:
+                raise LogFormatError(f"{self.path}: cannot open: {err.strerror or err}") from err
+            lines = _lines(self.path, self._fh)
+        for lineno, line in lines:
+            tok = line.split()
+            if not tok or tok[0].startswith(b"#"):
+                continue
+            key = tok[0]
+            handler = handlers.get(key)
+            if handler is None:
+                if _NAME_RE.match(key):
+                    counts[key.decode()] += 1
+                    continue
+                self._malformed(stats, lineno, f"not a CARMEN record ({key[:20]!r})", None)
+                continue
+            name = key.decode()
+            counts[name] += 1
+            try:
+                ev = handler(tok)
+            except (ValueError, IndexError, OverflowError) as err:
+                self._malformed(
+                    stats, lineno, f"{name} {err}" if isinstance(err, _Bad) else f"{name}: {err}", err
+                )
+                continue
+            if ev is None:
+                continue
+            if index_clock:
+                if key == scan_name:
+                    n_scans += 1
+                    ev = with_index_clock(ev, n_scans * INDEX_CLOCK_PERIOD_NS)
+                else:
+                    ev = with_index_clock(ev, n_scans * INDEX_CLOCK_PERIOD_NS + INDEX_CLOCK_PERIOD_NS // 2)
+            yield ev
+        self._close_pass()
+        self._stats_counts = dict(counts)
+
+    def _malformed(self, stats: SyncStats, lineno: int, what: str, err: BaseException | None) -> None:
+        where = f"line {lineno}: {what}"
+        if self._strict:
+            raise LogFormatError(f"{self.path} {where}") from err
+        stats.add_malformed(where)
+
+    def _handlers(self) -> dict[bytes, Callable[[list[bytes]], Event | None]]:
+        h: dict[bytes, Callable[[list[bytes]], Event | None]] = {b"PARAM": self._on_param}
+        scan = self.scan_stream
+        if scan in ("FLASER", "RLASER"):
+            h[scan.encode()] = self._on_flaser
+        elif scan.startswith("ROBOTLASER"):
+            h[scan.encode()] = self._on_robotlaser
+        else:
+            h[scan.encode()] = self._on_rawlaser
+        if self._odom_mode == "stream":
+            h[b"ODOM"] = self._on_odom
+        if self._truth_mode == "stream":
+            h[b"TRUEPOS"] = self._on_truepos
+        return h
+
+    # -- per-line parsers (raise _Bad / ValueError on malformed lines) ---------------------------------------
+    def _on_param(self, tok: list[bytes]) -> None:
+        if len(tok) < 3:
+            raise _Bad("needs a name and a value")
+        key, value = tok[1].decode("ascii", "replace"), tok[2].decode("ascii", "replace")
+        if self._params.get(key) != value:
+            self._params[key] = value
+            self._laser = _laser_config(_SIDE[self.scan_stream], self._params, self._saturation)
+            self._angles.clear()  # the bearings may depend on the PARAM
+        return None
+
+    def _angles_for(self, n: int, start: float | None, res: float | None) -> F64:
+        key = (n, start if start is not None else math.nan, res if res is not None else math.nan)
+        a = self._angles.get(key)
+        if a is None:
+            if start is None:
+                a = flaser_angles(n, fov_rad=self._laser.fov_rad, resolution_rad=self._laser.resolution_rad)
+            else:
+                a = start + (res or 0.0) * np.arange(n, dtype=np.float64)
+            a.flags.writeable = False
+            if len(self._angles) > 64:
+                self._angles.clear()
+            self._angles[key] = a
+        return a
+
+    def _on_flaser(self, tok: list[bytes]) -> ScanEvent:
+        n = _count(tok, 1, "range")
+        _need(tok, 2 + n + 6, f"declares {n} ranges")
+        raw = _ranges(tok, 2, n)
+        v = _floats(tok[2 + n : 2 + n + 6], "pose")
+        t = _trailer_time(tok, 2 + n + 6)
+        las = self._laser
+        scan = Scan(
+            t,
+            clean_ranges(raw, las.max_range_m, las.min_range_m),
+            self._angles_for(n, None, None),
+            las.max_range_m,
+            las.min_range_m,
+            las.sensor_pose,
+        )
+        odom = _pose(v[3:6])
+        truth = _compose(_pose(v[0:3]), las.sensor_pose.inverse()) if self._truth_mode == "embedded" else None
+        return ScanEvent(t, scan, odom, truth)
+
+    def _new_style(self, tok: list[bytes], robot: bool) -> tuple[int, Scan, list[float] | None]:
+        head = _floats(tok[1:8], "laser header")
+        _, start, _fov, res, max_r = head[:5]
+        n = _count(tok, 8, "range")
+        if len(tok) < 10 + n:
+            raise _Bad(f"declares {n} ranges: line ends early")
+        m = int(tok[9 + n])
+        if not 0 <= m <= _MAX_BEAMS:
+            raise _Bad(f"remission count {m} out of range")
+        tail = 11 if robot else 0
+        _need(tok, 10 + n + m + tail, f"declares {n} ranges and {m} remissions")
+        raw = _ranges(tok, 9, n)
+        poses = _floats(tok[10 + n + m : 10 + n + m + 6], "pose") if robot else None
+        t = _trailer_time(tok, 10 + n + m + tail)
+        max_range = max_r if max_r > 0 else self._laser.max_range_m
+        sensor_pose = self._laser.sensor_pose
+        if poses is not None:
+            sensor_pose = _relative(_pose(poses[3:6]), _pose(poses[0:3]))
+        scan = Scan(
+            t,
+            clean_ranges(raw, max_range, self._laser.min_range_m),
+            self._angles_for(n, start, res),
+            max_range,
+            self._laser.min_range_m,
+            sensor_pose,
+        )
+        return t, scan, poses
+
+    def _on_rawlaser(self, tok: list[bytes]) -> ScanEvent:
+        t, scan, _ = self._new_style(tok, robot=False)
+        return ScanEvent(t, scan)
+
+    def _on_robotlaser(self, tok: list[bytes]) -> ScanEvent:
+        t, scan, poses = self._new_style(tok, robot=True)
+        assert poses is not None
+        truth = _pose(poses[3:6]) if self._truth_mode == "embedded" else None
+        return ScanEvent(t, scan, _pose(poses[3:6]), truth)
+
+    def _on_odom(self, tok: list[bytes]) -> OdomEvent:
+        _need(tok, 7, "x y theta tv rv accel")
+        v = _floats(tok[1:7], "odometry")
+        t = _trailer_time(tok, 7)
+        return OdomEvent(t, Odometry(t, _pose(v), v[3], v[4]))
+
+    def _on_truepos(self, tok: list[bytes]) -> TruthEvent:
+        _need(tok, 7, "true pose and odometry")
+        v = _floats(tok[1:7], "pose")
+        t = _trailer_time(tok, 7)
+        return TruthEvent(t, _pose(v))
+
+
+# ---------------------------------------------------------------------------------------------------------
+# the writer
+
+
+def _fmt(values: Iterable[float], decimals: int | None) -> str:
+    if decimals is None:
+        return " ".join(map(repr, values))
+    return " ".join(f"{v:.{decimals}f}" for v in values)
+
+
+def _pose_fields(p: Pose2D, decimals: int | None) -> str:
+    return _fmt((p.x, p.y, p.theta), decimals)
+
+
+def _open_write(path: Path, tmp: Path) -> IO[str]:
+    suffix = path.suffix.lower()
+    if suffix == ".gz":
+        return gzip.open(tmp, "wt", encoding="ascii", newline="\n")
+    if suffix == ".bz2":
+        return bz2.open(tmp, "wt", encoding="ascii", newline="\n")
+    return open(tmp, "w", encoding="ascii", newline="\n")
+
+
+def _geometry_params(scan: Scan) -> dict[str, str] | None:
+    """PARAMs needed so the reader rebuilds the scan's bearings; None if the readlog.c default matches.
+
+    Raises:
+        LogFormatError: the bearings are not uniform and centred on 0 (or readlog.c's layout).
+    """
+    a = scan.angles_rad
+    n = a.size
+    if n < 2:
+        raise LogFormatError(f"cannot write a {n}-beam scan as CARMEN FLASER")
+    if np.allclose(a, flaser_angles(n), rtol=0.0, atol=1e-9):
+        return None
+    res = float((a[-1] - a[0]) / (n - 1))
+    fov = float(a[-1] - a[0])
+    if np.allclose(a, flaser_angles(n, fov_rad=fov, resolution_rad=res), rtol=0.0, atol=1e-9):
+        return {
+            "laser_front_laser_fov": repr(math.degrees(fov)),
+            "laser_front_laser_resolution": repr(math.degrees(res)),
+        }
+    raise LogFormatError(
+        f"cannot write the scan as CARMEN FLASER: {n} bearings from {a[0]:.6f} to {a[-1]:.6f} rad are not "
+        "uniform and centred on 0"
+    )
+
+
+def write_carmen(
+    path: Path,
+    ticks: Iterable[Tick],
+    *,
+    odometry: Iterable[Odometry] | None = None,
+    params: Mapping[str, str] | None = None,
+    hostname: str = "gndreplay",
+    decimals: int | None = None,
+) -> None:
+    """Write ticks as a CARMEN log (plain, .gz or .bz2 by suffix) that :class:`CarmenReader` reads back.
+
+    Lines: PARAMs (``params``, then the laser mounting ``robot_frontlaser_offset`` / ``_side_offset`` /
+    ``_angular_offset``, ``laser_front_laser_max_range`` / ``_min_range``, and fov/resolution when the
+    bearings
+    are not readlog.c's), then in time order ODOM (``odometry`` if given, else one per tick from ``tick.odom``
+    with zero velocities), TRUEPOS when ``tick.truth`` is set, and FLASER. FLASER's first triple is the laser
+    pose (``odom ∘ sensor_pose``), the second the robot odometry. No-return beams (+inf) are written as the
+    max range, invalid ones (nan) as ``nan``. Numbers are written with full precision (``decimals=None``) so
+    the reader gets the same values back; times exactly to the ns. The file appears only once complete
+    (written to a temporary file in the same folder, then renamed).
+
+    Args:
+        path: output file; ``.gz`` / ``.bz2`` compress.
+        ticks: time-ordered ticks; all must share the first tick's scan geometry, max range and mounting.
+        odometry: time-ordered odometry samples for the ODOM lines (e.g. at a higher rate than the scans).
+        params: extra PARAM lines (name -> value).
+        hostname: the ipc_hostname field.
+        decimals: fixed decimals for ranges and poses instead of full precision.
+
+    Raises:
+        LogFormatError: a scan cannot be expressed as FLASER, or the laser changes between ticks.
+    """
+    path = Path(path)
+    it = iter(ticks)
+    first = next(it, None)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or Path("."))
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        with _open_write(path, tmp) as out:
+            _write_body(out, first, it, odometry, params or {}, hostname, decimals)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _write_body(
+    out: IO[str],
+    first: Tick | None,
+    rest: Iterator[Tick],
+    odometry: Iterable[Odometry] | None,
+    params: Mapping[str, str],
+    host: str,
+    decimals: int | None,
+) -> None:
+    out.write(
+        "# CARMEN log written by gndreplay\n"
+        "# message_name [message contents] ipc_timestamp ipc_hostname logger_timestamp\n"
+        "# PARAM param_name param_value\n"
+        "# ODOM x y theta tv rv accel\n"
+        "# TRUEPOS true_x true_y true_theta odom_x odom_y odom_theta\n"
+        "# FLASER num_readings [range_readings] x y theta odom_x odom_y odom_theta\n"
+    )
+    all_params = dict(params)
+    if first is not None:
+        sp, scan = first.scan.sensor_pose, first.scan
+        all_params.update(
+            {
+                "robot_frontlaser_offset": repr(sp.x),
+                "robot_frontlaser_side_offset": repr(sp.y),
+                "robot_frontlaser_angular_offset": repr(sp.theta),
+                "laser_front_laser_max_range": repr(float(scan.max_range_m)),
+                "laser_front_laser_min_range": repr(float(scan.min_range_m)),
+            }
+        )
+        all_params.update(_geometry_params(scan) or {})
+    t0 = first.t_ns if first is not None else 0
+    for k, v in all_params.items():
+        if not k or any(c.isspace() for c in k + str(v)) or not str(v):
+            raise LogFormatError(f"PARAM {k!r} = {v!r}: names and values must be single words")
+        out.write(f"PARAM {k} {v} {host} 0\n")
+    if first is None:
+        return
+
+    def trailer(t_ns: int) -> str:
+        return f"{format_time_s(t_ns)} {host} {(t_ns - t0) / NS_PER_S:.6f}"
+
+    ref = first.scan
+
+    def scan_line(tick: Tick) -> str:
+        s = tick.scan
+        if (
+            s.sensor_pose != ref.sensor_pose
+            or s.max_range_m != ref.max_range_m
+            or s.min_range_m != ref.min_range_m
+            or s.angles_rad.shape != ref.angles_rad.shape
+            or (
+                s.angles_rad is not ref.angles_rad
+                and not np.allclose(s.angles_rad, ref.angles_rad, rtol=0.0, atol=1e-9)
+            )
+        ):
+            raise LogFormatError(
+                f"tick {tick.index}: the laser (bearings, range limits or mounting) differs "
+                "from the first tick's; a CARMEN FLASER stream has one laser"
+            )
+        r = np.where(np.isposinf(s.ranges_m), s.max_range_m, s.ranges_m)
+        laser = _compose(tick.odom, s.sensor_pose)
+        return (
+            f"FLASER {r.size} {_fmt(r.tolist(), decimals)} {_pose_fields(laser, decimals)} "
+            f"{_pose_fields(tick.odom, decimals)} {trailer(tick.t_ns)}\n"
+        )
+
+    def odom_line(o: Odometry) -> str:
+        v = 0.0 if math.isnan(o.v_mps) else o.v_mps
+        w = 0.0 if math.isnan(o.w_radps) else o.w_radps
+        return f"ODOM {_pose_fields(o.pose, decimals)} {_fmt((v, w, 0.0), decimals)} {trailer(o.t_ns)}\n"
+
+    def tick_lines(tick: Tick) -> str:
+        lines = "" if odometry is not None else odom_line(Odometry(tick.t_ns, tick.odom))
+        if tick.truth is not None:
+            lines += (
+                f"TRUEPOS {_pose_fields(tick.truth, decimals)} {_pose_fields(tick.odom, decimals)} "
+                f"{trailer(tick.t_ns)}\n"
+            )
+        return lines + scan_line(tick)
+
+    def all_ticks() -> Iterator[Tick]:
+        yield first
+        yield from rest
+
+    if odometry is None:
+        for tick in all_ticks():
+            out.write(tick_lines(tick))
+        return
+    odo = iter(odometry)
+    pending = next(odo, None)
+    for tick in all_ticks():
+        while pending is not None and pending.t_ns <= tick.t_ns:
+            out.write(odom_line(pending))
+            pending = next(odo, None)
+        out.write(tick_lines(tick))
+    while pending is not None:
+        out.write(odom_line(pending))
+        pending = next(odo, None)
