@@ -222,6 +222,329 @@ def _print_info(result: object) -> None:
     console.print(streams)
 
 
+_RUN_PANEL = "Run"
+_NAV_PANEL = "Navigation"
+SAMPLE_LOG = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
+
+
+def _parse_goal(value: str | None) -> tuple[float, float] | None:
+    if value is None:
+        return None
+    parts = value.replace(" ", "").split(",")
+    try:
+        x, y = (float(p) for p in parts)
+    except ValueError:
+        raise typer.BadParameter(f"expected X,Y in metres (e.g. 3.5,-1.0), got {value!r}") from None
+    if not all(map(_finite, (x, y))):
+        raise typer.BadParameter(f"the goal must be finite, got {value!r}")
+    return (x, y)
+
+
+def _finite(x: float) -> bool:
+    return x == x and abs(x) != float("inf")
+
+
+def _sample_log() -> Path:
+    """The bundled sample log; regenerated (deterministically, seed 0) into the user cache if this
+    installation has no source tree beside it."""
+    if SAMPLE_LOG.is_file():
+        return SAMPLE_LOG
+    from .sim.scenario import simulate
+
+    cache = Path.home() / ".cache" / "gndreplay" / SAMPLE_LOG.name
+    if not cache.is_file():
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        simulate("office", seed=0, out=cache)
+    return cache
+
+
+def _log_stem(log: Path) -> str:
+    name = log.name.rstrip("/")
+    for suffix in (".gz", ".bz2", ".clf", ".log", ".carmen", ".bag", ".mcap"):
+        if name.endswith(suffix):
+            name = name[: -len(suffix)]
+    return name or "run"
+
+
+@app.command()
+@cli_errors
+def run(
+    log: Annotated[
+        Path | None,
+        typer.Argument(
+            help="The log to replay (any format `gndreplay info` reads). Default: the bundled sample log.",
+            show_default=False,
+        ),
+    ] = None,
+    preset_name: Annotated[
+        str | None,
+        typer.Option(
+            "--preset",
+            help="Robot and stack preset: wheelchair (default) or xr4000.",
+            rich_help_panel=_NAV_PANEL,
+            show_default=False,
+        ),
+    ] = None,
+    config: Annotated[
+        Path | None,
+        typer.Option(
+            "--config", help="TOML file overriding any field of the preset.",
+            rich_help_panel=_NAV_PANEL,
+        ),
+    ] = None,
+    goal: Annotated[
+        str | None,
+        typer.Option(
+            "--goal",
+            help="Fixed goal X,Y [m] in the corrected odometry frame (instead of --goal-ahead).",
+            rich_help_panel=_NAV_PANEL,
+            show_default=False,
+        ),
+    ] = None,
+    goal_ahead: Annotated[
+        float,
+        typer.Option(
+            "--goal-ahead",
+            min=0.1,
+            help="Goal = the pose this many metres further along the log's corrected trajectory.",
+            rich_help_panel=_NAV_PANEL,
+        ),
+    ] = 5.0,
+    matcher: Annotated[
+        str | None,
+        typer.Option(
+            "--matcher",
+            help="Odometry correction before the model: idc, kiss-icp or odom (default: the config's, idc).",
+            rich_help_panel=_NAV_PANEL,
+            show_default=False,
+        ),
+    ] = None,
+    enforce_budgets: Annotated[
+        bool,
+        typer.Option(
+            "--enforce-budgets",
+            help="Act on module time-outs as the papers do (planner over budget = planner failure).",
+            rich_help_panel=_NAV_PANEL,
+        ),
+    ] = False,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out", help="Run directory (default: out/<log-stem>).",
+            rich_help_panel=_RUN_PANEL,
+        ),
+    ] = None,
+    until: Annotated[
+        float | None,
+        typer.Option(
+            "--until", min=0.0, help="Stop after T seconds of log time.",
+            rich_help_panel=_RUN_PANEL,
+        ),
+    ] = None,
+    every: Annotated[
+        int,
+        typer.Option(
+            "--every", min=1, help="Run the stack on every N-th scan.",
+            rich_help_panel=_RUN_PANEL,
+        ),
+    ] = 1,
+    mcap: Annotated[
+        bool,
+        typer.Option(
+            "--mcap", help="Also write results.mcap (ROS 2, opens in Foxglove).",
+            rich_help_panel=_RUN_PANEL,
+        ),
+    ] = False,
+    figures: Annotated[
+        bool,
+        typer.Option(
+            "--figures/--no-figures", help="Draw the figures and report.md.",
+            rich_help_panel=_RUN_PANEL,
+        ),
+    ] = True,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
+    json_out: Annotated[bool, typer.Option("--json", help="Print summary.json to stdout.")] = False,
+    fmt: FormatOpt = None,
+    scan_topic: ScanTopicOpt = None,
+    odom_topic: OdomTopicOpt = None,
+    cmd_topic: CmdTopicOpt = None,
+    truth_topic: TruthTopicOpt = None,
+    strict: StrictOpt = False,
+) -> None:
+    """Replay a log through scan matching -> model -> NF1 planner -> ND+ reactor -> GND supervisor.
+
+    Writes a run directory: commands.csv (one command per scan), timing.csv, the odometry and corrected
+    trajectories (TUM), summary.json, the resolved config.toml, the figures and report.md.
+
+    [bold]Examples[/]
+
+      gndreplay run                                   # the bundled sample log
+
+      gndreplay run aces.clf.bz2 --goal-ahead 3 --out out/aces
+
+      gndreplay run run.bag --preset xr4000 --config mine.toml --until 60 --mcap
+    """
+    import dataclasses
+
+    from .config import load_config
+    from .replay import ReadOptions, RunOptions, run_log
+
+    goal_xy = _parse_goal(goal)
+    log_path = log if log is not None else _sample_log()
+    cfg = load_config(config, preset_name=preset_name)
+    if matcher is not None:
+        cfg = _with_matcher(cfg, matcher)
+    if enforce_budgets:
+        cfg = dataclasses.replace(cfg, supervisor=dataclasses.replace(cfg.supervisor, enforce_budgets=True))
+    out_dir = out if out is not None else Path("out") / _log_stem(log_path)
+    options = RunOptions(goal_xy=goal_xy, goal_ahead_m=goal_ahead, until_s=until, every=every)
+    read = ReadOptions(
+        fmt=fmt, scan_topic=scan_topic, odom_topic=odom_topic, cmd_topic=cmd_topic, truth_topic=truth_topic,
+        strict=strict,
+    )
+    sinks = _run_sinks(figures=figures, mcap=mcap)
+    with _progress(enabled=not (quiet or json_out), label=log_path.name) as on_tick:
+        summary = run_log(log_path, cfg, out_dir, options=options, read=read, sinks=sinks, on_tick=on_tick)
+    if figures:
+        from .report import build_report
+
+        build_report(summary.out_dir)
+    if json_out:
+        import json
+
+        typer.echo(json.dumps(summary.data, allow_nan=True))
+    elif not quiet:
+        _print_run(summary.data, summary.out_dir)
+
+
+@app.command()
+@cli_errors
+def report(
+    run_dir: Annotated[
+        Path, typer.Argument(help="A run directory written by `gndreplay run`.", show_default=False)
+    ],
+) -> None:
+    """Redraw the figures (fig_model, fig_raw, fig_commands, fig_timing) and report.md of a finished run
+    from its files alone (commands.csv, timing.csv, trajectories, summary.json, maps.npz); no log needed.
+
+    [bold]Example[/]
+
+      gndreplay report out/aces
+    """
+    from .report import build_report
+
+    for path in build_report(run_dir):
+        typer.echo(str(path))
+
+
+def _with_matcher(cfg: object, matcher: str) -> object:
+    import dataclasses
+
+    from .config import Config, apply_overrides
+
+    assert isinstance(cfg, Config)
+    try:
+        return apply_overrides(cfg, {"scanmatch": {"method": matcher}})
+    except GndReplayError:
+        raise typer.BadParameter(f"--matcher must be idc, kiss-icp or odom, got {matcher!r}") from None
+    finally:
+        del dataclasses
+
+
+def _run_sinks(*, figures: bool, mcap: bool) -> list[object]:
+    sinks: list[object] = []
+    if figures:
+        from .report import MapSink
+
+        sinks.append(MapSink())
+    if mcap:
+        from .report import McapSink
+
+        sinks.append(McapSink())
+    return sinks
+
+
+class _progress:
+    """One progress helper: a rich bar with ticks/s on a terminal, silent otherwise."""
+
+    def __init__(self, *, enabled: bool, label: str) -> None:
+        self.enabled = enabled and sys.stderr.isatty()
+        self.label = label
+        self._bar: object | None = None
+
+    def __enter__(self) -> Callable[[object], None] | None:
+        if not self.enabled:
+            return None
+        from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+        bar = Progress(
+            SpinnerColumn(),
+            TextColumn("[bold]{task.description}"),
+            TextColumn("{task.completed} ticks"),
+            TextColumn("{task.fields[rate]:.0f} ticks/s"),
+            TimeElapsedColumn(),
+            transient=True,
+        )
+        bar.__enter__()
+        task = bar.add_task(self.label, total=None, rate=0.0)
+        self._bar = bar
+        import time
+
+        t0 = time.perf_counter()
+
+        def on_tick(_: object) -> None:
+            done = bar.tasks[0].completed + 1
+            if done % 25 == 0 or done == 1:
+                bar.update(task, completed=done, rate=done / max(time.perf_counter() - t0, 1e-9))
+            else:
+                bar.update(task, completed=done)
+
+        return on_tick
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.__exit__(*exc)  # type: ignore[attr-defined]
+
+
+def _print_run(data: dict[str, object], out_dir: Path) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console(soft_wrap=False)
+    head = Table(show_header=False, box=None, pad_edge=False)
+    head.add_column(style="bold")
+    head.add_column()
+    agreement = data.get("agreement") or {}
+    assert isinstance(agreement, dict)
+    head.add_row("run directory", str(out_dir))
+    head.add_row("ticks", f"{data['ticks']} over {float(data['duration_s']):.1f} s")  # type: ignore[arg-type]
+    head.add_row("modes", _counts(data["modes"]))
+    head.add_row("situations", _counts(data["situations"]))
+    flags = {k: v for k, v in data["flags"].items() if v}  # type: ignore[attr-defined]
+    head.add_row("flags", _counts(flags) or "none")
+    if agreement.get("heading_ticks"):
+        head.add_row(
+            "agreement with the log",
+            f"heading within 30 deg {100 * agreement['heading_within_30deg']:.0f} % "
+            f"(median error {agreement['heading_err_median_deg']:.1f} deg), "
+            f"speed MAE {agreement['speed_mae_mps']:.3f} m/s, "
+            f"turn direction agrees {100 * agreement['turn_sign_agreement']:.0f} %",
+        )
+    console.print(head)
+    lat = Table(title="latency per tick [ms]", title_justify="left")
+    for col in ("module", "median", "p90", "p99", "max"):
+        lat.add_column(col, justify="left" if col == "module" else "right")
+    for module, q in data["latency_ms"].items():  # type: ignore[attr-defined]
+        if q:
+            lat.add_row(module, *(f"{q[k]:.2f}" for k in ("median", "p90", "p99", "max")))
+    console.print(lat)
+
+
+def _counts(counts: object) -> str:
+    assert isinstance(counts, dict)
+    return ", ".join(f"{k} {v}" for k, v in sorted(counts.items(), key=lambda kv: -kv[1]))
+
+
 def main() -> None:
     """Console-script entry point."""
     try:

@@ -35,9 +35,7 @@ import gzip
 import itertools
 import logging
 import math
-import os
 import re
-import tempfile
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
@@ -49,6 +47,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import LogFormatError
+from ..fsutil import atomic_path
 from ..types import NS_PER_S, Odometry, Pose2D, Scan, Tick
 from .base import INDEX_CLOCK_PERIOD_NS, LogDescription, ReadReport, StreamInfo, StreamRole
 from .sync import (
@@ -897,16 +896,8 @@ def write_carmen(
     path = Path(path)
     it = iter(ticks)
     first = next(it, None)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or Path("."))
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        with _open_write(path, tmp) as out:
-            _write_body(out, first, it, odometry, params or {}, hostname, decimals)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with atomic_path(path) as tmp, _open_write(path, tmp) as out:
+        _write_body(out, first, it, odometry, params or {}, hostname, decimals)
 
 
 def _write_body(

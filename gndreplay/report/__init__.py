@@ -1,1 +1,33 @@
-"""Figures, tables and exports of a run directory."""
+"""Figures, report.md and the results MCAP of a run directory.
+
+A replay feeds the sinks while it streams (``MapSink`` -> maps.npz, ``McapSink`` -> results.mcap);
+``build_report(run_dir)`` then draws fig_model.png, fig_raw.png, fig_commands.png, fig_timing.png and
+report.md from the run's files alone (also what ``gndreplay report RUN_DIR`` does). matplotlib and rosbags
+are imported only when a figure or the MCAP is made.
+"""
+
+from __future__ import annotations
+
+from .build import REPORT_FILE, build_report
+from .figures import FIGURES
+from .maps import MAPS_FILE, GridSnapshot, HitRaster, MapsData, MapSink, load_maps
+from .mcap_export import MCAP_FILE, McapSink, grid_to_occupancy
+from .rundir import RunData, RunDirError, load_run
+
+__all__ = [
+    "FIGURES",
+    "MAPS_FILE",
+    "MCAP_FILE",
+    "REPORT_FILE",
+    "GridSnapshot",
+    "HitRaster",
+    "MapSink",
+    "MapsData",
+    "McapSink",
+    "RunData",
+    "RunDirError",
+    "build_report",
+    "grid_to_occupancy",
+    "load_maps",
+    "load_run",
+]

@@ -1,0 +1,213 @@
+"""Trajectory evaluation: the SLAM-benchmark relations metric and a TUM trajectory writer.
+
+The relations metric is the one of Kümmerle et al., "On measuring the accuracy of SLAM algorithms" (Autonomous
+Robots 2009): for each relation (t1, t2, δ*) with δ* the reference pose of the scan at t2 in the frame of the
+scan at t1, the estimated relative pose is δ = pose(t1)⁻¹ ∘ pose(t2) and the error is δ*⁻¹ ∘ δ. Its
+translational part is ‖R*ᵀ (t - t*)‖ = ‖t - t*‖ (a rotation keeps the norm, so the "difference of the
+translation components" convention gives the same number) and its rotational part is |wrap(θ - θ*)|. The
+benchmark reports the mean ± standard deviation of both over all relations (the "absolute" errors).
+
+Scans are identified by their timestamp (CARMEN ipc_timestamp, ROS header stamp); a relation end matches the
+nearest scan stamp within ``tol_s`` (the relation files print 1e-5 s or 1e-6 s).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .errors import GndReplayError
+from .fsutil import atomic_write_text
+from .geometry import relative, wrap_angle
+
+__all__ = ["RelationStats", "Relations", "load_relations", "relation_errors", "write_tum"]
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True, eq=False)
+class Relations:
+    """Reference relative poses between pairs of scans.
+
+    Attributes:
+        t1_ns, t2_ns: (M,) int64 stamps of the two scans [ns].
+        dx, dy: (M,) float64 translation of scan t2 in the frame of scan t1 [m].
+        dyaw: (M,) float64 rotation of scan t2 in the frame of scan t1 [rad].
+    """
+
+    t1_ns: I64
+    t2_ns: I64
+    dx: F64
+    dy: F64
+    dyaw: F64
+
+    def __len__(self) -> int:
+        return int(self.t1_ns.shape[0])
+
+
+def _seconds_to_ns(text: str) -> int:
+    """Exact decimal seconds -> int ns (no float rounding: stamps are ~1e9 s)."""
+    whole, _, frac = text.strip().partition(".")
+    sign = -1 if whole.startswith("-") else 1
+    frac_ns = int((frac + "000000000")[:9]) if frac else 0
+    return int(whole) * NS_PER_S + sign * frac_ns
+
+
+def load_relations(path: str | os.PathLike[str]) -> Relations:
+    """Read a SLAM-benchmark relations file: one ``t1 t2 x y z roll pitch yaw`` line per relation.
+
+    Blank lines and lines starting with ``#`` are skipped; z, roll and pitch are ignored (planar).
+
+    Raises:
+        GndReplayError: the file is missing or a line does not have 8 numbers.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except OSError as err:
+        raise GndReplayError(f"{p}: cannot read relations file ({err.strerror})") from err
+    t1: list[int] = []
+    t2: list[int] = []
+    vals: list[tuple[float, float, float]] = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        tok = s.split()
+        if len(tok) != 8:
+            raise GndReplayError(f"{p} line {lineno}: expected 8 numbers 't1 t2 x y z roll pitch yaw', "
+                                 f"found {len(tok)}")
+        try:
+            t1.append(_seconds_to_ns(tok[0]))
+            t2.append(_seconds_to_ns(tok[1]))
+            vals.append((float(tok[2]), float(tok[3]), float(tok[7])))
+        except ValueError as err:
+            raise GndReplayError(f"{p} line {lineno}: not a number ({err})") from err
+    v = np.array(vals, dtype=np.float64).reshape(-1, 3)
+    return Relations(np.array(t1, dtype=np.int64), np.array(t2, dtype=np.int64), v[:, 0].copy(),
+                     v[:, 1].copy(), v[:, 2].copy())
+
+
+@dataclass(frozen=True, eq=False)
+class RelationStats:
+    """Relation errors of one trajectory.
+
+    Attributes:
+        matched, unmatched: relations whose two stamps were / were not both found in the trajectory.
+        trans_mean_m, trans_std_m, trans_max_m: translational error statistics [m] (nan if none matched).
+        rot_mean_deg, rot_std_deg, rot_max_deg: rotational error statistics [deg].
+        index: (matched,) indices into the relations of the matched ones.
+        trans_err_m: (matched,) translational error per matched relation [m].
+        rot_err_deg: (matched,) rotational error per matched relation [deg].
+    """
+
+    matched: int
+    unmatched: int
+    trans_mean_m: float
+    trans_std_m: float
+    trans_max_m: float
+    rot_mean_deg: float
+    rot_std_deg: float
+    rot_max_deg: float
+    index: I64
+    trans_err_m: F64
+    rot_err_deg: F64
+
+    def to_dict(self) -> dict[str, Any]:
+        """Summary numbers (no per-relation arrays), JSON-ready."""
+        return {
+            "matched": self.matched, "unmatched": self.unmatched,
+            "trans_mean_m": self.trans_mean_m, "trans_std_m": self.trans_std_m,
+            "trans_max_m": self.trans_max_m, "rot_mean_deg": self.rot_mean_deg,
+            "rot_std_deg": self.rot_std_deg, "rot_max_deg": self.rot_max_deg,
+        }
+
+
+def _nearest(sorted_t: I64, q: I64) -> tuple[I64, I64]:
+    """Index of the nearest value of ``sorted_t`` to each query and the absolute gap [ns]."""
+    i = np.clip(np.searchsorted(sorted_t, q), 1, max(sorted_t.shape[0] - 1, 1))
+    lo = np.maximum(i - 1, 0)
+    d_lo = np.abs(q - sorted_t[lo])
+    d_hi = np.abs(sorted_t[np.minimum(i, sorted_t.shape[0] - 1)] - q)
+    pick = np.where(d_hi < d_lo, np.minimum(i, sorted_t.shape[0] - 1), lo)
+    return pick, np.minimum(d_lo, d_hi)
+
+
+def _stats(x: F64) -> tuple[float, float, float]:
+    if x.size == 0:
+        return math.nan, math.nan, math.nan
+    return float(np.mean(x)), float(np.std(x)), float(np.max(x))
+
+
+def relation_errors(t_ns: ArrayLike, poses: ArrayLike, relations: Relations, *,
+                    tol_s: float = 1e-4) -> RelationStats:
+    """Errors of a trajectory against reference relations (Kümmerle et al. 2009).
+
+    Args:
+        t_ns: (N,) int scan stamps [ns], any order, unique.
+        poses: (N, 3) estimated poses (x, y, theta) at those stamps.
+        relations: the reference relations.
+        tol_s: largest stamp difference [s] for a relation end to match a scan.
+
+    Raises:
+        ValueError: shapes disagree.
+    """
+    t = np.asarray(t_ns, dtype=np.int64)
+    p = np.asarray(poses, dtype=np.float64)
+    if t.ndim != 1 or p.shape != (t.shape[0], 3):
+        raise ValueError(f"poses must be (N, 3) with N = len(t_ns) = {t.shape[0]}, got shape {p.shape}")
+    m = len(relations)
+    empty = np.zeros(0)
+    if t.size == 0 or m == 0:
+        return RelationStats(0, m, math.nan, math.nan, math.nan, math.nan, math.nan, math.nan,
+                             np.zeros(0, dtype=np.int64), empty, empty)
+    order = np.argsort(t, kind="stable")
+    ts, ps = t[order], p[order]
+    tol_ns = round(tol_s * NS_PER_S)
+    i1, g1 = _nearest(ts, relations.t1_ns)
+    i2, g2 = _nearest(ts, relations.t2_ns)
+    ok = (g1 <= tol_ns) & (g2 <= tol_ns)
+    est = relative(ps[i1[ok]], ps[i2[ok]])
+    e_t = np.hypot(est[:, 0] - relations.dx[ok], est[:, 1] - relations.dy[ok])
+    e_r = np.degrees(np.abs(np.asarray(wrap_angle(est[:, 2] - relations.dyaw[ok]))))
+    tm, ts_, tx = _stats(e_t)
+    rm, rs, rx = _stats(e_r)
+    n_ok = int(ok.sum())
+    return RelationStats(n_ok, m - n_ok, tm, ts_, tx, rm, rs, rx, np.flatnonzero(ok).astype(np.int64), e_t, e_r)
+
+
+def _fmt_time(t_ns: int) -> str:
+    """Exact decimal seconds with 9 digits (no float rounding)."""
+    sign = "-" if t_ns < 0 else ""
+    a = abs(int(t_ns))
+    return f"{sign}{a // NS_PER_S}.{a % NS_PER_S:09d}"
+
+
+def write_tum(path: str | os.PathLike[str], t_ns: ArrayLike, poses: ArrayLike) -> None:
+    """Write a planar trajectory in TUM format (``t tx ty tz qx qy qz qw``), readable by evo.
+
+    Timestamps are exact decimal seconds with nanosecond digits; z = 0 and the quaternion is a yaw rotation
+    (xyzw order). The file is written to a temporary file in the same folder and renamed, so a reader never
+    sees half a trajectory.
+
+    Raises:
+        ValueError: shapes disagree.
+    """
+    t = np.asarray(t_ns, dtype=np.int64)
+    p = np.asarray(poses, dtype=np.float64)
+    if t.ndim != 1 or p.shape != (t.shape[0], 3):
+        raise ValueError(f"poses must be (N, 3) with N = len(t_ns) = {t.shape[0]}, got shape {p.shape}")
+    half = 0.5 * p[:, 2]
+    qz, qw = np.sin(half), np.cos(half)
+    lines = [f"{_fmt_time(int(ti))} {x!r} {y!r} 0.0 0.0 0.0 {z!r} {w!r}\n"
+             for ti, x, y, z, w in zip(t.tolist(), p[:, 0].tolist(), p[:, 1].tolist(), qz.tolist(),
+                                       qw.tolist(), strict=True)]
+    atomic_write_text(Path(path), "# timestamp tx ty tz qx qy qz qw\n" + "".join(lines))

@@ -1,0 +1,233 @@
+"""NavigationStack: one synchronous model -> planner -> reactor cycle per scan, under the supervisor.
+
+Scan matching runs one step ahead of the stack (in ``gndreplay.replay``) because the default goal of a
+replay is a pose further along the log's own *corrected* trajectory; the stack receives the corrected
+pose with the tick and never looks at the future. It owns the per-module timers.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..geometry import transform_points, wrap_angle
+from ..robot import RobotConfig
+from ..types import Flag, Pose2D, Scan, Tick
+from .cspace import free_cspace
+from .model import GridParams, RobotCentredGrid
+from .nd import NdParams, Situation, nd_step
+from .nf1 import Nf1Params, PlanResult, plan
+from .supervisor import (
+    Mode,
+    SupervisorParams,
+    TrapDetector,
+    budget_flags,
+    escape_command,
+    gnd_mode,
+    rotate_command,
+    swept_collision,
+)
+
+__all__ = ["MODULES", "NavigationStack", "StackParams", "TickResult", "warm_up"]
+
+MODULES = ("match", "model", "planner", "reactor")
+
+
+@dataclass(frozen=True, slots=True)
+class StackParams:
+    """Everything the stack needs, one frozen section per stage (see ``gndreplay.config``)."""
+
+    robot: RobotConfig
+    grid: GridParams
+    planner: Nf1Params
+    reactor: NdParams
+    supervisor: SupervisorParams
+    cspace_margin_m: float = 0.05
+    unknown_is_free: bool = True
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class TickResult:
+    """What the stack decided at one tick, and why, and how long each part took.
+
+    Attributes:
+        t_ns: the scan's time.
+        pose_corrected: robot pose after scan matching (corrected odometry frame).
+        v_mps, vy_mps, w_radps: the command (vy only for a holonomic base).
+        mode: GND mode or reflexive override that produced the command.
+        situation: the ND+ situation (Situation.NONE without a region).
+        flags: exception flags raised this tick.
+        direction_rad: ND+ motion direction in the robot frame (nan without a region).
+        goal: the goal in the corrected frame.
+        path_xy: (K, 2) tightened planned path in the corrected frame (empty when the planner failed).
+        timings_ms: per-module wall time [ms] ("match", "model", "planner", "reactor").
+    """
+
+    t_ns: int
+    pose_corrected: Pose2D
+    v_mps: float
+    vy_mps: float
+    w_radps: float
+    mode: Mode
+    situation: Situation
+    flags: Flag
+    direction_rad: float
+    goal: tuple[float, float]
+    path_xy: NDArray[np.float64] = field(repr=False)
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+
+def _ms(t0: int) -> float:
+    return (time.perf_counter_ns() - t0) / 1e6
+
+
+def _to_robot(pose: Pose2D, xy: NDArray[np.float64]) -> NDArray[np.float64]:
+    """World points (K, 2) into the robot frame of ``pose``."""
+    return transform_points(pose.inverse().as_array(), xy)
+
+
+class NavigationStack:
+    """Holds the state carried between ticks: the robot-centred grid, the previous scan time, the trap
+    detector and an escape in progress. ``step`` runs one full cycle and always returns one command."""
+
+    def __init__(self, params: StackParams) -> None:
+        self.params = params
+        self.grid = RobotCentredGrid(params.grid)
+        self._trap = TrapDetector(params.supervisor)
+        self._escape_left = 0
+        self._escape_v = 0.0
+        self._prev_t_ns: int | None = None
+
+    def step(self, tick: Tick, pose: Pose2D, goal_xy: tuple[float, float], match_ms: float = 0.0,
+             match_failed: bool = False) -> TickResult:
+        """One cycle: model -> planner -> reactor -> supervisor, for the tick's scan at ``pose``."""
+        p = self.params
+        flags = Flag.MATCH_FAILED if match_failed else Flag.NONE
+        timings = {"match": match_ms}
+
+        t0 = time.perf_counter_ns()
+        self.grid.integrate(tick.scan, pose)
+        timings["model"] = _ms(t0)
+
+        t0 = time.perf_counter_ns()
+        goal = np.asarray(goal_xy, dtype=np.float64)
+        planned = self._plan(pose, goal)
+        timings["planner"] = _ms(t0)
+
+        t0 = time.perf_counter_ns()
+        target = self._reactor_target(pose, goal, planned)
+        obstacles = self.grid.occupied_points(pose, p.reactor.max_range_m)
+        nd = nd_step(obstacles, target, p.robot, p.reactor)
+        timings["reactor"] = _ms(t0)
+
+        over = budget_flags({k: v / 1e3 for k, v in timings.items()}, p.supervisor)
+        flags |= over
+        planner_ok = planned.ok
+        if p.supervisor.enforce_budgets and over & Flag.PLANNER_OVER_BUDGET:
+            planner_ok = False
+            flags |= Flag.PLANNER_TIMEOUT
+        if not planned.ok:
+            flags |= planned.flag
+        if nd.flag:
+            flags |= nd.flag
+
+        mode = gnd_mode(planner_ok, not (nd.flag & Flag.REACTOR_NO_REGION))
+        if mode is Mode.MND and planned.ok:  # enforced planner time-out: steer to the goal itself
+            target = _to_robot(pose, goal[None, :])[0]
+            nd = nd_step(obstacles, target, p.robot, p.reactor)
+        v, vy, w = nd.v_mps, nd.vy_mps, nd.w_radps
+        goal_rel = _to_robot(pose, goal[None, :])[0]
+        if mode is Mode.ROTATE:
+            v, vy, w = 0.0, 0.0, rotate_command(math.atan2(goal_rel[1], goal_rel[0]), p.robot, p.supervisor)
+        if p.supervisor.enforce_budgets and over & Flag.REACTOR_OVER_BUDGET:
+            v, vy, w = 0.0, 0.0, 0.0
+        if math.hypot(goal_rel[0], goal_rel[1]) <= p.supervisor.goal_tolerance_m:
+            mode, v, vy, w = Mode.GOAL, 0.0, 0.0, 0.0
+            flags |= Flag.GOAL_REACHED
+
+        mode, v, vy, w, flags = self._reflexive(tick, mode, v, vy, w, flags)
+        path = planned.waypoints_cells
+        path_xy = self.grid.cells_to_world(path) if path.shape[0] else np.zeros((0, 2))
+        return TickResult(
+            t_ns=tick.t_ns,
+            pose_corrected=pose,
+            v_mps=_finite(v),
+            vy_mps=_finite(vy),
+            w_radps=_finite(w),
+            mode=mode,
+            situation=nd.situation,
+            flags=flags,
+            direction_rad=nd.direction_rad,
+            goal=(float(goal[0]), float(goal[1])),
+            path_xy=path_xy,
+            timings_ms=timings,
+        )
+
+    def _plan(self, pose: Pose2D, goal: NDArray[np.float64]) -> PlanResult:
+        p = self.params
+        free = free_cspace(
+            self.grid.cells,
+            cell_m=p.grid.cell_m,
+            inflate_m=p.robot.inner_radius_m + p.cspace_margin_m,
+            unknown_is_free=p.unknown_is_free,
+        )
+        start = self.grid.robot_cell(pose)
+        goal_rc = self.grid.world_to_cell_float(goal[None, :])[0]
+        return plan(free, start, goal_rc, cell_m=p.grid.cell_m, params=p.planner)
+
+    def _reactor_target(
+        self, pose: Pose2D, goal: NDArray[np.float64], planned: PlanResult
+    ) -> NDArray[np.float64]:
+        """mpND: a point lookahead_m along the instantaneous path direction; mND: the goal itself."""
+        if planned.ok and math.isfinite(planned.direction_rad):
+            bearing = float(wrap_angle(planned.direction_rad - pose.theta))
+            d = self.params.planner.lookahead_m
+            return np.array([d * math.cos(bearing), d * math.sin(bearing)])
+        return _to_robot(pose, goal[None, :])[0]
+
+    def _reflexive(
+        self, tick: Tick, mode: Mode, v: float, vy: float, w: float, flags: Flag
+    ) -> tuple[Mode, float, float, float, Flag]:
+        """The reflexive loop on the raw scan: stale data, imminent collision, trap escape."""
+        p = self.params
+        prev, self._prev_t_ns = self._prev_t_ns, tick.t_ns
+        if prev is not None and (tick.t_ns - prev) / 1e9 > p.supervisor.stale_scan_s:
+            return Mode.STALE, 0.0, 0.0, 0.0, flags | Flag.STALE_SCAN
+        raw = transform_points(tick.scan.sensor_pose.as_array(), tick.scan.points())
+        if self._escape_left > 0:
+            self._escape_left -= 1
+            if not swept_collision(raw, self._escape_v, 0.0, p.robot, p.supervisor):
+                return Mode.ESCAPE, self._escape_v, 0.0, 0.0, flags
+            self._escape_left = 0
+        if mode is not Mode.GOAL and swept_collision(raw, v, w, p.robot, p.supervisor, vy_mps=vy):
+            mode, v, vy, w = Mode.EMERGENCY, 0.0, 0.0, 0.0
+            flags |= Flag.EMERGENCY_STOP
+        if self._trap.update(mode, w):
+            flags |= Flag.TRAP_DETECTED
+            v_esc, possible = escape_command(raw, p.robot, p.supervisor)
+            if possible:
+                self._escape_left, self._escape_v = p.supervisor.escape_ticks - 1, v_esc
+                return Mode.ESCAPE, v_esc, 0.0, 0.0, flags
+        return mode, v, vy, w, flags
+
+
+def warm_up(params: StackParams) -> None:
+    """Run a throwaway stack on a synthetic scan so numba compiles (or loads) every kernel before the
+    first timed tick; otherwise tick 0 would report hundreds of milliseconds of JIT as model time."""
+    angles = np.linspace(-math.pi / 2, math.pi / 2, 181)
+    ranges = np.where(np.arange(angles.size) % 7 == 0, np.inf, 3.0)
+    scan = Scan(t_ns=0, ranges_m=ranges, angles_rad=angles, max_range_m=8.0)
+    stack = NavigationStack(params)
+    for k, goal in enumerate(((2.0, 0.5), (-5.0, 0.0), (30.0, 30.0))):
+        pose = Pose2D(0.05 * k, 0.0, 0.0)
+        stack.step(Tick(index=k, t_ns=k, scan=scan, odom=pose), pose, goal)
+
+
+def _finite(x: float) -> float:
+    """No NaN ever leaves the stack: a non-finite command component becomes 0 (stop)."""
+    return float(x) if math.isfinite(x) else 0.0
+

@@ -1,0 +1,320 @@
+"""The figure set of a run directory (the wheelchair paper's Fig. 5b-e), built from the run's files alone.
+
+Figures are ``matplotlib.figure.Figure`` objects rendered by the Agg canvas: no pyplot, no global backend
+switch, no window. PNGs are saved at a fixed dpi without metadata, so the same files give the same bytes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .plots import (
+    MODE_COLORS,
+    SITUATION_COLORS,
+    plot_bands,
+    plot_commands,
+    plot_flags,
+    plot_grid,
+    plot_hit_raster,
+    plot_pose,
+    plot_timing,
+    plot_trajectory,
+)
+from .rundir import TIMING_MODULES, RunData
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+__all__ = [
+    "DPI",
+    "FIGURES",
+    "budgets_ms",
+    "build_figures",
+    "figure_commands",
+    "figure_model",
+    "figure_raw",
+    "figure_timing",
+    "save_figure",
+    "scan_period_s",
+]
+
+DPI = 120
+FIGURES: Mapping[str, str] = {
+    "fig_model.png": "Model: scan hits placed at the corrected poses, corrected and raw trajectories, "
+    "and the robot-centred grid at one tick (Fig. 5b).",
+    "fig_raw.png": "Raw laser data placed with the raw odometry, and the odometry trajectory (Fig. 5c).",
+    "fig_commands.png": "Motion commands v and w over time, GND mode and ND+ situation bands, and the "
+    "ticks where each flag fired (Fig. 5d).",
+    "fig_timing.png": "Computation time of each module per tick, with the time-out budgets and the log's "
+    "scan period (Fig. 5e).",
+}
+LegendLoc = Literal["outside right upper", "outside right center"]
+_START, _END, _GOAL = "#2ca02c", "#d62728", "#ffbf00"
+_CORRECTED, _RAW = "#1f77b4", "#ff7f0e"
+
+
+def budgets_ms(summary: Mapping[str, Any]) -> dict[str, float]:
+    """Per-module budgets [ms] from summary.json's ``config.supervisor.budget_<module>_s`` (those present)."""
+    sup = summary.get("config", {}).get("supervisor", {}) or {}
+    out: dict[str, float] = {}
+    for m in TIMING_MODULES:
+        b = sup.get(f"budget_{m}_s")
+        if isinstance(b, int | float) and np.isfinite(b) and b > 0:
+            out[m] = 1e3 * float(b)
+    return out
+
+
+def scan_period_s(t_s: NDArray[np.float64]) -> float | None:
+    """The log's scan period [s]: median spacing of the scan stamps (None with fewer than two)."""
+    if t_s.size < 2:
+        return None
+    d = np.diff(np.sort(t_s))
+    d = d[d > 0]
+    return float(np.median(d)) if d.size else None
+
+
+def _t0(data: RunData) -> float:
+    starts = [a[0] for a in (data.traj_corrected[:, 0], data.commands.t_s, data.timing.t_s) if a.size]
+    return float(min(starts)) if starts else 0.0
+
+
+def _bounds(*boxes: tuple[float, float, float, float] | None, margin: float = 0.03
+            ) -> tuple[float, float, float, float]:
+    """The union of (x0, x1, y0, y1) boxes (None and non-finite skipped), grown by ``margin`` of its size."""
+    b = np.array([x for x in boxes if x is not None and np.all(np.isfinite(x))], dtype=np.float64)
+    if b.size == 0:
+        return (-1.0, 1.0, -1.0, 1.0)
+    x0, x1, y0, y1 = b[:, 0].min(), b[:, 1].max(), b[:, 2].min(), b[:, 3].max()
+    m = margin * max(x1 - x0, y1 - y0, 1.0)
+    return (float(x0 - m), float(x1 + m), float(y0 - m), float(y1 + m))
+
+
+def _box(xy: NDArray[np.float64]) -> tuple[float, float, float, float] | None:
+    if xy.shape[0] == 0:
+        return None
+    return (float(xy[:, 0].min()), float(xy[:, 0].max()), float(xy[:, 1].min()), float(xy[:, 1].max()))
+
+
+def _set_box(ax: Axes, box: tuple[float, float, float, float]) -> None:
+    ax.set_xlim(box[0], box[1])
+    ax.set_ylim(box[2], box[3])
+
+
+def _map_height(box: tuple[float, float, float, float], width_in: float, lo: float = 3.5, hi: float = 9.0
+                ) -> float:
+    """Height [in] of an equal-aspect map panel ``width_in`` wide showing ``box``, clamped to [lo, hi]."""
+    ratio = (box[3] - box[2]) / max(box[1] - box[0], 1e-9)
+    return float(np.clip(width_in * ratio, lo, hi))
+
+
+def _new_figure(w: float, h: float) -> Figure:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(w, h), layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _ends(ax: Axes, traj: NDArray[np.float64]) -> None:
+    if traj.shape[0]:
+        ax.plot(traj[0, 1], traj[0, 2], "o", color=_START, markersize=8, markeredgecolor="k", label="start",
+                zorder=6)
+        ax.plot(traj[-1, 1], traj[-1, 2], "s", color=_END, markersize=7, markeredgecolor="k", label="end",
+                zorder=6)
+
+
+def _no_data(ax: Axes, text: str) -> None:
+    ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", fontsize=9, color="0.4")
+
+
+def figure_model(data: RunData) -> Figure:
+    """Fig. 5b: the global model map with both trajectories, and the robot-centred grid at one tick."""
+    maps = data.maps
+    snap = maps.snapshot if maps is not None else None
+    box = _bounds(maps.corrected_extent if maps is not None else None, _box(data.traj_corrected[:, 1:3]),
+                  _box(data.traj_odom[:, 1:3]))
+    fig = _new_figure(13.0, max(6.0, _map_height(box, 7.6) + 1.4))
+    ax, ax_g = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.7, 1.0]})
+    if maps is not None:
+        plot_hit_raster(ax, maps.corrected_hits, maps.corrected_extent)
+    else:
+        _no_data(ax, "maps.npz missing: no map")
+    plot_trajectory(ax, data.traj_odom[:, 1:3], label="raw odometry", style="--", color=_RAW, linewidth=1.0,
+                    alpha=0.9)
+    plot_trajectory(ax, data.traj_corrected[:, 1:3], label="corrected", color=_CORRECTED, linewidth=1.4)
+    _ends(ax, data.traj_corrected)
+    goal = data.summary.get("options", {}).get("goal")
+    if goal:
+        ax.plot(goal[0], goal[1], "*", color=_GOAL, markersize=14, markeredgecolor="k", label="goal",
+                zorder=6)
+    if snap is not None:
+        plot_pose(ax, snap.pose, length_m=0.04 * max(box[1] - box[0], box[3] - box[2]), color="#c51b7d",
+                  label=f"robot at t = {snap.elapsed_s:.1f} s (right)")
+    _set_box(ax, box)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m] (corrected frame)")
+    ax.set_ylabel("y [m]")
+    cell = f", {maps.cell_m * 100:.0f} cm cells" if maps is not None else ""
+    ax.set_title(f"Model: scan hits at the corrected poses{cell}", fontsize=10)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=5, fontsize=8, frameon=False)
+
+    if snap is None:
+        _no_data(ax_g, "no robot-centred grid snapshot")
+        ax_g.set_axis_off()
+        return fig
+    x0, x1, y0, y1 = snap.extent
+    plot_grid(ax_g, snap.cells, snap.extent)
+    if snap.path_xy.shape[0]:
+        plot_trajectory(ax_g, snap.path_xy, label="planned path", color="#1f77b4", linewidth=1.6, zorder=4)
+    gx, gy = float(snap.goal_xy[0]), float(snap.goal_xy[1])
+    inside = x0 <= gx <= x1 and y0 <= gy <= y1
+    gx, gy = float(np.clip(gx, x0, x1)), float(np.clip(gy, y0, y1))
+    ax_g.plot(gx, gy, "*", color=_GOAL, markersize=14, markeredgecolor="k",
+              label="goal" if inside else "goal (outside, on the border)", zorder=6)
+    plot_pose(ax_g, snap.pose, length_m=0.05 * (x1 - x0), color="#c51b7d", label="robot")
+    ax_g.set_xlim(x0, x1)
+    ax_g.set_ylim(y0, y1)
+    ax_g.set_xlabel("x [m]")
+    ax_g.set_ylabel("y [m]")
+    flags = f"\nflags: {snap.flags.replace('|', ', ')}" if snap.flags else ""
+    ax_g.set_title(f"Robot-centred grid at t = {snap.elapsed_s:.1f} s (tick {snap.tick}): "
+                   f"{snap.mode}, {snap.situation}{flags}", fontsize=10)
+    from matplotlib.patches import Patch
+
+    handles, _ = ax_g.get_legend_handles_labels()
+    handles += [Patch(facecolor=c, edgecolor="0.3", label=n)
+                for c, n in (("#9e9e9e", "unknown"), ("#ffffff", "free"), ("#000000", "occupied"))]
+    ax_g.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8,
+                frameon=False)
+    return fig
+
+
+def figure_raw(data: RunData) -> Figure:
+    """Fig. 5c: every scan placed with the raw odometry, and the odometry trajectory."""
+    box = _bounds(data.maps.raw_extent if data.maps is not None else None, _box(data.traj_odom[:, 1:3]))
+    fig = _new_figure(9.0, _map_height(box, 8.4) + 1.3)
+    ax = fig.subplots()
+    _set_box(ax, box)
+    if data.maps is not None:
+        plot_hit_raster(ax, data.maps.raw_hits, data.maps.raw_extent)
+    else:
+        _no_data(ax, "maps.npz missing: no raw map")
+    plot_trajectory(ax, data.traj_odom[:, 1:3], label="raw odometry", color=_RAW, linewidth=1.2)
+    _ends(ax, data.traj_odom)
+    _set_box(ax, box)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m] (odometry frame)")
+    ax.set_ylabel("y [m]")
+    ax.set_title("Raw laser data and trajectory from the odometry alone", fontsize=10)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=3, fontsize=8, frameon=False)
+    return fig
+
+
+def _pad_xlim(ax: Axes, t: NDArray[np.float64]) -> None:
+    if t.size:
+        pad = 0.005 * max(float(t[-1] - t[0]), 1e-3)
+        ax.set_xlim(float(t[0]) - pad, float(t[-1]) + pad)
+
+
+def figure_commands(data: RunData) -> Figure:
+    """Fig. 5d: v and w over time, mode and situation bands, flag markers."""
+    c = data.commands
+    t = c.t_s - _t0(data)
+    n_flags = max(1, sum(1 for m in c.flags.values() if np.any(m)))
+    fig = _new_figure(12.0, 5.6 + 0.2 * n_flags)
+    axes = fig.subplots(5, 1, sharex=True,
+                        gridspec_kw={"height_ratios": [3.0, 3.0, 0.45, 0.45, 0.5 + 0.3 * n_flags]})
+    ax_v, ax_w, ax_m, ax_s, ax_f = axes
+    if len(c) == 0:
+        _no_data(ax_v, "no tick")
+    plot_commands(ax_v, ax_w, t, c.v_mps, c.w_radps, vy=c.vy_mps)
+    strips: tuple[tuple[Axes, NDArray[np.str_], Mapping[str, str], str, LegendLoc], ...] = (
+        (ax_m, c.modes, MODE_COLORS, "GND mode", "outside right upper"),
+        (ax_s, c.situations, SITUATION_COLORS, "ND+ situation", "outside right center"),
+    )
+    for ax, labels, colors, name, where in strips:
+        plot_bands(ax, t, labels, colors=colors, legend=False)
+        ax.set_ylabel(name.split()[-1], rotation=0, ha="right", va="center", fontsize=8)
+        handles, names = ax.get_legend_handles_labels()
+        if handles:
+            fig.legend(handles, names, loc=where, title=name, fontsize=8, title_fontsize=8,
+                       frameon=False, handlelength=1.0)
+    plot_flags(ax_f, t, c.flags)
+    ax_f.set_xlabel("time since the first scan [s]")
+    _pad_xlim(ax_f, t)
+    ax_v.set_title(f"Motion commands ({len(c)} ticks)", fontsize=10)
+    return fig
+
+
+def _timing_stats(ms: NDArray[np.float64], budget: float | None) -> str:
+    if ms.size == 0:
+        return ""
+    q = np.percentile(ms, [50, 99])
+    text = f"median {q[0]:.2f}, p99 {q[1]:.2f}, max {ms.max():.1f} ms"
+    if budget is not None:
+        text += f"; budget {budget:g} ms, over it: {int(np.count_nonzero(ms > budget))} ticks"
+    return text
+
+
+def figure_timing(data: RunData) -> Figure:
+    """Fig. 5e: per-module time per tick (one panel each, shared log axis), with each module's budget and
+    the scan period; the last panel is the total (match + model + planner + reactor)."""
+    from matplotlib.lines import Line2D
+
+    tm = data.timing
+    t = tm.t_s - _t0(data)
+    modules = [m for m in (*TIMING_MODULES, "total") if m in tm.ms]
+    fig = _new_figure(12.0, 1.3 + 1.35 * len(modules))
+    axes = np.atleast_1d(fig.subplots(len(modules), 1, sharex=True, sharey=True))
+    period = scan_period_s(data.traj_corrected[:, 0])
+    if period is None:
+        period = scan_period_s(tm.t_s)
+    period_ms = None if period is None else 1e3 * period
+    budgets = budgets_ms(data.summary)
+    for ax, m in zip(axes, modules, strict=True):
+        b = budgets.get(m)
+        plot_timing(ax, t, {m: tm.ms[m]}, budgets_ms={m: b} if b else None, scan_period_ms=period_ms,
+                    ylabel=f"{m} [ms]")
+        ax.text(0.005, 0.96, _timing_stats(tm.ms[m], b), transform=ax.transAxes, ha="left", va="top",
+                fontsize=8, bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 1.5})
+    if t.size == 0:
+        _no_data(axes[0], "no tick")
+    _pad_xlim(axes[-1], t)
+    top = max([float(np.max(tm.ms[m])) for m in modules if tm.ms[m].size] + [period_ms or 1.0, 1.0])
+    axes[0].set_ylim(top=top * 3.0)
+    axes[-1].set_xlabel("time since the first scan [s]")
+    axes[0].set_title("Computation time per tick", fontsize=10)
+    proxies = [Line2D([], [], color="0.3", linewidth=0.8, label="time per tick"),
+               Line2D([], [], color="0.3", linestyle="--", linewidth=1.0, label="budget (time-out)")]
+    if period_ms is not None:
+        proxies.append(Line2D([], [], color="black", linestyle=":", linewidth=1.2,
+                              label=f"scan period {period_ms:.0f} ms"))
+    fig.legend(handles=proxies, loc="outside lower center", ncol=len(proxies), fontsize=8, frameon=False)
+    return fig
+
+
+def save_figure(fig: Figure, path: Path, *, dpi: int = DPI) -> Path:
+    """Save as PNG at ``dpi`` with no metadata (byte-identical for the same figure)."""
+    fig.savefig(path, dpi=dpi, format="png", metadata={"Software": None})
+    return path
+
+
+def build_figures(data: RunData, out_dir: Path, *, dpi: int = DPI) -> list[Path]:
+    """Draw the four figures of ``data`` into ``out_dir`` under their fixed names (overwriting)."""
+    makers = {
+        "fig_model.png": figure_model,
+        "fig_raw.png": figure_raw,
+        "fig_commands.png": figure_commands,
+        "fig_timing.png": figure_timing,
+    }
+    out = []
+    for name, make in makers.items():
+        out.append(save_figure(make(data), Path(out_dir) / name, dpi=dpi))
+    return out

@@ -1,0 +1,400 @@
+"""Map rasters for the figures, accumulated while a replay streams (``MapSink``) and stored as ``maps.npz``.
+
+``gndreplay report RUN_DIR`` must redraw the figures without the log, so the run keeps what the map panels
+need: two global hit-count rasters (every scan hit placed with the corrected pose and with the raw odometry
+pose) and one snapshot of the robot-centred grid. Memory is bounded by the explored area (tiles are created
+where hits land) and by a fixed number of grid snapshots, never by the log length.
+
+maps.npz keys (all numpy arrays; scalars are 0-d):
+    format_version: 1.
+    cell_m: side of a raster cell [m].
+    corrected_hits, raw_hits: (H, W) uint16 hit counts (saturated at 65535), ``[row, col]`` with row along
+        world y; corrected_origin_xy, raw_origin_xy: (2,) world (x, y) [m] of the outer corner of cell (0, 0).
+    scans: number of scans accumulated.
+    grid_cells: (N, N) uint8 robot-centred grid (0 unknown, 1 free, 2 occupied; ``[row, col]``, row = y),
+        grid_origin_xy (2,), grid_cell_m, grid_t_s (tick time [s]), grid_elapsed_s (from the first scan),
+        grid_tick (tick index), grid_pose (3,) corrected robot pose, grid_goal_xy (2,), grid_path_xy (K, 2)
+        planned path, grid_mode / grid_situation / grid_flags (str). Absent when the stack never ran.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..geometry import compose, transform_points
+from ..pipeline.model import RobotCentredGrid
+from ..pipeline.stack import TickResult
+from ..types import Pose2D, Tick
+
+__all__ = [
+    "MAPS_FILE",
+    "GridSnapshot",
+    "HitRaster",
+    "MapSink",
+    "MapsData",
+    "load_maps",
+]
+
+MAPS_FILE = "maps.npz"
+FORMAT_VERSION = 1
+_U16_MAX = np.iinfo(np.uint16).max
+_KEY_OFF, _KEY_MUL = 2**20, 2**21
+
+
+class HitRaster:
+    """A sparse, tiled hit-count raster over the plane: square tiles of ``tile_cells`` cells are created
+    where points land, so memory follows the explored area.
+
+    Cell (i, j) of the world lattice spans x in [j c, (j + 1) c), y in [i c, (i + 1) c) with c = cell_m.
+    """
+
+    def __init__(self, cell_m: float = 0.05, *, tile_cells: int = 256, batch_points: int = 1 << 16) -> None:
+        if not cell_m > 0.0:
+            raise ValueError(f"cell_m must be > 0, got {cell_m!r}")
+        if tile_cells < 1:
+            raise ValueError(f"tile_cells must be >= 1, got {tile_cells!r}")
+        self.cell_m = float(cell_m)
+        self.tile_cells = int(tile_cells)
+        self.batch_points = int(batch_points)
+        self._tiles: dict[tuple[int, int], NDArray[np.uint32]] = {}
+        self._pending: list[NDArray[np.float64]] = []
+        self._n_pending = 0
+
+    @property
+    def n_tiles(self) -> int:
+        """Tiles allocated (after counting the pending points)."""
+        self._flush()
+        return len(self._tiles)
+
+    def add(self, xy: NDArray[np.float64]) -> None:
+        """Count the world points ``xy`` (M, 2) [m] into their cells (non-finite points are ignored).
+
+        Points are buffered and counted in batches of ``batch_points`` (per-call numpy overhead dominates
+        for a single scan); ``to_array`` and ``n_tiles`` count what is pending first."""
+        p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        self._pending.append(p)
+        self._n_pending += p.shape[0]
+        if self._n_pending >= self.batch_points:
+            self._flush()
+
+    def _flush(self) -> None:
+        if not self._pending:
+            return
+        p = np.concatenate(self._pending) if len(self._pending) > 1 else self._pending[0]
+        self._pending, self._n_pending = [], 0
+        p = p[np.isfinite(p).all(axis=1)]
+        if p.shape[0] == 0:
+            return
+        t = self.tile_cells
+        rows = np.floor(p[:, 1] / self.cell_m).astype(np.int64)
+        cols = np.floor(p[:, 0] / self.cell_m).astype(np.int64)
+        tr, lr = np.divmod(rows, t)
+        tc, lc = np.divmod(cols, t)
+        local = lr * t + lc
+        key = (tr + _KEY_OFF) * _KEY_MUL + (tc + _KEY_OFF)  # one int64 per tile (|index| < 2**20)
+        order = np.argsort(key, kind="stable")
+        k_sorted = key[order]
+        cuts = np.flatnonzero(k_sorted[1:] != k_sorted[:-1]) + 1
+        for a, b in zip(np.r_[0, cuts].tolist(), np.r_[cuts, key.size].tolist(), strict=True):
+            k = int(k_sorted[a])
+            ij = (k // _KEY_MUL - _KEY_OFF, k % _KEY_MUL - _KEY_OFF)
+            tile = self._tiles.get(ij)
+            if tile is None:
+                tile = self._tiles[ij] = np.zeros((t, t), dtype=np.uint32)
+            np.add.at(tile.reshape(-1), local[order[a:b]], np.uint32(1))  # a view: tiles are C-contiguous
+
+    def to_array(self) -> tuple[NDArray[np.uint32], tuple[float, float]]:
+        """The dense raster cropped to the cells that hold hits, and the world (x, y) [m] of the outer
+        corner of its cell (0, 0). An empty raster is (1, 1) zeros at the origin."""
+        self._flush()
+        if not self._tiles:
+            return np.zeros((1, 1), dtype=np.uint32), (0.0, 0.0)
+        t = self.tile_cells
+        keys = np.array(list(self._tiles.keys()), dtype=np.int64)
+        r0, c0 = keys.min(axis=0)
+        r1, c1 = keys.max(axis=0) + 1
+        dense = np.zeros(((r1 - r0) * t, (c1 - c0) * t), dtype=np.uint32)
+        for (i, j), tile in self._tiles.items():
+            dense[(i - r0) * t : (i - r0 + 1) * t, (j - c0) * t : (j - c0 + 1) * t] = tile
+        rows = np.flatnonzero(dense.any(axis=1))
+        cols = np.flatnonzero(dense.any(axis=0))
+        cropped = dense[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]
+        origin = ((c0 * t + cols[0]) * self.cell_m, (r0 * t + rows[0]) * self.cell_m)
+        return np.ascontiguousarray(cropped), (float(origin[0]), float(origin[1]))
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class GridSnapshot:
+    """The robot-centred grid at one tick, with what the stack decided there.
+
+    Attributes:
+        cells: (N, N) uint8 UNKNOWN / FREE / OCCUPIED, ``[row, col]`` with row along world y.
+        origin_xy: world (x, y) [m] of the outer corner of cell (0, 0).
+        cell_m: cell side [m].
+        t_s: tick time [s]; elapsed_s: time since the first scan [s]; tick: tick index.
+        pose: (3,) corrected robot pose; goal_xy: (2,); path_xy: (K, 2) planned path (corrected frame).
+        mode, situation, flags: as in commands.csv.
+    """
+
+    cells: NDArray[np.uint8]
+    origin_xy: tuple[float, float]
+    cell_m: float
+    t_s: float
+    elapsed_s: float
+    tick: int
+    pose: NDArray[np.float64]
+    goal_xy: NDArray[np.float64]
+    path_xy: NDArray[np.float64]
+    mode: str
+    situation: str
+    flags: str
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """(x0, x1, y0, y1) [m] for ``imshow(origin="lower")``."""
+        return _extent(self.cells.shape, self.origin_xy, self.cell_m)
+
+
+def _extent(
+    shape: tuple[int, ...], origin_xy: tuple[float, float], cell_m: float
+) -> tuple[float, float, float, float]:
+    x0, y0 = origin_xy
+    return (x0, x0 + shape[1] * cell_m, y0, y0 + shape[0] * cell_m)
+
+
+def _snapshot(tick: Tick, result: TickResult, grid: RobotCentredGrid, elapsed_s: float) -> GridSnapshot:
+    path = np.asarray(result.path_xy, dtype=np.float64).reshape(-1, 2)
+    return GridSnapshot(
+        cells=np.array(grid.cells, dtype=np.uint8, copy=True),
+        origin_xy=(float(grid.origin_xy[0]), float(grid.origin_xy[1])),
+        cell_m=float(grid.params.cell_m),
+        t_s=result.t_ns / 1e9,
+        elapsed_s=elapsed_s,
+        tick=int(tick.index),
+        pose=result.pose_corrected.as_array(),
+        goal_xy=np.asarray(result.goal, dtype=np.float64).reshape(2),
+        path_xy=path.copy(),
+        mode=str(result.mode.value),
+        situation=str(result.situation.name),
+        flags="|".join(result.flags.names()),
+    )
+
+
+class MapSink:
+    """A ``RunSink`` that accumulates the figure maps and writes ``maps.npz``.
+
+    Every scan's hits are placed at laser pose = robot pose ∘ ``scan.sensor_pose``, once with the corrected
+    pose (the model map) and once with the raw odometry (the smeared map).
+
+    The grid snapshot: with ``snapshot_at_s`` set, the first tick the stack ran at or after that much log
+    time from the first scan (the last tick if the run is shorter). With None (default), the tick nearest
+    the middle of the run: the length of the run is unknown while streaming, so the sink keeps at most
+    ``max_snapshots`` candidate snapshots on a regular time lattice (dropping those before the current
+    half-way point, and thinning the lattice by 2 when full) and picks the nearest at ``finish``; the
+    chosen tick is within about duration / max_snapshots of the middle.
+
+    Args:
+        cell_m: raster cell side [m].
+        max_range_m: ignore hits farther than this from the laser (None: all hits).
+        snapshot_at_s: see above.
+        max_snapshots: bound of the candidate buffer (>= 2).
+    """
+
+    def __init__(
+        self,
+        *,
+        cell_m: float = 0.05,
+        max_range_m: float | None = None,
+        snapshot_at_s: float | None = None,
+        max_snapshots: int = 16,
+    ) -> None:
+        if max_snapshots < 2:
+            raise ValueError(f"max_snapshots must be >= 2, got {max_snapshots!r}")
+        self.corrected = HitRaster(cell_m)
+        self.raw = HitRaster(cell_m)
+        self.max_range_m = max_range_m
+        self.snapshot_at_s = snapshot_at_s
+        self.max_snapshots = max_snapshots
+        self.scans = 0
+        self._t0_ns: int | None = None
+        self._step_s = 1.0
+        self._candidates: list[tuple[int, GridSnapshot]] = []  # (lattice slot, snapshot)
+        self._fixed: GridSnapshot | None = None
+        self._latest: tuple[Tick, TickResult, RobotCentredGrid, float] | None = None
+
+    # ---- RunSink ------------------------------------------------------------------------------------
+
+    def add_scan(self, tick: Tick, pose_corrected: Pose2D) -> None:
+        """Place the scan's hits with the corrected pose and with the raw odometry."""
+        if self._t0_ns is None:
+            self._t0_ns = tick.t_ns
+        self.scans += 1
+        scan = tick.scan
+        pts = scan.points()
+        if self.max_range_m is not None and pts.shape[0]:
+            pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= self.max_range_m]
+        if pts.shape[0] == 0:
+            return
+        sensor = scan.sensor_pose.as_array()
+        self.corrected.add(transform_points(compose(pose_corrected.as_array(), sensor), pts))
+        self.raw.add(transform_points(compose(tick.odom.as_array(), sensor), pts))
+
+    def add_result(self, tick: Tick, result: TickResult, grid: RobotCentredGrid) -> None:
+        """Keep the grid snapshot candidates (see the class docstring)."""
+        if self._t0_ns is None:
+            self._t0_ns = tick.t_ns
+        elapsed = (result.t_ns - self._t0_ns) / 1e9
+        # the grid is not touched after the last tick, so a reference is enough for the latest state
+        self._latest = (tick, result, grid, elapsed)
+        if self.snapshot_at_s is not None:
+            if self._fixed is None and elapsed >= self.snapshot_at_s:
+                self._fixed = _snapshot(tick, result, grid, elapsed)
+            return
+        slot = math.floor(elapsed / self._step_s)
+        if not self._candidates or slot > self._candidates[-1][0]:
+            self._candidates.append((slot, _snapshot(tick, result, grid, elapsed)))
+            self._prune(elapsed)
+
+    def _prune(self, elapsed: float) -> None:
+        half = 0.5 * elapsed
+        before = [k for k, (_, s) in enumerate(self._candidates) if s.elapsed_s <= half]
+        if len(before) > 1:  # only the newest candidate at or before the half-way point can still win
+            del self._candidates[: before[-1]]
+        while len(self._candidates) > self.max_snapshots:
+            self._step_s *= 2.0
+            kept: list[tuple[int, GridSnapshot]] = []
+            for _, snap in self._candidates:
+                slot = math.floor(snap.elapsed_s / self._step_s)
+                if not kept or slot > kept[-1][0]:
+                    kept.append((slot, snap))
+            self._candidates = kept
+
+    @property
+    def candidates(self) -> int:
+        """Grid snapshots held right now (at most ``max_snapshots``)."""
+        return len(self._candidates) + (self._fixed is not None)
+
+    def snapshot(self) -> GridSnapshot | None:
+        """The chosen grid snapshot (None when the stack never ran)."""
+        if self._latest is None:
+            return None
+        if self.snapshot_at_s is not None:
+            return self._fixed if self._fixed is not None else _snapshot(*self._latest)
+        half = 0.5 * self._latest[3]
+        best = min((s for _, s in self._candidates), key=lambda s: abs(s.elapsed_s - half))
+        if abs(self._latest[3] - half) < abs(best.elapsed_s - half):  # a run of one tick
+            return _snapshot(*self._latest)
+        return best
+
+    def finish(self, run_dir: Path) -> None:
+        """Write ``maps.npz`` into ``run_dir``."""
+        save_maps(Path(run_dir) / MAPS_FILE, self.corrected, self.raw, self.snapshot(), scans=self.scans)
+
+    def abort(self) -> None:
+        """RunSink hook for a failed replay: nothing to release (the rasters are in memory)."""
+
+
+def _u16(a: NDArray[np.uint32]) -> NDArray[np.uint16]:
+    return np.minimum(a, _U16_MAX).astype(np.uint16)
+
+
+def save_maps(
+    path: Path, corrected: HitRaster, raw: HitRaster, snap: GridSnapshot | None, *, scans: int
+) -> None:
+    """Write the rasters and the snapshot as a compressed npz (keys in the module docstring)."""
+    cor, cor_o = corrected.to_array()
+    raw_a, raw_o = raw.to_array()
+    arrays: dict[str, Any] = {
+        "format_version": np.int64(FORMAT_VERSION),
+        "cell_m": np.float64(corrected.cell_m),
+        "scans": np.int64(scans),
+        "corrected_hits": _u16(cor),
+        "corrected_origin_xy": np.asarray(cor_o, dtype=np.float64),
+        "raw_hits": _u16(raw_a),
+        "raw_origin_xy": np.asarray(raw_o, dtype=np.float64),
+    }
+    if snap is not None:
+        arrays |= {
+            "grid_cells": snap.cells,
+            "grid_origin_xy": np.asarray(snap.origin_xy, dtype=np.float64),
+            "grid_cell_m": np.float64(snap.cell_m),
+            "grid_t_s": np.float64(snap.t_s),
+            "grid_elapsed_s": np.float64(snap.elapsed_s),
+            "grid_tick": np.int64(snap.tick),
+            "grid_pose": snap.pose,
+            "grid_goal_xy": snap.goal_xy,
+            "grid_path_xy": snap.path_xy,
+            "grid_mode": np.str_(snap.mode),
+            "grid_situation": np.str_(snap.situation),
+            "grid_flags": np.str_(snap.flags),
+        }
+    with open(path, "wb") as f:
+        np.savez_compressed(f, **arrays)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class MapsData:
+    """maps.npz read back: the two hit rasters (uint16 counts) and the optional grid snapshot."""
+
+    cell_m: float
+    scans: int
+    corrected_hits: NDArray[np.uint16]
+    corrected_origin_xy: tuple[float, float]
+    raw_hits: NDArray[np.uint16]
+    raw_origin_xy: tuple[float, float]
+    snapshot: GridSnapshot | None
+
+    @property
+    def corrected_extent(self) -> tuple[float, float, float, float]:
+        return _extent(self.corrected_hits.shape, self.corrected_origin_xy, self.cell_m)
+
+    @property
+    def raw_extent(self) -> tuple[float, float, float, float]:
+        return _extent(self.raw_hits.shape, self.raw_origin_xy, self.cell_m)
+
+
+def _xy(a: NDArray[np.float64]) -> tuple[float, float]:
+    return float(a[0]), float(a[1])
+
+
+def load_maps(path: Path) -> MapsData:
+    """Read ``maps.npz`` (see the module docstring).
+
+    Raises:
+        ValueError: unknown format version or missing keys (the caller names the file).
+    """
+    with np.load(path, allow_pickle=False) as z:
+        version = int(z["format_version"])
+        if version != FORMAT_VERSION:
+            raise ValueError(f"maps format_version {version} is not supported (expected {FORMAT_VERSION})")
+        snap = None
+        if "grid_cells" in z.files:
+            snap = GridSnapshot(
+                cells=z["grid_cells"],
+                origin_xy=_xy(z["grid_origin_xy"]),
+                cell_m=float(z["grid_cell_m"]),
+                t_s=float(z["grid_t_s"]),
+                elapsed_s=float(z["grid_elapsed_s"]),
+                tick=int(z["grid_tick"]),
+                pose=z["grid_pose"],
+                goal_xy=z["grid_goal_xy"],
+                path_xy=z["grid_path_xy"].reshape(-1, 2),
+                mode=str(z["grid_mode"]),
+                situation=str(z["grid_situation"]),
+                flags=str(z["grid_flags"]),
+            )
+        return MapsData(
+            cell_m=float(z["cell_m"]),
+            scans=int(z["scans"]),
+            corrected_hits=z["corrected_hits"],
+            corrected_origin_xy=_xy(z["corrected_origin_xy"]),
+            raw_hits=z["raw_hits"],
+            raw_origin_xy=_xy(z["raw_origin_xy"]),
+            snapshot=snap,
+        )

@@ -1,0 +1,141 @@
+"""report.md: the run's summary as Markdown tables, with the figures linked."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..geometry import compose, inverse
+from .figures import FIGURES, budgets_ms, scan_period_s
+from .rundir import RunData
+
+__all__ = ["render_report", "trajectory_gap"]
+
+_LATENCY_ROWS = ("match", "model", "planner", "reactor", "stack", "total")
+_OVER = {"match": "MATCH_OVER_BUDGET", "model": "MODEL_OVER_BUDGET", "planner": "PLANNER_OVER_BUDGET",
+         "reactor": "REACTOR_OVER_BUDGET"}
+
+
+def _num(x: Any, fmt: str = ".2f") -> str:
+    if isinstance(x, bool) or x is None:
+        return "-" if x is None else str(x)
+    if isinstance(x, int):
+        return str(x)
+    if isinstance(x, float):
+        return "nan" if math.isnan(x) else format(x, fmt)
+    return str(x)
+
+
+def _table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
+    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    out += ["| " + " | ".join(r) + " |" for r in rows]
+    return [*out, ""]
+
+
+def _histogram(title: str, column: str, counts: Mapping[str, int], total: int) -> list[str]:
+    if not counts:
+        return [f"## {title}", "", "none", ""]
+    rows = [(k, str(v), f"{100.0 * v / total:.1f} %" if total else "-")
+            for k, v in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))]
+    return [f"## {title}", "", *_table((column, "ticks", "share"), rows)]
+
+
+def trajectory_gap(odom: NDArray[np.float64], corrected: NDArray[np.float64]) -> dict[str, float]:
+    """How far the correction moved the trajectory: path lengths of both (M, 4) t, x, y, yaw trajectories,
+    and the distance between them (both anchored at the first pose) at the end and at its largest."""
+    if odom.shape[0] == 0 or odom.shape != corrected.shape:
+        return {}
+
+    def length(a: NDArray[np.float64]) -> float:
+        return float(np.hypot(*np.diff(a[:, 1:3], axis=0).T).sum()) if a.shape[0] > 1 else 0.0
+
+    # express the corrected trajectory in the odometry frame, anchored at the first pose
+    anchor = compose(odom[0, 1:4], inverse(corrected[0, 1:4]))
+    cor = compose(anchor, corrected[:, 1:4])
+    gap = np.hypot(odom[:, 1] - cor[:, 0], odom[:, 2] - cor[:, 1])
+    return {"path_odom_m": length(odom), "path_corrected_m": length(corrected), "final_gap_m": float(gap[-1]),
+            "max_gap_m": float(gap.max())}
+
+
+def render_report(data: RunData, figures: Iterable[str] = tuple(FIGURES)) -> str:
+    """The Markdown text of report.md (deterministic given the run's files); links the named figures."""
+    s = data.summary
+    n = int(s.get("ticks", len(data.commands)))
+    cfg = s.get("config", {}) or {}
+    flags: Mapping[str, int] = s.get("flags", {}) or {}
+    budgets = budgets_ms(s)
+    period = scan_period_s(data.traj_corrected[:, 0])
+    opts = s.get("options", {}) or {}
+    out = [f"# gndreplay run: {data.run_dir.name}", ""]
+    overview = [
+        ("log", f"`{s.get('log', '-')}`"),
+        ("gndreplay version", str(s.get("gndreplay_version", "-"))),
+        ("ticks (stack runs)", str(n)),
+        ("scans", str(data.traj_corrected.shape[0])),
+        ("duration", f"{_num(s.get('duration_s'))} s"),
+        ("scan period (median)", "-" if period is None else f"{1e3 * period:.1f} ms"),
+        ("goal", f"fixed {opts['goal']}" if opts.get("goal") else f"{_num(opts.get('goal_ahead_m'))} m ahead "
+                 "along the corrected trajectory"),
+        ("stack every N scans", _num(opts.get("every"))),
+    ]
+    if opts.get("until_s") is not None:
+        overview.append(("until", f"{_num(opts['until_s'])} s"))
+    out += ["## Run", "", *_table(("", ""), overview)]
+
+    lat: Mapping[str, Mapping[str, float]] = s.get("latency_ms", {}) or {}
+    rows = []
+    for m in _LATENCY_ROWS:
+        q = lat.get(m)
+        if not q:
+            continue
+        b = budgets.get(m)
+        over = flags.get(_OVER[m], "-") if m in _OVER else "-"
+        rows.append((m, *(_num(q.get(k)) for k in ("median", "p90", "p99", "max")),
+                     "-" if b is None else f"{b:g}", str(over)))
+    out += ["## Latency per tick [ms]", "",
+            *_table(("module", "median", "p90", "p99", "max", "budget", "ticks over budget"), rows)]
+    out += ["stack = model + planner + reactor; total = match + stack.", ""]
+
+    out += _histogram("GND modes", "mode", s.get("modes", {}) or {}, n)
+    out += _histogram("ND+ situations", "situation", s.get("situations", {}) or {}, n)
+
+    fired = [(k, str(v), f"{100.0 * v / n:.1f} %" if n else "-") for k, v in flags.items() if v]
+    silent = [k for k, v in flags.items() if not v]
+    out += ["## Flags", ""]
+    out += _table(("flag", "ticks", "share"), fired) if fired else ["no flag fired", ""]
+    if silent:
+        out += [f"Never fired: {', '.join(silent)}.", ""]
+
+    agree = s.get("agreement", {}) or {}
+    if agree:
+        out += ["## Agreement with the logged motion", "",
+                *_table(("metric", "value"), [(k, _num(v, ".3f")) for k, v in agree.items()])]
+
+    sm = cfg.get("scanmatch", {}) or {}
+    gap = trajectory_gap(data.traj_odom, data.traj_corrected)
+    q = lat.get("match", {})
+    rows = [("matcher", str(sm.get("method", "-"))),
+            ("match failures (MATCH_FAILED)", f"{flags.get('MATCH_FAILED', 0)} of {n} ticks"),
+            ("match time median / p99", f"{_num(q.get('median'))} / {_num(q.get('p99'))} ms" if q else "-")]
+    names = {"path_odom_m": "path length, raw odometry [m]",
+             "path_corrected_m": "path length, corrected [m]",
+             "final_gap_m": "corrected vs odometry at the end [m]",
+             "max_gap_m": "corrected vs odometry, max [m]"}
+    rows += [(names[k], f"{v:.3f}") for k, v in gap.items()]
+    out += ["## Scan matching", "", *_table(("", ""), rows)]
+
+    rr = s.get("read_report")
+    if isinstance(rr, Mapping) and rr:
+        scalars = [(str(k), _num(v, ".3f")) for k, v in rr.items() if isinstance(v, str | int | float | bool)]
+        if scalars:
+            out += ["## Log reading", "", *_table(("", ""), scalars)]
+
+    out += ["## Figures", ""]
+    for name in figures:
+        caption = FIGURES.get(name, "")
+        out += [f"### {name}", "", caption, "", f"![{name}]({name})", ""]
+    return "\n".join(out).rstrip("\n") + "\n"

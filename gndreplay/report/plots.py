@@ -1,0 +1,266 @@
+"""Plot functions: each draws on a matplotlib ``Axes`` it is given, returns None and never opens a window.
+
+Arrays are positional, options keyword-only. Colours of modes, situations and modules are fixed here so every
+figure and report agrees.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
+__all__ = [
+    "FLAG_ORDER",
+    "MODE_COLORS",
+    "MODULE_COLORS",
+    "SITUATION_COLORS",
+    "hit_image",
+    "plot_bands",
+    "plot_commands",
+    "plot_flags",
+    "plot_grid",
+    "plot_hit_raster",
+    "plot_pose",
+    "plot_timing",
+    "plot_trajectory",
+    "runs",
+]
+
+F64 = NDArray[np.float64]
+
+MODE_COLORS: Mapping[str, str] = {
+    "mpND": "#4daf4a",
+    "mND": "#377eb8",
+    "ROTATE": "#ff7f00",
+    "EMERGENCY": "#e41a1c",
+    "STALE": "#999999",
+    "ESCAPE": "#984ea3",
+    "GOAL": "#222222",
+}
+SITUATION_COLORS: Mapping[str, str] = {
+    "HSGR": "#1b9e77",
+    "HSWR": "#66c2a5",
+    "HSNR": "#a6d854",
+    "LSG": "#fdae61",
+    "LS1": "#f46d43",
+    "LS2": "#d53e4f",
+    "NONE": "#bbbbbb",
+}
+MODULE_COLORS: Mapping[str, str] = {
+    "match": "#984ea3",
+    "model": "#377eb8",
+    "planner": "#e41a1c",
+    "reactor": "#4daf4a",
+    "total": "#222222",
+}
+FLAG_ORDER: Sequence[str] = (
+    "EMERGENCY_STOP",
+    "PLANNER_NO_PATH",
+    "PLANNER_TIMEOUT",
+    "REACTOR_NO_REGION",
+    "GOAL_IN_OBSTACLE",
+    "TRAP_DETECTED",
+    "STALE_SCAN",
+    "GOAL_REACHED",
+    "MATCH_FAILED",
+    "MATCH_OVER_BUDGET",
+    "MODEL_OVER_BUDGET",
+    "PLANNER_OVER_BUDGET",
+    "REACTOR_OVER_BUDGET",
+)
+_FLAG_COLORS: Mapping[str, str] = {
+    "EMERGENCY_STOP": "#e41a1c",
+    "PLANNER_NO_PATH": "#377eb8",
+    "PLANNER_TIMEOUT": "#377eb8",
+    "REACTOR_NO_REGION": "#ff7f00",
+    "GOAL_IN_OBSTACLE": "#8c6d31",
+    "TRAP_DETECTED": "#984ea3",
+    "STALE_SCAN": "#777777",
+    "GOAL_REACHED": "#222222",
+    "MATCH_FAILED": "#a65628",
+    "MATCH_OVER_BUDGET": "#c51b7d",
+    "MODEL_OVER_BUDGET": "#c51b7d",
+    "PLANNER_OVER_BUDGET": "#c51b7d",
+    "REACTOR_OVER_BUDGET": "#c51b7d",
+}
+_GRID_COLORS = ("#9e9e9e", "#ffffff", "#000000")  # UNKNOWN, FREE, OCCUPIED
+
+
+def plot_trajectory(
+    ax: Axes,
+    xy: ArrayLike,
+    *,
+    label: str = "",
+    style: str = "-",
+    color: str | None = None,
+    linewidth: float = 1.2,
+    alpha: float = 1.0,
+    zorder: float = 3.0,
+) -> None:
+    """A planar trajectory ``xy`` (M, 2) [m] (extra columns are ignored) as one line."""
+    p = np.asarray(xy, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] < 2:
+        raise ValueError(f"xy must be (M, 2), got shape {p.shape}")
+    ax.plot(p[:, 0], p[:, 1], style, label=label or None, color=color, linewidth=linewidth, alpha=alpha,
+            zorder=zorder)
+
+
+def plot_pose(ax: Axes, pose: ArrayLike, *, length_m: float = 0.6, color: str = "#e41a1c", label: str = "",
+              zorder: float = 5.0) -> None:
+    """A robot pose (x, y, theta) as a dot with a heading arrow of ``length_m``."""
+    x, y, th = (float(v) for v in np.asarray(pose, dtype=np.float64)[:3])
+    ax.plot([x], [y], "o", color=color, markersize=5, label=label or None, zorder=zorder)
+    ax.annotate("", xy=(x + length_m * np.cos(th), y + length_m * np.sin(th)), xytext=(x, y),
+                arrowprops={"arrowstyle": "-|>", "color": color, "lw": 1.5}, zorder=zorder)
+
+
+def hit_image(hits: ArrayLike, *, max_pixels: int = 1600) -> F64:
+    """Hit counts (H, W) -> display darkness in [0, 1]: max-pooled so no side exceeds ``max_pixels``
+    (thin walls survive the downsampling), then log-scaled and saturated at the 90th percentile of the
+    non-zero cells, so walls seen once and walls seen a thousand times are both visible."""
+    a = np.asarray(hits)
+    if a.ndim != 2:
+        raise ValueError(f"hits must be 2-D, got shape {a.shape}")
+    f = max(1, -(-max(a.shape) // max_pixels))
+    if f > 1:
+        h, w = -(-a.shape[0] // f) * f, -(-a.shape[1] // f) * f
+        pad = np.zeros((h, w), dtype=a.dtype)
+        pad[: a.shape[0], : a.shape[1]] = a
+        a = pad.reshape(h // f, f, w // f, f).max(axis=(1, 3))
+    v = np.log1p(a.astype(np.float64))
+    nz = v[v > 0]
+    top = float(np.percentile(nz, 90)) if nz.size else 1.0
+    return np.clip(v / max(top, 1e-9), 0.0, 1.0)
+
+
+Extent = tuple[float, float, float, float]
+
+
+def plot_hit_raster(ax: Axes, hits: ArrayLike, extent: Extent, *, cmap: str = "Greys",
+                    max_pixels: int = 1600) -> None:
+    """A hit-count raster (H, W), row 0 at the bottom, covering ``extent`` = (x0, x1, y0, y1) [m]."""
+    img = hit_image(hits, max_pixels=max_pixels)
+    ax.imshow(img, origin="lower", extent=extent, cmap=cmap, vmin=0.0, vmax=1.0,
+              interpolation="nearest", zorder=1)
+    ax.set_aspect("equal")
+
+
+def plot_grid(ax: Axes, cells: ArrayLike, extent: Extent) -> None:
+    """A robot-centred grid (N, N) of 0 unknown / 1 free / 2 occupied: grey / white / black."""
+    from matplotlib.colors import ListedColormap
+
+    c = np.asarray(cells)
+    ax.imshow(c, origin="lower", extent=extent, cmap=ListedColormap(list(_GRID_COLORS)), vmin=-0.5,
+              vmax=2.5, interpolation="nearest", zorder=1)
+    ax.set_aspect("equal")
+
+
+def runs(labels: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Start and end (exclusive) indices of the runs of equal consecutive labels."""
+    a = np.asarray(labels)
+    if a.size == 0:
+        return np.zeros(0, np.intp), np.zeros(0, np.intp)
+    cut = np.flatnonzero(a[1:] != a[:-1]) + 1
+    return np.concatenate([[0], cut]).astype(np.intp), np.concatenate([cut, [a.size]]).astype(np.intp)
+
+
+def _tick_edges(t: F64) -> F64:
+    """(K + 1,) edges of the ticks' time spans: each tick lasts until the next one (the last: the median
+    period)."""
+    if t.size == 0:
+        return np.zeros(1)
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    return np.concatenate([t, [t[-1] + dt]])
+
+
+def plot_bands(ax: Axes, t: ArrayLike, labels: ArrayLike, *, colors: Mapping[str, str],
+               legend: bool = True, legend_title: str = "") -> None:
+    """A strip of coloured bands: tick k spans [t_k, t_k+1) in the colour of ``labels[k]``.
+
+    Labels missing from ``colors`` are drawn grey. The legend lists the labels present, in ``colors`` order.
+    """
+    tt = np.asarray(t, dtype=np.float64)
+    lab = np.asarray(labels).astype(str)
+    edges = _tick_edges(tt)
+    start, end = runs(lab)
+    present = [k for k in colors if np.any(lab == k)] + sorted(set(lab.tolist()) - set(colors))
+    for name in present:
+        sel = lab[start] == name
+        x0 = edges[start[sel]]
+        ax.broken_barh(list(zip(x0.tolist(), (edges[end[sel]] - x0).tolist(), strict=True)), (0.0, 1.0),
+                       facecolors=colors.get(name, "#cccccc"), edgecolor="none", label=name)
+    ax.set_ylim(0.0, 1.0)
+    ax.set_yticks([])
+    if legend and present:
+        ax.legend(loc="center left", bbox_to_anchor=(1.005, 0.5), fontsize=7, frameon=False,
+                  title=legend_title or None, title_fontsize=7, handlelength=1.0, borderaxespad=0.0)
+
+
+def plot_commands(ax_v: Axes, ax_w: Axes, t: ArrayLike, v: ArrayLike, w: ArrayLike, *,
+                  vy: ArrayLike | None = None) -> None:
+    """v [m/s] (and vy when given and not all zero) on ``ax_v`` and w [rad/s] on ``ax_w``, as step lines
+    (a command holds until the next tick)."""
+    tt = np.asarray(t, dtype=np.float64)
+    ax_v.step(tt, np.asarray(v, dtype=np.float64), where="post", color="#1f4e79", linewidth=0.8, label="v")
+    if vy is not None and np.any(np.asarray(vy) != 0.0):
+        ax_v.step(tt, np.asarray(vy, dtype=np.float64), where="post", color="#ff7f00", linewidth=0.8,
+                  label="vy")
+        ax_v.legend(loc="upper right", fontsize=7)
+    ax_w.step(tt, np.asarray(w, dtype=np.float64), where="post", color="#7b1f3a", linewidth=0.8, label="w")
+    for ax, name in ((ax_v, "v [m/s]"), (ax_w, "w [rad/s]")):
+        ax.axhline(0.0, color="0.6", linewidth=0.6, zorder=0)
+        ax.set_ylabel(name)
+        ax.grid(True, linewidth=0.3, alpha=0.6)
+
+
+def plot_flags(ax: Axes, t: ArrayLike, flags: Mapping[str, ArrayLike], *,
+               order: Sequence[str] = FLAG_ORDER) -> None:
+    """One row per flag that fired, a tick mark at each tick where it did (flags in ``order`` first)."""
+    tt = np.asarray(t, dtype=np.float64)
+    names = [n for n in order if n in flags and np.any(flags[n])]
+    names += sorted(n for n in flags if n not in order and np.any(flags[n]))
+    if not names:
+        ax.text(0.5, 0.5, "no flag fired", transform=ax.transAxes, ha="center", va="center", fontsize=8,
+                color="0.4")
+        ax.set_yticks([])
+        return
+    pos = [tt[np.asarray(flags[n], dtype=bool)] for n in names]
+    offsets = [float(len(names) - 1 - k) for k in range(len(names))]
+    ax.eventplot(pos, lineoffsets=offsets, linelengths=0.7, linewidths=0.8,
+                 colors=[_FLAG_COLORS.get(n, "#555555") for n in names])
+    ax.set_yticks(offsets, [f"{n} ({int(np.count_nonzero(flags[n]))})" for n in names], fontsize=7)
+    ax.set_ylim(-0.6, len(names) - 0.4)
+    ax.grid(True, axis="x", linewidth=0.3, alpha=0.6)
+
+
+def plot_timing(ax: Axes, t: ArrayLike, timings_ms: Mapping[str, ArrayLike], *,
+                budgets_ms: Mapping[str, float] | None = None, scan_period_ms: float | None = None,
+                floor_ms: float = 1e-3, ylabel: str = "time per tick [ms]") -> None:
+    """Per-module computation time [ms] per tick on a log axis (values below ``floor_ms`` are drawn at it),
+    each module's budget as a dashed line of its colour (one grey line for modules sharing a budget), and
+    the scan period as a dotted black line. A "total" series is drawn fainter, behind the modules."""
+    tt = np.asarray(t, dtype=np.float64)
+    for name, ms in timings_ms.items():
+        y = np.maximum(np.asarray(ms, dtype=np.float64), floor_ms)
+        ax.plot(tt, y, color=MODULE_COLORS.get(name), linewidth=0.6 if name != "total" else 0.5,
+                alpha=0.85 if name != "total" else 0.45, label=name, zorder=2 if name != "total" else 1.5)
+    same: dict[float, list[str]] = {}  # modules sharing a budget share one line
+    for name, b in (budgets_ms or {}).items():
+        if b and np.isfinite(b):
+            same.setdefault(float(b), []).append(name)
+    for b, names in same.items():
+        color = MODULE_COLORS.get(names[0], "0.3") if len(names) == 1 else "0.35"
+        label = f"{' + '.join(names)} budget {b:g} ms"
+        ax.axhline(b, color=color, linestyle="--", linewidth=1.0, label=label)
+    if scan_period_ms is not None and np.isfinite(scan_period_ms) and scan_period_ms > 0:
+        ax.axhline(scan_period_ms, color="black", linestyle=":", linewidth=1.2,
+                   label=f"scan period {scan_period_ms:.0f} ms")
+    ax.set_yscale("log")
+    ax.set_ylabel(ylabel)
+    ax.grid(True, which="major", linewidth=0.3, alpha=0.6)

@@ -1,0 +1,195 @@
+"""Read a run directory back (commands.csv, timing.csv, the TUM trajectories, summary.json, maps.npz).
+
+Only the files are used: ``gndreplay report RUN_DIR`` redraws everything without the log.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import GndReplayError
+from .maps import MAPS_FILE, MapsData, load_maps
+
+__all__ = ["Commands", "RunData", "RunDirError", "Timing", "load_run", "read_commands", "read_timing",
+           "read_tum"]
+
+F64 = NDArray[np.float64]
+TIMING_MODULES = ("match", "model", "planner", "reactor")
+
+
+class RunDirError(GndReplayError):
+    """A run directory cannot be read back: a file is missing or malformed (the message names it)."""
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Commands:
+    """commands.csv as arrays.
+
+    Attributes:
+        t_s: (K,) tick times [s]; v_mps, vy_mps, w_radps: (K,) the commands.
+        modes, situations: (K,) str arrays.
+        flags: flag name -> (K,) bool mask, for every flag that fired at least once (in first-seen order).
+    """
+
+    t_s: F64
+    v_mps: F64
+    vy_mps: F64
+    w_radps: F64
+    modes: NDArray[np.str_]
+    situations: NDArray[np.str_]
+    flags: Mapping[str, NDArray[np.bool_]]
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Timing:
+    """timing.csv as arrays: t_s (K,) and ms per module name (K,) (match, model, planner, reactor, total)."""
+
+    t_s: F64
+    ms: Mapping[str, F64]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class RunData:
+    """Everything the report needs from a run directory.
+
+    Attributes:
+        run_dir: the directory.
+        commands, timing: the per-tick tables.
+        traj_odom, traj_corrected: (M, 4) t [s], x, y [m], yaw [rad] from the TUM files (every scan).
+        summary: summary.json.
+        maps: maps.npz, or None when the run was written without it.
+    """
+
+    run_dir: Path
+    commands: Commands
+    timing: Timing
+    traj_odom: F64
+    traj_corrected: F64
+    summary: dict[str, Any]
+    maps: MapsData | None
+
+
+def _need(path: Path) -> Path:
+    if not path.is_file():
+        raise RunDirError(f"{path}: missing (is {path.parent} a gndreplay run directory?)")
+    return path
+
+
+def read_commands(path: Path) -> Commands:
+    """Parse commands.csv (header ``t,v,vy,w,mode,situation,flags``).
+
+    Raises:
+        RunDirError: missing file, wrong header or a malformed row (named by line).
+    """
+    with open(_need(path), newline="") as f:
+        rows = list(csv.reader(f))
+    expected = ["t", "v", "vy", "w", "mode", "situation", "flags"]
+    if not rows or rows[0] != expected:
+        raise RunDirError(f"{path}: expected header {','.join(expected)}")
+    body = rows[1:]
+    num = np.empty((len(body), 4), dtype=np.float64)
+    flags: dict[str, NDArray[np.bool_]] = {}
+    for k, r in enumerate(body):
+        try:
+            if len(r) != 7:
+                raise ValueError(f"{len(r)} fields")
+            num[k] = [float(x) for x in r[:4]]
+        except ValueError as err:
+            raise RunDirError(
+                f"{path} line {k + 2}: expected 7 fields t,v,vy,w (numbers),mode,situation,flags ({err})"
+            ) from err
+        for name in filter(None, r[6].split("|")):
+            mask = flags.get(name)
+            if mask is None:
+                mask = flags[name] = np.zeros(len(body), dtype=bool)
+            mask[k] = True
+    return Commands(
+        t_s=num[:, 0],
+        v_mps=num[:, 1],
+        vy_mps=num[:, 2],
+        w_radps=num[:, 3],
+        modes=np.array([r[4] for r in body], dtype=np.str_),
+        situations=np.array([r[5] for r in body], dtype=np.str_),
+        flags=flags,
+    )
+
+
+def read_timing(path: Path) -> Timing:
+    """Parse timing.csv (``t,match_ms,model_ms,planner_ms,reactor_ms,total_ms``).
+
+    Raises:
+        RunDirError: missing file, missing column or a malformed number.
+    """
+    with open(_need(path), newline="") as f:
+        header = f.readline().strip().split(",")
+        if not header or header[0] != "t":
+            raise RunDirError(f"{path}: expected a header starting with t")
+        try:
+            data = np.loadtxt(f, delimiter=",", dtype=np.float64, ndmin=2)
+        except ValueError as err:
+            raise RunDirError(f"{path}: malformed row: {err}") from err
+    data = data.reshape(-1, len(header))
+    ms = {name.removesuffix("_ms"): data[:, k] for k, name in enumerate(header) if k and name.endswith("_ms")}
+    missing = [m for m in TIMING_MODULES if m not in ms]
+    if missing:
+        raise RunDirError(f"{path}: missing column(s) {', '.join(m + '_ms' for m in missing)}")
+    return Timing(t_s=data[:, 0], ms=ms)
+
+
+def read_tum(path: Path) -> F64:
+    """A planar TUM trajectory as (M, 4) t [s], x, y [m], yaw [rad] (yaw from qz, qw).
+
+    Raises:
+        RunDirError: missing file or not 8 numbers per line.
+    """
+    try:
+        data = np.loadtxt(_need(path), comments="#", dtype=np.float64, ndmin=2)
+    except ValueError as err:
+        raise RunDirError(f"{path}: not a TUM trajectory (t x y z qx qy qz qw): {err}") from err
+    if data.size == 0:
+        return np.zeros((0, 4))
+    if data.shape[1] != 8:
+        raise RunDirError(f"{path}: expected 8 columns (t x y z qx qy qz qw), got {data.shape[1]}")
+    yaw = 2.0 * np.arctan2(data[:, 6], data[:, 7])
+    return np.column_stack([data[:, 0], data[:, 1], data[:, 2], yaw])
+
+
+def load_run(run_dir: Path) -> RunData:
+    """Read a run directory.
+
+    Raises:
+        RunDirError: a required file is missing or malformed (maps.npz is optional).
+    """
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise RunDirError(f"{run_dir}: not a directory")
+    try:
+        summary = json.loads(_need(run_dir / "summary.json").read_text())
+    except json.JSONDecodeError as err:
+        raise RunDirError(f"{run_dir / 'summary.json'}: not valid JSON: {err}") from err
+    maps = None
+    if (run_dir / MAPS_FILE).is_file():
+        try:
+            maps = load_maps(run_dir / MAPS_FILE)
+        except (ValueError, KeyError, OSError) as err:
+            raise RunDirError(f"{run_dir / MAPS_FILE}: {err}") from err
+    return RunData(
+        run_dir=run_dir,
+        commands=read_commands(run_dir / "commands.csv"),
+        timing=read_timing(run_dir / "timing.csv"),
+        traj_odom=read_tum(run_dir / "trajectory_odom.tum"),
+        traj_corrected=read_tum(run_dir / "trajectory_corrected.tum"),
+        summary=summary,
+        maps=maps,
+    )

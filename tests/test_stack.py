@@ -1,0 +1,167 @@
+"""The navigation stack on simulated scenes with known answers: modes, flags, reflexes, no NaN."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from gndreplay.config import PRESETS, Config
+from gndreplay.geometry import compose
+from gndreplay.pipeline.nd import Situation
+from gndreplay.pipeline.stack import NavigationStack, TickResult
+from gndreplay.pipeline.supervisor import Mode
+from gndreplay.sim.world import box, cast_rays, polygon, regular_polygon, wall
+from gndreplay.types import Flag, Pose2D, Scan, Tick
+
+FRONT = np.linspace(-math.pi / 2, math.pi / 2, 361)  # a SICK-like 180 deg laser
+AROUND = np.linspace(-math.pi, math.pi, 720, endpoint=False)  # 360 deg: the robot sees it is enclosed
+
+
+def scan_of(
+    segments: np.ndarray, pose: Pose2D, sensor: Pose2D, t_ns: int, beams: np.ndarray, max_range: float = 8.0
+) -> Scan:
+    laser = compose(pose.as_array(), sensor.as_array())
+    ranges = cast_rays(laser[:2], beams + laser[2], segments, max_range_m=max_range)
+    return Scan(t_ns=t_ns, ranges_m=ranges, angles_rad=beams, max_range_m=max_range, sensor_pose=sensor)
+
+
+def run(
+    cfg: Config,
+    segments: np.ndarray,
+    pose: Pose2D,
+    goal: tuple[float, float],
+    n: int = 3,
+    dt_s: float = 0.2,
+    beams: np.ndarray = FRONT,
+) -> list[TickResult]:
+    """n ticks of a robot standing at ``pose`` (the grid fills up, the reactor sees the model)."""
+    stack = NavigationStack(cfg.stack_params())
+    sensor = Pose2D(cfg.robot.laser_x_m, cfg.robot.laser_y_m, cfg.robot.laser_theta_rad)
+    out = []
+    for i in range(n):
+        t = 1_000_000_000 + int(i * dt_s * 1e9)
+        tick = Tick(index=i, t_ns=t, scan=scan_of(segments, pose, sensor, t, beams), odom=pose)
+        out.append(stack.step(tick, pose, goal))
+    return out
+
+
+ROOM = np.vstack([polygon([(-6, -6), (12, -6), (12, 6), (-6, 6)])])
+PRESET_NAMES = sorted(PRESETS)
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_open_room_goal_ahead_drives_straight(name: str) -> None:
+    cfg = PRESETS[name]
+    r = run(cfg, ROOM, Pose2D(0, 0, 0), (4.0, 0.0))[-1]
+    assert r.mode is Mode.MPND
+    assert r.situation is Situation.HSGR
+    assert r.v_mps == pytest.approx(cfg.robot.vmax_mps, rel=1e-6)
+    assert abs(r.w_radps) < 1e-6
+    assert r.flags == Flag.NONE
+    assert set(r.timings_ms) == {"match", "model", "planner", "reactor"}
+    assert r.path_xy.shape[1] == 2 and np.allclose(r.path_xy[-1], (4.0, 0.0), atol=0.06)
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_goal_inside_an_obstacle_switches_to_mnd(name: str) -> None:
+    cfg = PRESETS[name]
+    world = np.vstack([ROOM, box(3.0, 0.0, 1.0, 1.0)])
+    # the goal on the box face the laser sees (its far side is unknown, hence free, to the planner)
+    r = run(cfg, world, Pose2D(0, 0, 0), (2.5, 0.0))[-1]
+    assert r.flags & Flag.GOAL_IN_OBSTACLE
+    assert r.mode is Mode.MND
+    assert r.path_xy.shape == (0, 2)
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_enclosed_robot_has_no_path_and_never_drives(name: str) -> None:
+    cfg = PRESETS[name]
+    ring = regular_polygon(0.0, 0.0, cfg.robot.outer_radius_m + 0.15, sides=24)
+    results = run(cfg, np.vstack([ROOM, ring]), Pose2D(0, 0, 0), (4.0, 0.0), n=4, beams=AROUND)
+    for r in results[1:]:
+        assert r.flags & Flag.PLANNER_NO_PATH
+        assert r.flags & Flag.REACTOR_NO_REGION
+        assert r.mode in (Mode.ROTATE, Mode.EMERGENCY, Mode.ESCAPE)
+        assert r.v_mps == 0.0 and r.vy_mps == 0.0
+
+
+def test_half_seen_enclosure_plans_through_the_unknown_side() -> None:
+    """With a 180 deg laser the back of the ring is UNKNOWN, i.e. free to the planner (GND's choice)."""
+    cfg = PRESETS["wheelchair"]
+    ring = regular_polygon(0.0, 0.0, cfg.robot.outer_radius_m + 0.15, sides=24)
+    r = run(cfg, np.vstack([ROOM, ring]), Pose2D(0, 0, 0), (4.0, 0.0))[-1]
+    assert not r.flags & Flag.PLANNER_NO_PATH
+    assert r.v_mps == pytest.approx(0.0, abs=0.05)
+
+
+def test_wall_close_ahead_makes_nd_turn_in_place() -> None:
+    cfg = PRESETS["wheelchair"]
+    # a wall 0.15 m in front of the wheelchair's front edge, with the goal straight through it
+    world = np.vstack([ROOM, wall(0.95, -3.0, 0.95, 3.0)])
+    r = run(cfg, world, Pose2D(0, 0, 0), (4.0, 0.0))[-1]
+    assert r.situation in (Situation.LS1, Situation.LSG, Situation.LS2)
+    assert r.v_mps == pytest.approx(0.0, abs=1e-6) and r.w_radps != 0.0
+    assert not r.flags & Flag.EMERGENCY_STOP  # turning in place sweeps nothing of the wall
+
+
+def test_reflexive_brake_overrides_a_colliding_reactor_command(monkeypatch: pytest.MonkeyPatch) -> None:
+    """If the reactor commanded full speed into a close wall, the reflexive loop brakes on the raw scan."""
+    import gndreplay.pipeline.stack as stack_module
+
+    cfg = PRESETS["wheelchair"]
+    real = stack_module.nd_step
+
+    def reckless(*args: object, **kwargs: object):  # type: ignore[no-untyped-def]
+        import dataclasses
+
+        return dataclasses.replace(real(*args, **kwargs), v_mps=cfg.robot.vmax_mps, w_radps=0.0)
+
+    monkeypatch.setattr(stack_module, "nd_step", reckless)
+    world = np.vstack([ROOM, wall(0.95, -3.0, 0.95, 3.0)])
+    r = run(cfg, world, Pose2D(0, 0, 0), (4.0, 0.0))[-1]
+    assert r.mode is Mode.EMERGENCY and r.flags & Flag.EMERGENCY_STOP
+    assert (r.v_mps, r.w_radps) == (0.0, 0.0)
+
+
+def test_stale_scan_stops_the_robot() -> None:
+    cfg = PRESETS["wheelchair"]
+    results = run(cfg, ROOM, Pose2D(0, 0, 0), (4.0, 0.0), n=2, dt_s=cfg.supervisor.stale_scan_s + 0.5)
+    assert results[0].mode is Mode.MPND
+    assert results[1].mode is Mode.STALE and results[1].flags & Flag.STALE_SCAN
+    assert (results[1].v_mps, results[1].w_radps) == (0.0, 0.0)
+
+
+def test_goal_reached_stops() -> None:
+    r = run(PRESETS["wheelchair"], ROOM, Pose2D(1.0, 1.0, 0.3), (1.1, 1.0))[-1]
+    assert r.mode is Mode.GOAL and r.flags & Flag.GOAL_REACHED
+    assert (r.v_mps, r.vy_mps, r.w_radps) == (0.0, 0.0, 0.0)
+
+
+def test_goal_behind_turns_in_place_differential() -> None:
+    r = run(PRESETS["wheelchair"], ROOM, Pose2D(0, 0, 0), (-4.0, 0.5))[-1]
+    assert r.v_mps == pytest.approx(0.0, abs=1e-9)
+    assert r.w_radps > 0.0
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_random_clutter_never_produces_nan(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    boxes = [box(*rng.uniform(-4, 8, 2), *rng.uniform(0.2, 1.5, 2)) for _ in range(25)]
+    cfg = PRESETS["wheelchair" if seed % 2 else "xr4000"]
+    goal = tuple(rng.uniform(-10, 10, 2))
+    for r in run(cfg, np.vstack([ROOM, *boxes]), Pose2D(0, 0, rng.uniform(-3, 3)), goal, n=3):
+        assert all(math.isfinite(x) for x in (r.v_mps, r.vy_mps, r.w_radps))
+        assert abs(r.v_mps) <= cfg.robot.vmax_mps + 1e-9
+        assert abs(r.w_radps) <= cfg.robot.wmax_radps + 1e-9
+
+
+def test_enforced_planner_budget_falls_back_to_mnd() -> None:
+    import dataclasses
+
+    base = PRESETS["wheelchair"]
+    sup = dataclasses.replace(base.supervisor, enforce_budgets=True, budget_planner_s=0.0)
+    r = run(dataclasses.replace(base, supervisor=sup), ROOM, Pose2D(0, 0, 0), (4.0, 1.0))[-1]
+    assert r.flags & Flag.PLANNER_OVER_BUDGET and r.flags & Flag.PLANNER_TIMEOUT
+    assert r.mode is Mode.MND
