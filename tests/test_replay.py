@@ -204,7 +204,8 @@ DEV_LOGS = [
 def test_every_dev_log_runs_with_one_command_per_scan(
     datasets: Path, tmp_path: Path, rel: str, scans: int | None, until: float | None
 ) -> None:
-    summary = run_log(datasets / rel, PRESETS["wheelchair"], tmp_path / "run", options=RunOptions(until_s=until))
+    options = RunOptions(until_s=until)
+    summary = run_log(datasets / rel, PRESETS["wheelchair"], tmp_path / "run", options=options)
     if scans is None:
         t0 = next(iter(read_ticks(datasets / rel))).t_ns
         scans = sum(1 for t in read_ticks(datasets / rel) if (t.t_ns - t0) / 1e9 <= until)
