@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gndreplay.errors import ConfigError
 from gndreplay.geometry import compose, relative, wrap_angle
 from gndreplay.io import read_ticks
 from gndreplay.robot import WHEELCHAIR_ROBOT
@@ -307,11 +308,11 @@ def test_office_ticks_are_deterministic(office_run: SimulatedRun) -> None:
 
 def test_simulate_rejects_unknown_scenario(tmp_path: Path) -> None:
     assert "office" in SCENARIOS
-    with pytest.raises(ValueError, match="unknown scenario 'mars'"):
+    with pytest.raises(ConfigError, match="unknown scenario 'mars'"):
         simulate("mars", seed=0, out=tmp_path / "x.clf")
-    with pytest.raises(ValueError, match="simulated logs are written as CARMEN"):
+    with pytest.raises(ConfigError, match="simulated logs are written as CARMEN"):
         simulate("office", seed=0, out=tmp_path / "x.mcap")
-    with pytest.raises(ValueError, match="simulated logs are written as CARMEN"):
+    with pytest.raises(ConfigError, match="simulated logs are written as CARMEN"):
         simulate("office", seed=0, out=tmp_path / "x.bz2")
 
 

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.signal import lfilter  # type: ignore[import-untyped]
 
+from ..errors import ConfigError
 from ..geometry import compose, wrap_angle
 from ..robot import WHEELCHAIR_ROBOT, RobotConfig
 from ..types import Command, Odometry, Pose2D, Scan, Tick
@@ -531,16 +532,16 @@ def simulate(scenario: str, *, seed: int, out: Path, t0_ns: int = DEFAULT_T0_NS)
         ``out``.
 
     Raises:
-        ValueError: unknown scenario, or ``out`` not named like a CARMEN log (``.clf``/``.log``/``.carmen``,
+        ConfigError: unknown scenario, or ``out`` not named like a CARMEN log (``.clf``/``.log``/``.carmen``,
             optionally ``.gz``/``.bz2``).
     """
     if scenario not in SCENARIOS:
-        raise ValueError(f"unknown scenario {scenario!r}; expected one of {sorted(SCENARIOS)}")
+        raise ConfigError(f"unknown scenario {scenario!r}; expected one of {sorted(SCENARIOS)}")
     out = Path(out)
     suffixes = [x.lower() for x in out.suffixes[-2:]]
     inner = suffixes[-2] if len(suffixes) == 2 and suffixes[-1] in (".gz", ".bz2") else (suffixes or [""])[-1]
     if inner not in CARMEN_SUFFIXES:
-        raise ValueError(f"out={str(out)!r}: simulated logs are written as CARMEN; name them "
+        raise ConfigError(f"{out}: simulated logs are written as CARMEN; name them "
                          f"{'/'.join(CARMEN_SUFFIXES)} (optionally + .gz/.bz2)")
     from ..io import write_carmen  # io is imported only when writing
 
