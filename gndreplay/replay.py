@@ -98,14 +98,17 @@ def _make_matcher(cfg: Config) -> Matcher:
 
 
 def _warm_up_matcher(cfg: Config) -> None:
-    """Compile the matcher's kernels on a few synthetic scans of a bumpy round room before timing."""
-    matcher = _make_matcher(cfg)
-    angles = np.linspace(-math.pi / 2, math.pi / 2, 361)
-    for k in range(3):
-        pose = Pose2D(0.05 * k, 0.0, 0.01 * k)
-        world_angles = angles + pose.theta
-        ranges = 4.0 + 0.4 * np.sin(5.0 * world_angles) - pose.x * np.cos(angles)
-        matcher.update(Scan(t_ns=k, ranges_m=ranges, angles_rad=angles, max_range_m=30.0), pose)
+    """Compile the matcher's kernels on synthetic scans of a bumpy round room before timing (with
+    writable and read-only arrays, as readers may hand out either)."""
+    for read_only in (False, True):
+        matcher = _make_matcher(cfg)
+        angles = np.linspace(-math.pi / 2, math.pi / 2, 361)
+        angles.flags.writeable = not read_only
+        for k in range(3):
+            pose = Pose2D(0.05 * k, 0.0, 0.01 * k)
+            ranges = 4.0 + 0.4 * np.sin(5.0 * (angles + pose.theta)) - pose.x * np.cos(angles)
+            ranges.flags.writeable = not read_only
+            matcher.update(Scan(t_ns=k, ranges_m=ranges, angles_rad=angles, max_range_m=30.0), pose)
 
 
 def corrected_stream(ticks: Iterable[Tick], cfg: Config, options: RunOptions) -> Iterator[Matched]:

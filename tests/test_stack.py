@@ -165,3 +165,32 @@ def test_enforced_planner_budget_falls_back_to_mnd() -> None:
     r = run(dataclasses.replace(base, supervisor=sup), ROOM, Pose2D(0, 0, 0), (4.0, 1.0))[-1]
     assert r.flags & Flag.PLANNER_OVER_BUDGET and r.flags & Flag.PLANNER_TIMEOUT
     assert r.mode is Mode.MND
+
+
+def _numba_signatures() -> dict[str, int]:
+    from gndreplay.pipeline import cspace, model, nd, nf1
+
+    return {
+        f"{mod.__name__}.{name}": len(obj.signatures)
+        for mod in (model, cspace, nf1, nd)
+        for name, obj in vars(mod).items()
+        if hasattr(obj, "signatures")
+    }
+
+
+def test_warm_up_compiles_what_real_ticks_need() -> None:
+    """After warm_up, ticks from a real reader (read-only shared beam angles) compile nothing new, so no
+    JIT time is ever reported as model/planner/reactor time."""
+    from pathlib import Path
+
+    from gndreplay.io import read_ticks
+    from gndreplay.pipeline.stack import warm_up
+
+    cfg = PRESETS["wheelchair"]
+    warm_up(cfg.stack_params())
+    before = _numba_signatures()
+    stack = NavigationStack(cfg.stack_params())
+    sample = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
+    for tick, _ in zip(read_ticks(sample), range(5), strict=False):
+        stack.step(tick, tick.odom, (tick.odom.x + 3.0, tick.odom.y))
+    assert _numba_signatures() == before

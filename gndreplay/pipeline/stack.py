@@ -216,15 +216,24 @@ class NavigationStack:
 
 
 def warm_up(params: StackParams) -> None:
-    """Run a throwaway stack on a synthetic scan so numba compiles (or loads) every kernel before the
-    first timed tick; otherwise tick 0 would report hundreds of milliseconds of JIT as model time."""
-    angles = np.linspace(-math.pi / 2, math.pi / 2, 181)
-    ranges = np.where(np.arange(angles.size) % 7 == 0, np.inf, 3.0)
-    scan = Scan(t_ns=0, ranges_m=ranges, angles_rad=angles, max_range_m=8.0)
+    """Run a throwaway stack on synthetic scans so numba compiles (or loads) every kernel before the
+    first timed tick; otherwise tick 0 would report hundreds of milliseconds of JIT as model time.
+
+    Readers may hand out read-only arrays (shared beam angles, buffers decoded in place), which numba
+    compiles as a separate specialisation, so every writable/read-only combination is exercised."""
     stack = NavigationStack(params)
-    for k, goal in enumerate(((2.0, 0.5), (-5.0, 0.0), (30.0, 30.0))):
-        pose = Pose2D(0.05 * k, 0.0, 0.0)
-        stack.step(Tick(index=k, t_ns=k, scan=scan, odom=pose), pose, goal)
+    k = 0
+    for ro_ranges in (False, True):
+        for ro_angles in (False, True):
+            angles = np.linspace(-math.pi / 2, math.pi / 2, 181)
+            ranges = np.where(np.arange(angles.size) % 7 == 0, np.inf, 3.0)
+            ranges.flags.writeable = not ro_ranges
+            angles.flags.writeable = not ro_angles
+            scan = Scan(t_ns=k, ranges_m=ranges, angles_rad=angles, max_range_m=8.0)
+            for goal in ((2.0, 0.5), (-5.0, 0.0), (30.0, 30.0)):
+                pose = Pose2D(0.05 * k, 0.0, 0.0)
+                stack.step(Tick(index=k, t_ns=k, scan=scan, odom=pose), pose, goal)
+                k += 1
 
 
 def _finite(x: float) -> float:
