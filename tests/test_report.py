@@ -419,8 +419,22 @@ def test_replay_of_the_sample_log_writes_figures_report_and_mcap(tmp_path: Path)
 
 
 @pytest.mark.slow
-def test_replay_of_aces_writes_figures_report_and_mcap(datasets: Path, tmp_path: Path) -> None:
+def test_cli_run_mcap_on_aces_writes_figures_report_and_mcap(datasets: Path, tmp_path: Path) -> None:
+    """`gndreplay run --mcap` on the whole ACES log (CARMEN form), then `gndreplay report` on the result."""
+    from typer.testing import CliRunner
+
+    from gndreplay.cli import app
+
     out = tmp_path / "aces"
-    ticks = _replay_with_sinks(datasets / "carmen" / "aces.clf.bz2", out, until_s=120.0)
-    assert ticks > 500
+    result = CliRunner().invoke(app, ["run", str(datasets / "carmen" / "aces.clf.bz2"), "--mcap", "--out",
+                                      str(out), "--quiet"])
+    assert result.exit_code == 0, result.output
+    ticks = json.loads((out / "summary.json").read_text())["ticks"]
+    assert ticks == 7374 == len((out / "commands.csv").read_text().splitlines()) - 1
     _check_run_dir(out, ticks)
+    before = {name: (out / name).read_bytes() for name in FIGURES}
+    for name in FIGURES:
+        (out / name).unlink()
+    again = CliRunner().invoke(app, ["report", str(out)])
+    assert again.exit_code == 0, again.output
+    assert all((out / name).read_bytes() == data for name, data in before.items())
