@@ -288,7 +288,8 @@ def run(
     config: Annotated[
         Path | None,
         typer.Option(
-            "--config", help="TOML file overriding any field of the preset.",
+            "--config",
+            help="TOML file overriding any field of the preset.",
             rich_help_panel=_NAV_PANEL,
         ),
     ] = None,
@@ -330,35 +331,42 @@ def run(
     out: Annotated[
         Path | None,
         typer.Option(
-            "--out", help="Run directory (default: out/<log-stem>).",
+            "--out",
+            help="Run directory (default: out/<log-stem>).",
             rich_help_panel=_RUN_PANEL,
         ),
     ] = None,
     until: Annotated[
         float | None,
         typer.Option(
-            "--until", min=0.0, help="Stop after T seconds of log time.",
+            "--until",
+            min=0.0,
+            help="Stop after T seconds of log time.",
             rich_help_panel=_RUN_PANEL,
         ),
     ] = None,
     every: Annotated[
         int,
         typer.Option(
-            "--every", min=1, help="Run the stack on every N-th scan.",
+            "--every",
+            min=1,
+            help="Run the stack on every N-th scan.",
             rich_help_panel=_RUN_PANEL,
         ),
     ] = 1,
     mcap: Annotated[
         bool,
         typer.Option(
-            "--mcap", help="Also write results.mcap (ROS 2, opens in Foxglove).",
+            "--mcap",
+            help="Also write results.mcap (ROS 2, opens in Foxglove).",
             rich_help_panel=_RUN_PANEL,
         ),
     ] = False,
     figures: Annotated[
         bool,
         typer.Option(
-            "--figures/--no-figures", help="Draw the figures and report.md.",
+            "--figures/--no-figures",
+            help="Draw the figures and report.md.",
             rich_help_panel=_RUN_PANEL,
         ),
     ] = True,
@@ -399,7 +407,11 @@ def run(
     out_dir = out if out is not None else Path("out") / _log_stem(log_path)
     options = RunOptions(goal_xy=goal_xy, goal_ahead_m=goal_ahead, until_s=until, every=every)
     read = ReadOptions(
-        fmt=fmt, scan_topic=scan_topic, odom_topic=odom_topic, cmd_topic=cmd_topic, truth_topic=truth_topic,
+        fmt=fmt,
+        scan_topic=scan_topic,
+        odom_topic=odom_topic,
+        cmd_topic=cmd_topic,
+        truth_topic=truth_topic,
         strict=strict,
     )
     sinks = _run_sinks(figures=figures, mcap=mcap)
@@ -455,6 +467,163 @@ def simulate(
     from .sim.scenario import simulate as run_simulation
 
     typer.echo(str(run_simulation(scenario, seed=seed, out=out)))
+
+
+@app.command()
+@cli_errors
+def batch(
+    inputs: Annotated[
+        list[Path],
+        typer.Argument(
+            help="Logs, or folders searched for logs (CARMEN, ROS bags, MCAP).", show_default=False
+        ),
+    ],
+    jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Worker processes.")] = 1,
+    thresholds: Annotated[
+        Path | None,
+        typer.Option(
+            "--thresholds", help="TOML of pass/fail limits and per-input settings (relations, goal)."
+        ),
+    ] = None,
+    out: Annotated[Path, typer.Option("--out", help="Batch folder: one run directory per input.")] = Path(
+        "out/batch"
+    ),
+    junit: Annotated[
+        Path | None, typer.Option("--junit", help="Also write JUnit XML (one test case per input).")
+    ] = None,
+    dask: Annotated[
+        str | None,
+        typer.Option(
+            "--dask",
+            help="Send the inputs to this dask.distributed scheduler (pip install 'gndreplay[dask]').",
+            show_default=False,
+        ),
+    ] = None,
+    preset_name: Annotated[
+        str | None, typer.Option("--preset", help="wheelchair (default) or xr4000.", show_default=False)
+    ] = None,
+    config: Annotated[Path | None, typer.Option("--config", help="TOML overriding the preset.")] = None,
+    goal_ahead: Annotated[
+        float, typer.Option("--goal-ahead", min=0.1, help="Goal distance ahead [m].")
+    ] = 5.0,
+    until: Annotated[
+        float | None, typer.Option("--until", min=0.0, help="Replay only the first T seconds of each log.")
+    ] = None,
+    every: Annotated[int, typer.Option("--every", min=1, help="Run the stack on every N-th scan.")] = 1,
+    strict: StrictOpt = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
+) -> None:
+    """Replay many logs in parallel, check thresholds, write summary.csv / summary.md / JUnit.
+
+    Each input runs in its own worker process, so a bad or crashing input fails alone and is reported.
+    Exit code: 0 all passed, 1 a threshold was exceeded, 2 an input could not be read.
+
+    [bold]Examples[/]
+
+      gndreplay batch ../shared/datasets/carmen --jobs 2 --junit out/junit.xml
+
+      gndreplay batch logs/ --thresholds ci.toml --until 120
+    """
+    from .batch import expand_inputs, load_thresholds, run_batch
+    from .batch.thresholds import Thresholds
+    from .config import load_config
+    from .replay import ReadOptions, RunOptions
+
+    cfg = load_config(config, preset_name=preset_name)
+    job_list = expand_inputs(inputs)
+    limits = load_thresholds(thresholds) if thresholds is not None else Thresholds()
+    options = RunOptions(goal_ahead_m=goal_ahead, until_s=until, every=every)
+    with _batch_progress(enabled=not quiet, total=len(job_list)) as progress:
+        result = run_batch(
+            job_list,
+            cfg=cfg,
+            options=options,
+            thresholds=limits,
+            out_dir=out,
+            workers=jobs,
+            dask_address=dask,
+            progress=progress,
+            junit=junit,
+            read=ReadOptions(strict=strict),
+        )
+    for r in result.results:
+        if r.status == "error":
+            typer.echo(f"gndreplay: error: {r.name}: {r.error}", err=True)
+        elif r.status == "fail" and quiet:
+            typer.echo(f"gndreplay: fail: {r.name}: {'; '.join(r.failures)}", err=True)
+    if not quiet:
+        _print_batch(result)
+    raise typer.Exit(result.exit_code)
+
+
+class _batch_progress:
+    """A rich bar across inputs (on a terminal), advanced as each input finishes."""
+
+    def __init__(self, *, enabled: bool, total: int) -> None:
+        self.enabled = enabled and sys.stderr.isatty()
+        self.total = total
+        self._bar: object | None = None
+
+    def __enter__(self) -> Callable[[object], None] | None:
+        if not self.enabled:
+            return None
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        bar = Progress(
+            TextColumn("[bold]batch"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("{task.description}"),
+            TimeElapsedColumn(),
+            transient=True,
+        )
+        bar.__enter__()
+        task = bar.add_task("", total=self.total)
+        self._bar = bar
+
+        def advance(result: object) -> None:
+            bar.update(task, advance=1, description=str(getattr(result, "name", "")))
+
+        return advance
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.__exit__(*exc)  # type: ignore[attr-defined]
+
+
+def _print_batch(result: object) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    from .batch import BatchResult
+
+    assert isinstance(result, BatchResult)
+    table = Table(title=f"batch: {len(result.results)} inputs in {result.wall_s:.1f} s", title_justify="left")
+    for col in ("input", "status", "ticks", "stack p99 ms", "reactor p99 ms", "match failures", "why"):
+        table.add_column(
+            col, justify="right" if "ms" in col or col in ("ticks", "match failures") else "left"
+        )
+    style = {"pass": "green", "fail": "yellow", "error": "red"}
+    for r in result.results:
+        m = r.metrics
+        why = r.error if r.status == "error" else "; ".join(r.failures)
+        table.add_row(
+            r.name,
+            f"[{style[r.status]}]{r.status}[/]",
+            str(r.ticks),
+            _num(m.get("stack_p99_ms")),
+            _num(m.get("reactor_p99_ms")),
+            _num(m.get("match_failures"), "{:.0f}"),
+            why or "",
+        )
+    Console(soft_wrap=False).print(table)
+    typer.echo(
+        f"summary: {result.summary_csv}, {result.summary_md}" + (f", {result.junit}" if result.junit else "")
+    )
+
+
+def _num(value: object, fmt: str = "{:.2f}") -> str:
+    return fmt.format(value) if isinstance(value, int | float) else "-"
 
 
 def _with_matcher(cfg: object, matcher: str) -> object:

@@ -259,6 +259,8 @@ def motion_agreement(
     ok = j < n
     i = np.nonzero(ok)[0]
     j = j[ok]
+    if i.size == 0:  # the run is shorter than the horizon
+        return {"horizon_s": horizon_s, "ticks_compared": 0}
     dt = t_s[j] - t_s[i]
     rel = relative(poses[i], poses[j])
     dist = np.hypot(rel[:, 0], rel[:, 1])

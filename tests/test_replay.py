@@ -213,3 +213,9 @@ def test_every_dev_log_runs_with_one_command_per_scan(
     rows = (summary.out_dir / "commands.csv").read_text().splitlines()
     assert len(rows) == scans + 1
     assert summary.data["modes"].get("mpND", 0) > scans // 2  # the planner finds its way most of the time
+
+
+def test_motion_agreement_of_a_run_shorter_than_the_horizon() -> None:
+    t = np.array([0.0, 0.2, 0.4])
+    out = motion_agreement(t, np.zeros((3, 3)), np.zeros((3, 3)), horizon_s=1.0)
+    assert out == {"horizon_s": 1.0, "ticks_compared": 0}

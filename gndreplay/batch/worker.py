@@ -1,0 +1,264 @@
+"""What a worker runs: one :class:`Task` in, one :class:`InputResult` out, every failure captured as a value.
+
+This module is imported by each fresh worker process before anything heavy: it imports no numpy, numba or
+replay code at module level, so :func:`pin_threads` (the pool's initializer) takes effect before the
+numeric libraries read their thread settings.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import time
+import traceback
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal, Protocol
+
+from ..errors import ConfigError, GndReplayError
+from .jobs import Job
+from .metrics import metrics_from_summary, relation_metrics
+from .thresholds import check_limits
+
+if TYPE_CHECKING:
+    from ..config import Config
+    from ..replay import ReadOptions, RunOptions
+
+__all__ = [
+    "THREAD_ENV_VARS",
+    "InputResult",
+    "RunOutcome",
+    "Runner",
+    "Status",
+    "Task",
+    "crash_message",
+    "error_result",
+    "execute",
+    "pin_threads",
+    "read_tum",
+    "run_input",
+]
+
+log = logging.getLogger(__name__)
+
+#: Thread-count variables of the numeric libraries, set to 1 in each worker so N workers use N cores.
+THREAD_ENV_VARS = (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+    "NUMBA_NUM_THREADS",
+)
+
+Status = Literal["pass", "fail", "error"]
+
+
+def pin_threads() -> None:
+    """Worker initializer: one thread per numeric library (must run before numpy / numba are imported)."""
+    for name in THREAD_ENV_VARS:
+        os.environ[name] = "1"
+
+
+@dataclass(frozen=True, slots=True)
+class Task:
+    """Everything a worker needs for one input (picklable: frozen config and options, plain paths).
+
+    Attributes:
+        job: the input (its per-input goal already folded into ``options``).
+        cfg: the stack configuration.
+        options: replay options.
+        run_dir: the run directory to write (absolute).
+        limits: threshold key -> limit for this input.
+        read: how to open the log (None: the defaults).
+    """
+
+    job: Job
+    cfg: Config
+    options: RunOptions
+    run_dir: Path
+    limits: Mapping[str, float] = field(default_factory=dict)
+    read: ReadOptions | None = None
+
+
+class RunOutcome(Protocol):
+    """What a runner returns (``gndreplay.replay.RunSummary`` is one)."""
+
+    @property
+    def out_dir(self) -> Path: ...
+
+    @property
+    def ticks(self) -> int: ...
+
+    @property
+    def data(self) -> Mapping[str, Any]: ...
+
+
+#: Runs one task and writes its run directory; raises on failure. Must be picklable (a module-level function).
+Runner = Callable[[Task], RunOutcome]
+
+
+def run_input(task: Task) -> RunOutcome:
+    """The default runner: replay a log with ``run_log`` (scenarios: not supported yet).
+
+    Raises:
+        LogFormatError: the log cannot be read.
+        ConfigError: an input kind this version cannot run.
+    """
+    job = task.job
+    if job.kind == "log":
+        from ..replay import ReadOptions, run_log
+
+        return run_log(
+            job.path, task.cfg, task.run_dir, options=task.options, read=task.read or ReadOptions()
+        )
+    raise ConfigError(f"{job.path}: {job.kind} inputs are not supported yet")
+
+
+@dataclass(frozen=True, slots=True)
+class InputResult:
+    """The outcome of one input: one summary row and one JUnit test case.
+
+    Attributes:
+        name, path: the input.
+        status: "pass", "fail" (a threshold was exceeded) or "error" (unreadable input or crash).
+        error: one-line error message ("" unless status is "error").
+        error_type: exception type name of the error ("" unless status is "error").
+        ticks: ticks the stack ran on.
+        metrics: metric name -> value (see ``gndreplay.batch.metrics``).
+        failures: one message per exceeded threshold.
+        run_dir: the run directory written, or None.
+        wall_s: wall time of the input in its worker [s].
+        detail: traceback of a crash ("" otherwise).
+    """
+
+    name: str
+    path: str
+    status: Status
+    error: str = ""
+    error_type: str = ""
+    ticks: int = 0
+    metrics: Mapping[str, float] = field(default_factory=dict)
+    failures: tuple[str, ...] = ()
+    run_dir: Path | None = None
+    wall_s: float = 0.0
+    detail: str = ""
+
+
+def _one_line(err: BaseException) -> str:
+    return " ".join(str(err).split())
+
+
+def crash_message(err: BaseException) -> str:
+    """``"crashed: <type>: <message on one line>"`` for an unexpected exception."""
+    message = _one_line(err)
+    return f"crashed: {type(err).__name__}: {message}" if message else f"crashed: {type(err).__name__}"
+
+
+def error_result(
+    job: Job, message: str, *, error_type: str, wall_s: float = 0.0, detail: str = ""
+) -> InputResult:
+    """An "error" row for ``job``."""
+    return InputResult(
+        name=job.name,
+        path=str(job.path),
+        status="error",
+        error=message,
+        error_type=error_type,
+        wall_s=wall_s,
+        detail=detail,
+    )
+
+
+def _seconds_to_ns(text: str) -> int:
+    whole, _, frac = text.partition(".")
+    sign = -1 if whole.startswith("-") else 1
+    return int(whole) * 1_000_000_000 + sign * (int((frac + "000000000")[:9]) if frac else 0)
+
+
+def read_tum(path: Path) -> tuple[list[int], list[tuple[float, float, float]]]:
+    """Read a planar TUM trajectory (``t x y z qx qy qz qw``): stamps [ns] and (x, y, yaw) poses.
+
+    Raises:
+        GndReplayError: unreadable file or a line without 8 numbers (message names file and line).
+    """
+    try:
+        text = path.read_text()
+    except OSError as err:
+        raise GndReplayError(f"{path}: cannot read trajectory ({err.strerror})") from err
+    t_ns: list[int] = []
+    poses: list[tuple[float, float, float]] = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        tok = line.split()
+        if not tok or tok[0].startswith("#"):
+            continue
+        try:
+            if len(tok) != 8:
+                raise ValueError(f"expected 8 fields, found {len(tok)}")
+            x, y, qz, qw = float(tok[1]), float(tok[2]), float(tok[6]), float(tok[7])
+            t_ns.append(_seconds_to_ns(tok[0]))
+        except ValueError as err:
+            raise GndReplayError(
+                f"{path} line {lineno}: not a TUM pose 't x y z qx qy qz qw' ({err})"
+            ) from err
+        poses.append((x, y, 2.0 * math.atan2(qz, qw)))
+    return t_ns, poses
+
+
+def _scored_metrics(outcome: RunOutcome, job: Job) -> dict[str, float]:
+    metrics = metrics_from_summary(outcome.data)
+    if job.relations is not None:
+        import numpy as np
+
+        from ..evaluation import load_relations, relation_errors
+
+        t_ns, poses = read_tum(Path(outcome.out_dir) / "trajectory_corrected.tum")
+        stats = relation_errors(
+            np.asarray(t_ns, dtype=np.int64),
+            np.asarray(poses, dtype=np.float64).reshape(-1, 3),
+            load_relations(job.relations),
+        )
+        metrics.update(relation_metrics(stats))
+    return metrics
+
+
+def execute(task: Task, runner: Runner = run_input) -> InputResult:
+    """Run one task and score it; never raises for a bad input.
+
+    A ``GndReplayError`` becomes an "error" row with its one-line message; any other exception an "error"
+    row ``"crashed: <type>: <message>"`` with the traceback in ``detail``.
+    """
+    t0 = time.perf_counter()
+    job = task.job
+    try:
+        outcome = runner(task)
+        metrics = _scored_metrics(outcome, job)
+    except GndReplayError as err:
+        return error_result(
+            job,
+            _one_line(err) or type(err).__name__,
+            error_type=type(err).__name__,
+            wall_s=time.perf_counter() - t0,
+        )
+    except Exception as err:
+        log.debug("input %s crashed", job.name, exc_info=True)
+        return error_result(
+            job,
+            crash_message(err),
+            error_type=type(err).__name__,
+            wall_s=time.perf_counter() - t0,
+            detail=traceback.format_exc(),
+        )
+    failures = check_limits(metrics, task.limits)
+    return InputResult(
+        name=job.name,
+        path=str(job.path),
+        status="fail" if failures else "pass",
+        ticks=int(outcome.ticks),
+        metrics=metrics,
+        failures=failures,
+        run_dir=Path(outcome.out_dir),
+        wall_s=time.perf_counter() - t0,
+    )
