@@ -533,7 +533,7 @@ def batch(
     job_list = expand_inputs(inputs)
     limits = load_thresholds(thresholds) if thresholds is not None else Thresholds()
     options = RunOptions(goal_ahead_m=goal_ahead, until_s=until, every=every)
-    with _batch_progress(enabled=not quiet, total=len(job_list)) as progress:
+    with _progress(enabled=not quiet, label="batch", total=len(job_list), unit="inputs") as progress:
         result = run_batch(
             job_list,
             cfg=cfg,
@@ -554,41 +554,6 @@ def batch(
     if not quiet:
         _print_batch(result)
     raise typer.Exit(result.exit_code)
-
-
-class _batch_progress:
-    """A rich bar across inputs (on a terminal), advanced as each input finishes."""
-
-    def __init__(self, *, enabled: bool, total: int) -> None:
-        self.enabled = enabled and sys.stderr.isatty()
-        self.total = total
-        self._bar: object | None = None
-
-    def __enter__(self) -> Callable[[object], None] | None:
-        if not self.enabled:
-            return None
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-        bar = Progress(
-            TextColumn("[bold]batch"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TextColumn("{task.description}"),
-            TimeElapsedColumn(),
-            transient=True,
-        )
-        bar.__enter__()
-        task = bar.add_task("", total=self.total)
-        self._bar = bar
-
-        def advance(result: object) -> None:
-            bar.update(task, advance=1, description=str(getattr(result, "name", "")))
-
-        return advance
-
-    def __exit__(self, *exc: object) -> None:
-        if self._bar is not None:
-            self._bar.__exit__(*exc)  # type: ignore[attr-defined]
 
 
 def _print_batch(result: object) -> None:
@@ -654,41 +619,44 @@ def _run_sinks(*, figures: bool, mcap: bool) -> list[object]:
 
 
 class _progress:
-    """One progress helper: a rich bar with ticks/s on a terminal, silent otherwise."""
+    """The one progress helper: a transient rich bar on a terminal (silent otherwise, or when disabled).
 
-    def __init__(self, *, enabled: bool, label: str) -> None:
+    With ``total`` it is a bar over that many items (batch inputs); without, a counter with the rate
+    (replay ticks). ``__enter__`` returns the callback to call once per item, or None when silent.
+    """
+
+    def __init__(self, *, enabled: bool, label: str, total: int | None = None, unit: str = "ticks") -> None:
         self.enabled = enabled and sys.stderr.isatty()
-        self.label = label
+        self.label, self.total, self.unit = label, total, unit
         self._bar: object | None = None
 
     def __enter__(self) -> Callable[[object], None] | None:
         if not self.enabled:
             return None
-        from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+        import time
 
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        counted = (BarColumn(), MofNCompleteColumn()) if self.total else (TextColumn("{task.completed}"),)
         bar = Progress(
-            SpinnerColumn(),
             TextColumn("[bold]{task.description}"),
-            TextColumn("{task.completed} ticks"),
-            TextColumn("{task.fields[rate]:.0f} ticks/s"),
+            *counted,
+            TextColumn(f"{self.unit} " + "{task.fields[rate]:.1f}/s"),
+            TextColumn("{task.fields[last]}"),
             TimeElapsedColumn(),
             transient=True,
         )
         bar.__enter__()
-        task = bar.add_task(self.label, total=None, rate=0.0)
+        task = bar.add_task(self.label, total=self.total, rate=0.0, last="")
         self._bar = bar
-        import time
-
         t0 = time.perf_counter()
 
-        def on_tick(_: object) -> None:
+        def advance(item: object) -> None:
             done = bar.tasks[0].completed + 1
-            if done % 25 == 0 or done == 1:
-                bar.update(task, completed=done, rate=done / max(time.perf_counter() - t0, 1e-9))
-            else:
-                bar.update(task, completed=done)
+            rate = done / max(time.perf_counter() - t0, 1e-9)
+            bar.update(task, completed=done, rate=rate, last=str(getattr(item, "name", "")))
 
-        return on_tick
+        return advance
 
     def __exit__(self, *exc: object) -> None:
         if self._bar is not None:
