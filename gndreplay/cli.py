@@ -297,7 +297,7 @@ def run(
         str | None,
         typer.Option(
             "--goal",
-            help="Fixed goal X,Y [m] in the corrected odometry frame (instead of --goal-ahead).",
+            help="Fixed goal X,Y (m) in the corrected odometry frame (instead of --goal-ahead).",
             rich_help_panel=_NAV_PANEL,
             show_default=False,
         ),
@@ -431,6 +431,116 @@ def run(
 
 @app.command()
 @cli_errors
+def scanmatch(
+    log: LogArg,
+    matcher: Annotated[
+        str, typer.Option("--matcher", help="idc, kiss-icp, odom, or all (side by side in one run).")
+    ] = "all",
+    relations: Annotated[
+        Path | None,
+        typer.Option(
+            "--relations",
+            help="SLAM-benchmark relations (t1 t2 x y z roll pitch yaw) to score each trajectory against.",
+            show_default=False,
+        ),
+    ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out", help="Folder for one TUM trajectory per matcher (default: out/<log-stem>-scanmatch)."
+        ),
+    ] = None,
+    config: Annotated[
+        Path | None, typer.Option("--config", help="TOML with [scanmatch.idc] / [scanmatch.kiss].")
+    ] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="Print the rows as JSON.")] = False,
+    fmt: FormatOpt = None,
+    scan_topic: ScanTopicOpt = None,
+    odom_topic: OdomTopicOpt = None,
+    strict: StrictOpt = False,
+) -> None:
+    """Correct the log's odometry with each matcher and compare them side by side from the same run.
+
+    Writes one TUM trajectory per matcher (full-precision stamps, readable by evo) and prints ms per scan
+    (median, p99), match failures and, with --relations, the relation errors: for each relation (t1, t2) the
+    pose of scan t2 in the frame of scan t1 against the reference; mean +- std and max of the translational
+    (m) and rotational (deg) errors, relations matched / unmatched.
+
+    [bold]Example[/]
+
+      gndreplay scanmatch mit-csail.clf.bz2 --relations mit-csail.relations
+    """
+    from .config import load_config
+    from .evaluation import load_relations
+    from .io import open_log
+    from .scanmatch import METHODS, run_scanmatch
+
+    methods = list(METHODS) if matcher == "all" else [matcher]
+    if any(m not in METHODS for m in methods):
+        raise typer.BadParameter(f"--matcher must be one of {', '.join(METHODS)} or all, got {matcher!r}")
+    cfg = load_config(config)
+    refs = load_relations(relations) if relations is not None else None
+    out_dir = out if out is not None else Path("out") / f"{_log_stem(log)}-scanmatch"
+
+    def ticks() -> object:
+        with open_log(log, fmt=fmt, scan_topic=scan_topic, odom_topic=odom_topic, strict=strict) as reader:
+            yield from reader.ticks()
+
+    with open_log(log, fmt=fmt, scan_topic=scan_topic, odom_topic=odom_topic, strict=strict):
+        pass  # fail fast, before any matcher runs, on an unreadable log or a bad topic
+    rows = run_scanmatch(
+        ticks, methods, relations=refs, out_dir=out_dir, idc=cfg.scanmatch.idc, kiss=cfg.scanmatch.kiss
+    )
+    if json_out:
+        import json
+
+        typer.echo(json.dumps([r.to_dict() for r in rows], allow_nan=True))
+        return
+    _print_scanmatch(rows, relations is not None)
+
+
+def _print_scanmatch(rows: list[object], with_relations: bool) -> None:
+    from rich.table import Table
+
+    table = Table(title="scan matching, side by side in one run", title_justify="left")
+    cols = ["matcher", "ms median", "ms p99", "failures"]
+    if with_relations:
+        cols += ["trans err (m)", "trans max", "rot err (deg)", "rot max", "relations"]
+    for c in cols:
+        table.add_column(c, justify="left" if c == "matcher" else "right")
+    for r in rows:
+        d = r.to_dict()  # type: ignore[attr-defined]
+        cells = [d["method"], f"{d['ms_median']:.2f}", f"{d['ms_p99']:.2f}", str(d["failures"])]
+        rel = d["relations"]
+        if with_relations and rel is not None:
+            cells += [
+                f"{rel['trans_mean_m']:.3f} ± {rel['trans_std_m']:.3f}",
+                f"{rel['trans_max_m']:.3f}",
+                f"{rel['rot_mean_deg']:.2f} ± {rel['rot_std_deg']:.2f}",
+                f"{rel['rot_max_deg']:.2f}",
+                f"{rel['matched']}/{rel['matched'] + rel['unmatched']}",
+            ]
+        table.add_row(*cells)
+    console = _console()
+    console.print(table)
+    for r in rows:
+        d = r.to_dict()  # type: ignore[attr-defined]
+        if d["tum_path"]:
+            console.print(f"{d['method']}: {d['scans']} scans -> {d['tum_path']}", highlight=False)
+
+
+def _console() -> object:
+    """The terminal's console; when stdout is not a terminal, wide enough that tables do not fold."""
+    from rich.console import Console
+
+    console = Console(soft_wrap=False)
+    if not console.is_terminal:
+        console = Console(soft_wrap=False, width=160)
+    return console
+
+
+@app.command()
+@cli_errors
 def report(
     run_dir: Annotated[
         Path, typer.Argument(help="A run directory written by `gndreplay run`.", show_default=False)
@@ -504,7 +614,7 @@ def batch(
     ] = None,
     config: Annotated[Path | None, typer.Option("--config", help="TOML overriding the preset.")] = None,
     goal_ahead: Annotated[
-        float, typer.Option("--goal-ahead", min=0.1, help="Goal distance ahead [m].")
+        float, typer.Option("--goal-ahead", min=0.1, help="Goal distance ahead (m).")
     ] = 5.0,
     until: Annotated[
         float | None, typer.Option("--until", min=0.0, help="Replay only the first T seconds of each log.")
@@ -557,7 +667,6 @@ def batch(
 
 
 def _print_batch(result: object) -> None:
-    from rich.console import Console
     from rich.table import Table
 
     from .batch import BatchResult
@@ -581,7 +690,7 @@ def _print_batch(result: object) -> None:
             _num(m.get("match_failures"), "{:.0f}"),
             why or "",
         )
-    Console(soft_wrap=False).print(table)
+    _console().print(table)  # type: ignore[attr-defined]
     typer.echo(
         f"summary: {result.summary_csv}, {result.summary_md}" + (f", {result.junit}" if result.junit else "")
     )
@@ -664,10 +773,9 @@ class _progress:
 
 
 def _print_run(data: dict[str, object], out_dir: Path) -> None:
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console(soft_wrap=False)
+    console = _console()
     head = Table(show_header=False, box=None, pad_edge=False)
     head.add_column(style="bold")
     head.add_column()
@@ -688,7 +796,7 @@ def _print_run(data: dict[str, object], out_dir: Path) -> None:
             f"turn direction agrees {100 * agreement['turn_sign_agreement']:.0f} %",
         )
     console.print(head)
-    lat = Table(title="latency per tick [ms]", title_justify="left")
+    lat = Table(title="latency per tick (ms)", title_justify="left")
     for col in ("module", "median", "p90", "p99", "max"):
         lat.add_column(col, justify="left" if col == "module" else "right")
     for module, q in data["latency_ms"].items():  # type: ignore[attr-defined]

@@ -22,7 +22,7 @@ from .pipeline.nf1 import Nf1Params
 from .pipeline.stack import StackParams
 from .pipeline.supervisor import SupervisorParams
 from .robot import WHEELCHAIR_ROBOT, XR4000_ROBOT, RobotConfig
-from .scanmatch.idc import IdcParams
+from .scanmatch import IdcParams, KissParams
 
 __all__ = [
     "PRESETS",
@@ -58,6 +58,7 @@ class ScanMatchConfig:
 
     method: Literal["idc", "kiss-icp", "odom"] = "idc"
     idc: IdcParams = IdcParams()
+    kiss: KissParams = KissParams()
 
 
 @dataclass(frozen=True, slots=True)

@@ -29,8 +29,7 @@ from .fsutil import umask_mode
 from .geometry import relative, wrap_angle
 from .pipeline.model import RobotCentredGrid
 from .pipeline.stack import MODULES, NavigationStack, TickResult, warm_up
-from .scanmatch.base import Matcher, OdomMatcher
-from .scanmatch.idc import IdcMatcher
+from .scanmatch import Matcher, make_matcher
 from .types import Flag, Pose2D, Scan, Tick
 
 __all__ = [
@@ -94,7 +93,7 @@ class Matched:
 
 
 def _make_matcher(cfg: Config) -> Matcher:
-    return IdcMatcher(cfg.scanmatch.idc) if cfg.scanmatch.method == "idc" else OdomMatcher()
+    return make_matcher(cfg.scanmatch.method, idc=cfg.scanmatch.idc, kiss=cfg.scanmatch.kiss)
 
 
 def _warm_up_matcher(cfg: Config) -> None:

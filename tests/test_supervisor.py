@@ -24,7 +24,12 @@ P = SupervisorParams()
 
 @pytest.mark.parametrize(
     ("planner_ok", "has_region", "mode"),
-    [(True, True, Mode.MPND), (False, True, Mode.MND), (True, False, Mode.ROTATE), (False, False, Mode.ROTATE)],
+    [
+        (True, True, Mode.MPND),
+        (False, True, Mode.MND),
+        (True, False, Mode.ROTATE),
+        (False, False, Mode.ROTATE),
+    ],
 )
 def test_gnd_modes(planner_ok: bool, has_region: bool, mode: Mode) -> None:
     assert gnd_mode(planner_ok, has_region) is mode

@@ -1,0 +1,61 @@
+"""``gndreplay scanmatch`` end to end on the sample log, scored against relations made from its truth."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from typer.testing import CliRunner
+
+from gndreplay.cli import app
+from gndreplay.geometry import relative
+from gndreplay.io import read_ticks
+
+SAMPLE = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
+
+
+def write_relations(path: Path, *, step: int = 10, span: int = 100) -> int:
+    """SLAM-benchmark relations (t1 t2 x y z roll pitch yaw) between scans i and i + span, every step."""
+    ticks = [t for t in read_ticks(SAMPLE) if t.truth is not None]
+    lines = []
+    for i in range(0, len(ticks) - span, step):
+        a, b = ticks[i], ticks[i + span]
+        assert a.truth is not None and b.truth is not None
+        d = relative(a.truth.as_array(), b.truth.as_array())
+        lines.append(f"{a.t_ns / 1e9:.6f} {b.t_ns / 1e9:.6f} {d[0]:.6f} {d[1]:.6f} 0 0 0 {d[2]:.6f}\n")
+    path.write_text("".join(lines))
+    return len(lines)
+
+
+def test_scanmatch_all_side_by_side_beats_odometry(tmp_path: Path) -> None:
+    rel = tmp_path / "office.relations"
+    n = write_relations(rel)
+    out = tmp_path / "sm"
+    result = CliRunner().invoke(
+        app, ["scanmatch", str(SAMPLE), "--relations", str(rel), "--out", str(out), "--json"]
+    )
+    assert result.exit_code == 0, result.output
+    rows = {r["method"]: r for r in json.loads(result.stdout)}
+    assert set(rows) == {"odom", "idc", "kiss-icp"}
+    for method, row in rows.items():
+        assert row["scans"] == 570 and row["relations"]["matched"] == n
+        tum = np.loadtxt(out / f"{method}.tum")
+        assert tum.shape == (570, 8)
+    assert rows["idc"]["relations"]["trans_mean_m"] < rows["odom"]["relations"]["trans_mean_m"]
+    assert rows["idc"]["failures"] <= 0.1 * 570  # a failed match keeps the odometry increment
+
+
+def test_scanmatch_table_and_bad_inputs(tmp_path: Path) -> None:
+    runner = CliRunner()
+    table = runner.invoke(app, ["scanmatch", str(SAMPLE), "--matcher", "odom", "--out", str(tmp_path / "o")])
+    assert table.exit_code == 0 and "odom" in table.stdout and "ms median" in table.stdout
+    bad = runner.invoke(app, ["scanmatch", str(SAMPLE), "--matcher", "icp"])
+    assert bad.exit_code == 2 and "--matcher must be one of" in bad.output
+    missing = runner.invoke(app, ["scanmatch", str(tmp_path / "none.clf")])
+    assert missing.exit_code == 2 and "none.clf" in missing.stderr and "Traceback" not in missing.output
+    garbage = tmp_path / "junk.clf"
+    garbage.write_text("this is not a log\n")
+    junk = runner.invoke(app, ["scanmatch", str(garbage), "--out", str(tmp_path / "j")])
+    assert junk.exit_code == 2 and "junk.clf" in junk.stderr
+    assert not (tmp_path / "j").exists()
