@@ -181,7 +181,8 @@ def relation_errors(t_ns: ArrayLike, poses: ArrayLike, relations: Relations, *,
     tm, ts_, tx = _stats(e_t)
     rm, rs, rx = _stats(e_r)
     n_ok = int(ok.sum())
-    return RelationStats(n_ok, m - n_ok, tm, ts_, tx, rm, rs, rx, np.flatnonzero(ok).astype(np.int64), e_t, e_r)
+    index = np.flatnonzero(ok).astype(np.int64)
+    return RelationStats(n_ok, m - n_ok, tm, ts_, tx, rm, rs, rx, index, e_t, e_r)
 
 
 def _fmt_time(t_ns: int) -> str:

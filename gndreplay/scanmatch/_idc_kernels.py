@@ -1,9 +1,8 @@
 """Numba kernels of the IDC matcher: render the local map as a reference scan, then iterate IDC.
 
-Frames: the *reference frame* is the predicted laser pose (odometry prior) at which the map is rendered. The
-estimate (x, y, th) is the pose of the new scan's laser in that frame; the IDC loop starts at (0, 0, 0).
-The reference scan has ``n_bins`` bearing bins over the full circle, bin b covering
-[-pi + b * res, -pi + (b + 1) * res), so bin indices wrap around.
+Frames: the *reference frame* is the laser pose at which the map is rendered (the prediction). The estimate
+(x, y, th) is the pose of the new scan's laser in that frame. The reference scan has ``n_bins`` bearing bins
+over the full circle, bin b covering [-pi + b res, -pi + (b + 1) res); bin indices wrap around.
 """
 
 from __future__ import annotations
@@ -16,13 +15,7 @@ from numba import njit
 TWO_PI = 2.0 * math.pi
 
 
-@njit(cache=True)
-def _wrap(a: float) -> float:
-    """Wrap an angle to [-pi, pi)."""
-    return a - TWO_PI * math.floor((a + math.pi) / TWO_PI)
-
-
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _bin(a: float, inv_res: float, n_bins: int) -> int:
     b = int((a + math.pi) * inv_res)
     if b < 0:
@@ -32,40 +25,77 @@ def _bin(a: float, inv_res: float, n_bins: int) -> int:
     return b
 
 
+@njit(cache=True, inline="always")
+def fast_atan2(y: float, x: float) -> float:
+    """atan2 within 2e-6 rad, ~5x faster than math.atan2 (minimax polynomial of atan on [0, 1]).
+
+    Used for binning and for bearings inside the iterations: 2e-6 rad is 0.1 mm at 40 m.
+    """
+    ax = abs(x)
+    ay = abs(y)
+    mx = max(ax, ay)
+    if mx == 0.0:
+        return 0.0
+    z = min(ax, ay) / mx
+    z2 = z * z
+    p = 0.05265332 - z2 * 0.01172120
+    a = z * (0.99997726 + z2 * (-0.33262347 + z2 * (0.19354346 + z2 * (-0.11643287 + z2 * p))))
+    if ay > ax:
+        a = 0.5 * math.pi - a
+    if x < 0.0:
+        a = math.pi - a
+    if y < 0.0:
+        a = -a
+    return a
+
+
+@njit(cache=True, inline="always")
+def _pm_pi(a: float) -> float:
+    """Bring a difference of two angles in (-pi, pi] (so within (-2 pi, 2 pi)) back to [-pi, pi]."""
+    if a > math.pi:
+        return a - TWO_PI
+    if a < -math.pi:
+        return a + TWO_PI
+    return a
+
+
 @njit(cache=True)
-def render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r, blend_m,
-                     seg_abs_m, seg_rel, gap_bins):
-    """Render the keyframe points (world frame) as a polar reference scan seen from pose (ox, oy, oth).
+def render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r, blend_m, seg_abs_m, seg_rel, gap_bins):
+    """Render keyframe points (world frame) as a polar reference scan seen from the pose (ox, oy, oth).
 
     Per bearing bin the nearest return wins (occlusion), and the points within ``blend_m`` behind it are
-    averaged with it (several keyframes see the same wall: averaging cuts their noise). ``nxt[b]`` is the next
-    valid bin after b (within ``gap_bins``) that continues the same surface, else -1: the polyline the IDC
-    rules interpolate along never bridges a depth discontinuity.
+    averaged with it: several keyframes see the same wall, and the average is less noisy than any one scan.
+    ``nxt[b]`` is the next valid bin after b (at most ``gap_bins`` on) when both lie on one surface (closer
+    than seg_abs_m + seg_rel * range * bins apart), else -1: the polyline that the IDC rules interpolate
+    along never bridges a depth discontinuity.
 
-    Returns (ref_x, ref_y, ok, nxt) in the reference frame, each of length n_bins.
+    Returns (ref_x, ref_y, ref_r, ref_a, ok, nxt), each of length n_bins, in the reference frame (range and
+    bearing of each bin's point about the reference origin).
     """
     inv_res = n_bins / TWO_PI
     c, s = math.cos(oth), math.sin(oth)
     rmin = np.full(n_bins, np.inf)
-    n_kf = kf_n.shape[0]
     total = 0
-    for k in range(n_kf):
+    for k in range(kf_n.shape[0]):
         total += kf_n[k]
     lx = np.empty(total)
     ly = np.empty(total)
     lr = np.empty(total)
     lb = np.empty(total, dtype=np.int64)
     m = 0
-    for k in range(n_kf):
+    max_r2 = max_r * max_r
+    min_r2 = min_r * min_r
+    for k in range(kf_n.shape[0]):
         for i in range(kf_n[k]):
             dx = kf_xy[k, i, 0] - ox
             dy = kf_xy[k, i, 1] - oy
             x = c * dx + s * dy
             y = -s * dx + c * dy
-            r = math.sqrt(x * x + y * y)
-            if r < min_r or r > max_r:
+            r2 = x * x + y * y
+            if r2 < min_r2 or r2 > max_r2:
                 continue
-            b = _bin(math.atan2(y, x), inv_res, n_bins)
+            r = math.sqrt(r2)
+            b = _bin(fast_atan2(y, x), inv_res, n_bins)
             lx[m] = x
             ly[m] = y
             lr[m] = r
@@ -84,11 +114,15 @@ def render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r, blend_m,
             cnt[b] += 1.0
     ref_x = np.zeros(n_bins)
     ref_y = np.zeros(n_bins)
+    ref_r = np.zeros(n_bins)
+    ref_a = np.zeros(n_bins)
     ok = cnt > 0.0
     for b in range(n_bins):
         if ok[b]:
             ref_x[b] = sx[b] / cnt[b]
             ref_y[b] = sy[b] / cnt[b]
+            ref_r[b] = math.sqrt(ref_x[b] ** 2 + ref_y[b] ** 2)
+            ref_a[b] = math.atan2(ref_y[b], ref_x[b])
     nxt = np.full(n_bins, -1, dtype=np.int64)
     for b in range(n_bins):
         if not ok[b]:
@@ -96,133 +130,115 @@ def render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r, blend_m,
         for g in range(1, gap_bins + 1):
             j = (b + g) % n_bins
             if ok[j]:
-                dx = ref_x[j] - ref_x[b]
-                dy = ref_y[j] - ref_y[b]
-                lim = seg_abs_m + seg_rel * max(rmin[b], rmin[j]) * g
-                if dx * dx + dy * dy <= lim * lim:
+                lim = seg_abs_m + seg_rel * max(ref_r[b], ref_r[j]) * g
+                if (ref_x[j] - ref_x[b]) ** 2 + (ref_y[j] - ref_y[b]) ** 2 <= lim * lim:
                     nxt[b] = j
                 break
-    return ref_x, ref_y, ok, nxt
+    return ref_x, ref_y, ref_r, ref_a, ok, nxt
 
 
-@njit(cache=True)
-def _closest_on_polyline(qx, qy, bq, w_max, gap_bins, ref_x, ref_y, ok, nxt, best_d2):
-    """Closest point to (qx, qy) on the reference polyline, searching outwards from bin bq.
+@njit(cache=True, inline="always")
+def _closest_on_polyline(qx, qy, rq2, bq, w_max, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il, best_d2,
+                         sin2):
+    """Closest point to q = (qx, qy) on the reference polyline, searching outwards from q's bin bq.
 
-    A segment or point whose bearing differs from q's by delta is at least |q| sin(delta) away, so the
-    search stops as soon as that bound exceeds the best distance (segments start up to ``gap_bins`` bins
-    before the bearing they reach). ``best_d2`` is the squared gate. Returns (found, cx, cy, nx, ny, d2)
-    with (nx, ny) the unit normal of the matched segment ((0, 0) when matched to an isolated point).
+    ``cover[b]`` is the segment (its first bin) whose bearing span contains bin b, or the isolated point in
+    b, else -1. A segment not met within k bins of bq lies at least (k - 2) bins of bearing away, so at
+    least |q| sin((k - 2) res) from q: the search stops once ``rq2 * sin2[k]`` exceeds the best squared
+    distance so far (``best_d2`` starts as the squared gate). Returns (j, u, d2): the segment (or point) j
+    of the closest point, -1 if none within the gate, its parameter u along the segment, the squared
+    distance. The closest point is ref[j] + u seg[j].
     """
     n_bins = ref_x.shape[0]
-    res = TWO_PI / n_bins
-    rq = math.sqrt(qx * qx + qy * qy)
-    found = False
-    cx = 0.0
-    cy = 0.0
-    nx = 0.0
-    ny = 0.0
+    jbest = -1
+    ubest = 0.0
     for k in range(0, w_max + 1):
-        dk = (k - gap_bins - 1) * res
-        if dk > 0.0 and (dk >= 0.5 * math.pi or rq * math.sin(dk) > math.sqrt(best_d2)):
+        if rq2 * sin2[k] > best_d2:
             break
         for side in range(2):
-            if k == 0 and side == 1:
-                continue
-            j = (bq + k) % n_bins if side == 0 else (bq - k) % n_bins
-            if not ok[j]:
-                continue
-            ax = ref_x[j]
-            ay = ref_y[j]
-            m = nxt[j]
-            if m >= 0:
-                ex = ref_x[m] - ax
-                ey = ref_y[m] - ay
-                ll = ex * ex + ey * ey
-                u = ((qx - ax) * ex + (qy - ay) * ey) / ll if ll > 0.0 else 0.0
-                u = min(1.0, max(0.0, u))
-                px = ax + u * ex
-                py = ay + u * ey
-                d2 = (qx - px) ** 2 + (qy - py) ** 2
-                if d2 < best_d2:
-                    best_d2 = d2
-                    cx = px
-                    cy = py
-                    inv = 1.0 / math.sqrt(ll) if ll > 0.0 else 0.0
-                    nx = -ey * inv
-                    ny = ex * inv
-                    found = True
+            if side == 0:
+                b = bq + k
+                if b >= n_bins:
+                    b -= n_bins
             else:
-                d2 = (qx - ax) ** 2 + (qy - ay) ** 2
-                if d2 < best_d2:
-                    best_d2 = d2
-                    cx = ax
-                    cy = ay
-                    nx = 0.0
-                    ny = 0.0
-                    found = True
-    return found, cx, cy, nx, ny, best_d2
+                if k == 0:
+                    continue
+                b = bq - k
+                if b < 0:
+                    b += n_bins
+            j = cover[b]
+            if j < 0:
+                continue
+            dx = qx - ref_x[j]
+            dy = qy - ref_y[j]
+            u = 0.0
+            if nxt[j] >= 0:
+                u = min(1.0, max(0.0, (dx * seg_ex[j] + dy * seg_ey[j]) * seg_il[j]))
+                dx -= u * seg_ex[j]
+                dy -= u * seg_ey[j]
+            d2 = dx * dx + dy * dy
+            if d2 < best_d2:
+                best_d2 = d2
+                jbest = j
+                ubest = u
+    return jbest, ubest, best_d2
 
 
-@njit(cache=True)
-def _polar(j, x, y, th, ref_x, ref_y, rho, alpha, stamp, it):
-    """Range and bearing of reference bin j about the current scan origin, cached per iteration."""
-    if stamp[j] != it:
-        dx = ref_x[j] - x
-        dy = ref_y[j] - y
-        rho[j] = math.sqrt(dx * dx + dy * dy)
-        alpha[j] = math.atan2(dy, dx) - th
-        stamp[j] = it
+@njit(cache=True, inline="always")
+def _matching_range(rq, aq, bq, bw, ref_r, ref_a, ok, nxt):
+    """Matching-range-point rule: the bearing offset d, |d| <= bw and smallest, at which the reference
+    polyline (range interpolated linearly in bearing) has the range rq of the point at bearing aq.
 
-
-@njit(cache=True)
-def _matching_range(r, phi, bq, bw, extra, x, y, th, ref_x, ref_y, ok, nxt, rho, alpha, stamp, it):
-    """Matching-range-point rule: bearing offset d (|d| <= bw, smallest) where the reference polyline has
-    range r about the scan origin. Searches outwards from bin bq; bearings of the reference are monotonic in
-    the bin index up to ``extra`` (the scan origin is off the reference origin). Returns (found, d, slope)
-    with slope = d(range)/d(bearing) of the reference there [m/rad]."""
-    n_bins = ref_x.shape[0]
-    res = TWO_PI / n_bins
-    w_max = min(n_bins // 2 - 1, int((bw + extra) / res) + 2)
+    Searches outwards from bin bq, both sides in turn; a side stops once its segments start beyond the best
+    offset found. Returns (found, d).
+    """
+    n_bins = ref_r.shape[0]
+    w_max = min(n_bins // 2 - 1, int(bw * n_bins / TWO_PI) + 2)
     best = bw
     dbest = 0.0
-    slope = 0.0
     found = False
-    for side in range(2):
-        for k in range(0, w_max + 1):
-            j = (bq + k) % n_bins if side == 0 else (bq - k - 1) % n_bins
+    open_r = True
+    open_l = True
+    for k in range(0, w_max + 1):
+        if not (open_r or open_l):
+            break
+        for side in range(2):
+            if (side == 0 and not open_r) or (side == 1 and not open_l):
+                continue
+            j = bq + k if side == 0 else bq - k - 1
+            if j >= n_bins:
+                j -= n_bins
+            elif j < 0:
+                j += n_bins
             if not ok[j]:
                 continue
             m = nxt[j]
             if m < 0:
                 continue
-            _polar(j, x, y, th, ref_x, ref_y, rho, alpha, stamp, it)
-            _polar(m, x, y, th, ref_x, ref_y, rho, alpha, stamp, it)
-            d1 = _wrap(alpha[j] - phi)
-            d2 = _wrap(alpha[m] - phi)
-            if abs(d2 - d1) > math.pi:
+            d1 = _pm_pi(ref_a[j] - aq)
+            d2 = _pm_pi(ref_a[m] - aq)
+            if side == 0 and min(d1, d2) > best:
+                open_r = False
                 continue
-            if side == 0 and min(d1, d2) > best + extra:
-                break
-            if side == 1 and max(d1, d2) < -(best + extra):
-                break
-            r1 = rho[j] - r
-            r2 = rho[m] - r
-            if r1 * r2 > 0.0:
+            if side == 1 and max(d1, d2) < -best:
+                open_l = False
+                continue
+            r1 = ref_r[j] - rq
+            r2 = ref_r[m] - rq
+            if r1 * r2 > 0.0 or abs(d2 - d1) > math.pi:
                 continue
             u = 0.5 if r1 == r2 else r1 / (r1 - r2)
             d = d1 + u * (d2 - d1)
             if abs(d) < best:
                 best = abs(d)
                 dbest = d
-                slope = (rho[m] - rho[j]) / (d2 - d1) if d2 != d1 else 0.0
                 found = True
-    return found, dbest, slope
+    return found, dbest
 
 
 @njit(cache=True)
 def _weighted_median(v, w):
-    """Weighted median of v (robust location of the matching-range-point bearing offsets)."""
+    """Weighted median of v: a robust location of the matching-range-point offsets."""
     order = np.argsort(v)
     half = 0.5 * np.sum(w)
     acc = 0.0
@@ -234,158 +250,165 @@ def _weighted_median(v, w):
 
 
 @njit(cache=True)
-def idc_align(px, py, pr, pa, ref_x, ref_y, ok, nxt, max_iter, win0, win_tau, win_min,
-              gate0, gate_min, tol_t, tol_r, max_cp_bins, gap_bins, mrp_stride, sigma_r, sigma_a,
-              robust_rot, fit):
-    """Iterative Dual Correspondence (Lu & Milios 1997) of points (px, py) against the reference polyline.
+def _sin2_table(n_bins, w_max):
+    """sin² of the smallest bearing difference, (k - 2) bins clamped to [0, pi/2], of a segment first met k
+    bins away from the query's bin (see _closest_on_polyline)."""
+    res = TWO_PI / n_bins
+    out = np.empty(w_max + 1)
+    for k in range(w_max + 1):
+        out[k] = math.sin(min(max(0.0, (k - 2) * res), 0.5 * math.pi)) ** 2
+    return out
 
-    Each iteration pairs every point twice: the closest point on the polyline (gated by a distance that
-    shrinks from gate0 to gate_min) gives the translation, the point of equal range in the angular window
-    [phi - Bw, phi + Bw] (Bw shrinking from win0 to win_min) gives the rotation (every ``mrp_stride``-th
-    point only: the rule is the expensive one and the rotation needs fewer points). The rotation is the
-    range²-weighted mean of the matching-range-point bearing offsets (the least-squares rotation about the
-    scan origin); the translation is the least-squares translation of the closest-point pairs at that
-    rotation.
+
+@njit(cache=True)
+def segments(ref_x, ref_y, ok, nxt, normal_chord_m):
+    """Per bin: the vector to the next point of the polyline, its inverse squared length, the unit normal of
+    the surface there, and ``cover`` (see _closest_on_polyline).
+
+    The normal is taken across a chord of at least ``normal_chord_m`` along the polyline (extending up to 4
+    points each way), not across the single segment: two points 1 cm apart with 5 mm of noise tilt a
+    segment by up to 30 deg, which would invent constraints (a bare corridor would look observable along
+    its axis) and bias the point-to-line fit.
+    """
+    n_bins = ref_x.shape[0]
+    prv = np.full(n_bins, -1, dtype=np.int64)
+    cover = np.full(n_bins, -1, dtype=np.int64)
+    for j in range(n_bins):
+        m = nxt[j]
+        if m >= 0:
+            prv[m] = j
+            span = (m - j) % n_bins
+            for g in range(span):
+                cover[(j + g) % n_bins] = j
+    for j in range(n_bins):
+        if cover[j] < 0 and ok[j]:
+            cover[j] = j
+    ex = np.zeros(n_bins)
+    ey = np.zeros(n_bins)
+    il = np.zeros(n_bins)
+    nx = np.zeros(n_bins)
+    ny = np.zeros(n_bins)
+    lim2 = normal_chord_m * normal_chord_m
+    for j in range(n_bins):
+        m = nxt[j]
+        if m < 0:
+            continue
+        ex[j] = ref_x[m] - ref_x[j]
+        ey[j] = ref_y[m] - ref_y[j]
+        ll = ex[j] ** 2 + ey[j] ** 2
+        if ll <= 0.0:
+            continue
+        il[j] = 1.0 / ll
+        a = j
+        b = m
+        for _ in range(4):
+            tx = ref_x[b] - ref_x[a]
+            ty = ref_y[b] - ref_y[a]
+            if tx * tx + ty * ty >= lim2:
+                break
+            moved = False
+            if prv[a] >= 0:
+                a = prv[a]
+                moved = True
+            if nxt[b] >= 0:
+                b = nxt[b]
+                moved = True
+            if not moved:
+                break
+        tx = ref_x[b] - ref_x[a]
+        ty = ref_y[b] - ref_y[a]
+        inv = 1.0 / math.sqrt(tx * tx + ty * ty)
+        nx[j] = -ty * inv
+        ny[j] = tx * inv
+    return ex, ey, il, nx, ny, cover
+
+
+@njit(cache=True)
+def idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, seg_ex, seg_ey, seg_il, x0, y0, th0,
+              max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride,
+              mrp_every):
+    """Iterative Dual Correspondence (Lu & Milios 1997) of the points (px, py) against the reference.
+
+    Each iteration pairs the points twice. Closest-point rule: each transformed point q with the closest
+    point of the reference polyline, gated by a distance that shrinks from gate0 to gate_min; the
+    least-squares rigid fit of these pairs gives the translation. Matching-range-point rule: q with the
+    point of the polyline of equal range |q| within the bearing window [-Bw, +Bw] of q,
+    Bw(k) = max(win_min, win0 exp(-k / tau)); the offsets give the rotation (about the reference origin,
+    which is within centimetres of the scan's origin). The rotation update is the range²-weighted median of
+    the offsets (the weighted mean is the least-squares answer; the median ignores the wrong pairs of corners
+    and clutter). The closest-point rule uses every ``stride``-th point, the matching-range rule every
+    ``mrp_every``-th of those (the rotation needs fewer points; its wide early windows are the costly part).
 
     Returns (x, y, th, iterations, converged).
     """
     n = px.shape[0]
     n_bins = ref_x.shape[0]
     inv_res = n_bins / TWO_PI
-    x = 0.0
-    y = 0.0
-    th = 0.0
-    rho = np.zeros(n_bins)
-    alpha = np.zeros(n_bins)
-    stamp = np.full(n_bins, -1, dtype=np.int64)
+    sin2 = _sin2_table(n_bins, max_cp_bins)
     md = np.empty(n)
     mw = np.empty(n)
-    var_r = sigma_r * sigma_r
-    var_a = sigma_a * sigma_a
+    x = x0
+    y = y0
+    th = th0
     it = 0
     converged = False
     while it < max_iter:
         bw = max(win_min, win0 * math.exp(-it / win_tau))
         gate = max(gate_min, gate0 * math.exp(-it / win_tau))
+        gate2 = gate * gate
         c, s = math.cos(th), math.sin(th)
-        t_norm = math.sqrt(x * x + y * y)
-        sw = 0.0
-        swd = 0.0
-        hh = np.zeros((3, 3))
-        bb_ = np.zeros(3)
-        a11 = 0.0; a12 = 0.0; a22 = 0.0; b1 = 0.0; b2 = 0.0
-        g11 = 0.0; g12 = 0.0; g21 = 0.0; g22 = 0.0
-        pp_x = 0.0; pp_y = 0.0; n_pp = 0
-        m11 = 0.0; m12 = 0.0; m21 = 0.0; m22 = 0.0; m31 = 0.0; m32 = 0.0
         n_m = 0
         n_cp = 0
         spx = 0.0
         spy = 0.0
         scx = 0.0
         scy = 0.0
-        for i in range(n):
+        sxx = 0.0
+        sxy = 0.0
+        syx = 0.0
+        syy = 0.0
+        for i_s, i in enumerate(range(0, n, stride)):
             qx = c * px[i] - s * py[i] + x
             qy = s * px[i] + c * py[i] + y
-            bq = _bin(math.atan2(qy, qx), inv_res, n_bins)
-            f, cx, cy, nx, ny, _ = _closest_on_polyline(qx, qy, bq, max_cp_bins, gap_bins, ref_x, ref_y, ok,
-                                                        nxt, gate * gate)
-            if fit == 1:
-                if f and (nx != 0.0 or ny != 0.0):
-                    e = nx * (qx - cx) + ny * (qy - cy)
-                    jr = (qx - x) * ny - (qy - y) * nx
-                    jv = (nx, ny, jr)
-                    for aa in range(3):
-                        bb_[aa] -= jv[aa] * e
-                        for bb in range(3):
-                            hh[aa, bb] += jv[aa] * jv[bb]
-                    n_cp += 1
-                continue
-            if f and fit == 2:
-                if nx == 0.0 and ny == 0.0:
-                    # matched to an isolated point: point-to-point (both directions constrained)
-                    a11 += 1.0
-                    a22 += 1.0
-                    b1 += cx
-                    b2 += cy
-                    g11 += px[i]; g12 += py[i]; g21 += 0.0; g22 += 0.0
-                    # store for rotation-dependent rhs below
-                    pp_x += px[i]; pp_y += py[i]; n_pp += 1
-                else:
-                    a11 += nx * nx
-                    a12 += nx * ny
-                    a22 += ny * ny
-                    nc = nx * cx + ny * cy
-                    b1 += nx * nc
-                    b2 += ny * nc
-                    # rhs part depending on rotation: n (n . R p): keep sums of n n^T p
-                    m11 += nx * nx * px[i]; m12 += nx * nx * py[i]
-                    m21 += nx * ny * px[i]; m22 += nx * ny * py[i]
-                    m31 += ny * ny * px[i]; m32 += ny * ny * py[i]
-                n_cp += 1
-            elif f:
+            rq2 = qx * qx + qy * qy
+            aq = fast_atan2(qy, qx)
+            bq = _bin(aq, inv_res, n_bins)
+            j, u, _ = _closest_on_polyline(qx, qy, rq2, bq, max_cp_bins, ref_x, ref_y, nxt, cover, seg_ex,
+                                           seg_ey, seg_il, gate2, sin2)
+            if j >= 0:
+                cx = ref_x[j] + u * seg_ex[j]
+                cy = ref_y[j] + u * seg_ey[j]
                 n_cp += 1
                 spx += px[i]
                 spy += py[i]
                 scx += cx
                 scy += cy
-            if i % mrp_stride != 0:
+                sxx += px[i] * cx
+                sxy += px[i] * cy
+                syx += py[i] * cx
+                syy += py[i] * cy
+            if i_s % mrp_every != 0:
                 continue
-            extra = math.asin(min(1.0, t_norm / max(pr[i], 1e-9)))
-            fm, d, slope = _matching_range(pr[i], pa[i], bq, bw, extra, x, y, th, ref_x, ref_y, ok, nxt,
-                                           rho, alpha, stamp, it)
+            fm, d = _matching_range(math.sqrt(rq2), aq, bq, bw, ref_r, ref_a, ok, nxt)
             if fm:
-                if var_r > 0.0:
-                    wgt = slope * slope / (var_r + var_a * slope * slope)
-                else:
-                    wgt = pr[i] * pr[i]
-                sw += wgt
-                swd += wgt * d
                 md[n_m] = d
-                mw[n_m] = wgt
+                mw[n_m] = pr[i] * pr[i]
                 n_m += 1
         it += 1
-        if fit == 1:
-            if n_cp < 3:
-                break
-            sol = np.linalg.solve(hh + 1e-9 * np.eye(3), bb_)
-            x += sol[0]
-            y += sol[1]
-            th += sol[2]
-            if math.sqrt(sol[0] ** 2 + sol[1] ** 2) < tol_t and abs(sol[2]) < tol_r:
-                converged = True
-                break
-            continue
-        if n_cp < 3 or sw <= 0.0:
+        if n_cp < 3 or n_m < 3:
             break
-        if robust_rot:
-            dth = _weighted_median(md[:n_m], mw[:n_m])
-        else:
-            dth = swd / sw
+        dth = _weighted_median(md[:n_m], mw[:n_m])
         th_new = th + dth
-        c2, s2 = math.cos(th_new), math.sin(th_new)
-        if fit == 2:
-            # sum n n^T R p = [ [nx², nxny], [nxny, ny²] ] R p
-            # R p = (c2 px - s2 py, s2 px + c2 py)
-            t11 = c2 * m11 - s2 * m12  # sum nx² (Rp)_x
-            t12 = s2 * m11 + c2 * m12  # sum nx² (Rp)_y
-            t21 = c2 * m21 - s2 * m22  # sum nxny (Rp)_x
-            t22 = s2 * m21 + c2 * m22  # sum nxny (Rp)_y
-            t31 = c2 * m31 - s2 * m32  # sum ny² (Rp)_x
-            t32 = s2 * m31 + c2 * m32  # sum ny² (Rp)_y
-            r1 = b1 - (t11 + t22) - (c2 * pp_x - s2 * pp_y)
-            r2 = b2 - (t21 + t32) - (s2 * pp_x + c2 * pp_y)
-            lam = 1e-3 * (a11 + a22) + 1e-9
-            r1 += lam * x
-            r2 += lam * y
-            d11 = a11 + lam
-            d22 = a22 + lam
-            det = d11 * d22 - a12 * a12
-            x_new = (d22 * r1 - a12 * r2) / det
-            y_new = (d11 * r2 - a12 * r1) / det
-        else:
-            inv = 1.0 / n_cp
-            x_new = scx * inv - (c2 * spx - s2 * spy) * inv
-            y_new = scy * inv - (s2 * spx + c2 * spy) * inv
+        # translation of the closest-point least-squares fit (its own rotation is discarded, as in IDC)
+        inv = 1.0 / n_cp
+        kxx = sxx - spx * scx * inv
+        kxy = sxy - spx * scy * inv
+        kyx = syx - spy * scx * inv
+        kyy = syy - spy * scy * inv
+        om = math.atan2(kxy - kyx, kxx + kyy)
+        co, so = math.cos(om), math.sin(om)
+        x_new = (scx - (co * spx - so * spy)) * inv
+        y_new = (scy - (so * spx + co * spy)) * inv
         dt = math.sqrt((x_new - x) ** 2 + (y_new - y) ** 2)
         x, y, th = x_new, y_new, th_new
         if dt < tol_t and abs(dth) < tol_r:
@@ -395,17 +418,17 @@ def idc_align(px, py, pr, pa, ref_x, ref_y, ok, nxt, max_iter, win0, win_tau, wi
 
 
 @njit(cache=True)
-def match_quality(px, py, x, y, th, ref_x, ref_y, ok, nxt, gate, max_cp_bins, gap_bins):
-    """Closest-point pairs at the final estimate: (pairs, mean distance [m], 3x3 point-to-line information).
-
-    The information matrix sums J Jᵀ with J = (n, (R p) × n) over pairs matched to a segment of normal n; its
-    translational block is near-singular in a featureless corridor (degeneracy test).
-    """
+def _pairs_point_to_line(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il, seg_nx, seg_ny,
+                         gate2, max_cp_bins, sin2, h, g):
+    """Closest-point pairs at pose (x, y, th): fills the point-to-line normal equations h (3x3), g (3) and
+    returns (pairs, sum of pair distances). Pairs on an isolated reference point count in the distance but
+    not in h, g (no normal)."""
     n = px.shape[0]
     n_bins = ref_x.shape[0]
     inv_res = n_bins / TWO_PI
     c, s = math.cos(th), math.sin(th)
-    info = np.zeros((3, 3))
+    h[:, :] = 0.0
+    g[:] = 0.0
     pairs = 0
     sd = 0.0
     for i in range(n):
@@ -413,16 +436,96 @@ def match_quality(px, py, x, y, th, ref_x, ref_y, ok, nxt, gate, max_cp_bins, ga
         ry = s * px[i] + c * py[i]
         qx = rx + x
         qy = ry + y
-        bq = _bin(math.atan2(qy, qx), inv_res, n_bins)
-        f, _, _, nx, ny, d2 = _closest_on_polyline(qx, qy, bq, max_cp_bins, gap_bins, ref_x, ref_y, ok, nxt,
-                                                   gate * gate)
-        if not f:
+        bq = _bin(fast_atan2(qy, qx), inv_res, n_bins)
+        j, u, d2 = _closest_on_polyline(qx, qy, qx * qx + qy * qy, bq, max_cp_bins, ref_x, ref_y, nxt, cover,
+                                        seg_ex, seg_ey, seg_il, gate2, sin2)
+        if j < 0:
             continue
+        cx = ref_x[j] + u * seg_ex[j]
+        cy = ref_y[j] + u * seg_ey[j]
         pairs += 1
         sd += math.sqrt(d2)
-        jr = rx * ny - ry * nx
-        jv = (nx, ny, jr)
-        for a in range(3):
-            for b in range(3):
-                info[a, b] += jv[a] * jv[b]
-    return pairs, (sd / pairs if pairs > 0 else np.inf), info
+        nx = seg_nx[j]
+        ny = seg_ny[j]
+        if nx == 0.0 and ny == 0.0:
+            continue
+        e = nx * (qx - cx) + ny * (qy - cy)
+        j2 = rx * ny - ry * nx
+        h[0, 0] += nx * nx
+        h[0, 1] += nx * ny
+        h[0, 2] += nx * j2
+        h[1, 1] += ny * ny
+        h[1, 2] += ny * j2
+        h[2, 2] += j2 * j2
+        g[0] -= nx * e
+        g[1] -= ny * e
+        g[2] -= j2 * e
+    h[1, 0] = h[0, 1]
+    h[2, 0] = h[0, 2]
+    h[2, 1] = h[1, 2]
+    return pairs, sd
+
+
+@njit(cache=True)
+def polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il, seg_nx, seg_ny, x0, y0,
+                         th0, max_iter, gate, tol_t, tol_r, max_cp_bins, w_t, w_r):
+    """Gauss-Newton refinement on the closest-point pairs with the point-to-line distance.
+
+    Same correspondences as IDC's closest-point rule (closest point of the polyline within ``gate``), but
+    the fit minimises the distance along the segment normal, which does not penalise sliding along a wall:
+    it converges in a few iterations where the point-to-point fit creeps. The prediction (0, 0, 0) enters
+    as a prior with weights w_t (per axis) and w_r in units of one pair's weight: where the scan cannot
+    tell (a corridor, a wall at arm's length) the odometry decides.
+
+    Returns (x, y, th, iterations, pairs, mean pair distance [m], 3x3 point-to-line information), the last
+    three at the pose of the last linearisation (within the tolerance of the result when converged).
+    """
+    n_bins = ref_x.shape[0]
+    sin2 = _sin2_table(n_bins, max_cp_bins)
+    gate2 = gate * gate
+    x = x0
+    y = y0
+    th = th0
+    it = 0
+    h = np.zeros((3, 3))
+    g = np.zeros(3)
+    info = np.zeros((3, 3))
+    pairs = 0
+    sd = 0.0
+    while it < max_iter:
+        pairs, sd = _pairs_point_to_line(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il,
+                                         seg_nx, seg_ny, gate2, max_cp_bins, sin2, h, g)
+        info[:, :] = h
+        it += 1
+        if pairs < 3:
+            break
+        h[0, 0] += w_t + 1e-9
+        h[1, 1] += w_t + 1e-9
+        h[2, 2] += w_r + 1e-9
+        g[0] -= w_t * x
+        g[1] -= w_t * y
+        g[2] -= w_r * th
+        step = np.linalg.solve(h, g)
+        x += step[0]
+        y += step[1]
+        th += step[2]
+        if math.sqrt(step[0] ** 2 + step[1] ** 2) < tol_t and abs(step[2]) < tol_r:
+            break
+    return x, y, th, it, pairs, (sd / pairs if pairs > 0 else np.inf), info
+
+
+@njit(cache=True)
+def match_quality(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il, seg_nx, seg_ny, gate,
+                  max_cp_bins):
+    """Closest-point pairs at a pose: (pairs, mean distance [m], 3x3 point-to-line information).
+
+    The information matrix sums J Jᵀ with J = (n, (R p) × n) over the pairs matched to a segment of unit
+    normal n; its translational block is near-singular in a featureless corridor (degeneracy test).
+    """
+    n_bins = ref_x.shape[0]
+    sin2 = _sin2_table(n_bins, max_cp_bins)
+    h = np.zeros((3, 3))
+    g = np.zeros(3)
+    pairs, sd = _pairs_point_to_line(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il,
+                                     seg_nx, seg_ny, gate * gate, max_cp_bins, sin2, h, g)
+    return pairs, (sd / pairs if pairs > 0 else np.inf), h

@@ -16,7 +16,8 @@ class MatchResult:
 
     Attributes:
         pose: corrected robot (base) pose in the corrected odometry frame for this scan. When ``ok`` is
-            False it is the previous corrected pose composed with the odometry increment.
+            False it is the previous corrected pose composed with the odometry increment (the IDC matcher
+            uses constant velocity instead while it sees the odometry stalled, see IdcMatcher._priors).
         ok: False when the match failed (the stack raises MATCH_FAILED).
         pairs: correspondences used by the final estimate (0 when nothing was matched).
         residual_m: mean distance of those pairs after alignment [m] (nan when not applicable).

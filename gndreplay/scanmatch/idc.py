@@ -1,25 +1,33 @@
-"""IDC scan-to-local-map matcher (Lu & Milios 1997 correspondence rules, wheelchair paper's odometry fix).
+"""IDC scan-to-local-map matcher: Lu & Milios' Iterative Dual Correspondence, as the wheelchair paper uses it.
 
 Each scan is matched against a *local map*: the points of the last ``map_keyframes`` keyframes in the
 corrected frame, rendered as a polar reference scan seen from the predicted laser pose (previous corrected
-pose ∘ odometry increment). IDC's two rules then align the scan with that reference: closest point on the
-reference polyline for the translation, matching range point in a shrinking angular window for the rotation.
-Matching against a map of several keyframes instead of the previous scan is what keeps the drift low: the
-reference only changes slowly, and the averaged map is less noisy than one scan.
+pose ∘ odometry increment). IDC then aligns the scan with that reference: closest point on the reference
+polyline for the translation, matching range point in a shrinking bearing window for the rotation. Matching
+against a map of many keyframes rather than the previous scan is what keeps the drift low: the reference
+changes slowly, and the averaged map is less noisy than one scan.
 
-A match fails (odometry increment kept, MATCH_FAILED) on too few pairs, a large residual, a degenerate
-geometry (corridor: translation along it unobservable), or a correction implausibly far from odometry.
+IDC converges fast from far (a 20 deg rotation error) but creeps at the end: the point-to-point fit of the
+closest-point pairs penalises sliding along walls. A few Gauss-Newton steps on the same closest-point pairs
+with the point-to-line distance (``polish_iterations``; 0 = pure IDC) finish the alignment; they carry a
+weak odometry prior so that directions the scan cannot observe follow the odometry. On the dev logs the
+polish halves the relation error of pure IDC (see benchmarks/scanmatch.py).
+
+A match fails (odometry increment kept, MATCH_FAILED, ``reason`` says why) on too few pairs, a large
+residual, a degenerate geometry (a featureless corridor: translation along it unobservable), or a
+correction implausibly far from odometry.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..geometry import compose, inverse, transform_points
+from ..geometry import transform_points
 from ..types import Pose2D, Scan
 from . import _idc_kernels as k
 from .base import MatchResult
@@ -31,54 +39,61 @@ F64 = NDArray[np.float64]
 
 @dataclass(frozen=True, slots=True)
 class IdcParams:
-    """Constants of the IDC matcher (defaults tuned on the MIT CSAIL and ACES logs, see benchmarks/)."""
+    """Constants of the IDC matcher (defaults chosen on the MIT CSAIL and ACES logs, see benchmarks/)."""
 
-    # beams used: CARMEN no-return values are already +inf; far returns are sparse and noisy
+    # beams used: CARMEN no-return values are already +inf; returns beyond 40 m are few and sparse
     min_range_m: float = 0.05
     max_range_m: float = 40.0
-    # local map: a keyframe every 0.3 m or 10 deg of corrected motion, the newest 20 kept (~6 m of path)
+    # local map: a keyframe every 0.3 m or 10 deg of corrected motion, the newest 40 kept (~12 m of path):
+    # the longer the map remembers, the less often its reference changes, the less the pose drifts
     keyframe_dist_m: float = 0.3
     keyframe_angle_rad: float = math.radians(10.0)
-    map_keyframes: int = 20
+    map_keyframes: int = 40
     # reference rendering: 0.25 deg bins (finer than the 0.5-1 deg beams, so map points keep their detail);
     # points within 5 cm behind the nearest one of a bin are averaged (same wall seen by several keyframes)
     n_bins: int = 1440
     blend_m: float = 0.05
     # polyline continuity: consecutive bins are one surface when closer than 0.2 m + 5 % of range per bin
-    # gap (a 0.25 deg step at 10 m is 4.4 cm; a wall at 80 deg incidence stretches it ~6x), up to 4 bins gap
+    # (a 0.25 deg step at 10 m is 4.4 cm; a wall at 80 deg incidence stretches it ~6x), up to 4 bins apart
+    # (ACES' 1 deg beams leave 3 empty bins between the points of one scan)
     seg_abs_m: float = 0.2
     seg_rel: float = 0.05
     gap_bins: int = 4
-    # IDC iterations: window Bw(k) = max(win_min, B0 exp(-k / tau)) (Lu & Milios: B0 ~ 20-30 deg, tau 10).
-    # With the odometry prior B0 only has to cover the odometry's rotation error, which grows with the
-    # rotation increment: B0 = win0 + win_rel |odometry rotation increment|, at most win_max.
-    max_iterations: int = 40
-    win0_rad: float = math.radians(5.0)
-    win_rel: float = 0.5
-    win_max_rad: float = math.radians(30.0)
-    win_tau: float = 5.0
+    normal_chord_m: float = 0.1  # surface normals across >= 10 cm of polyline (see _idc_kernels.segments)
+    # IDC: bearing window Bw(k) = max(win_min, win0 exp(-k / tau)) as Lu & Milios (B0 20-30 deg); 20 deg
+    # covers CSAIL's odometry, off by up to ~15 deg per scan in fast turns. The polish finishes the
+    # alignment, so IDC stops at 1 mm / 1 mrad changes or after 12 iterations.
+    max_iterations: int = 12
+    win0_rad: float = math.radians(20.0)
+    win_tau: float = 4.0
     win_min_rad: float = math.radians(1.0)
-    mrp_stride: int = 2
-    # rotation = weighted mean of the matching-range-point bearing offsets d = (r - rho) / rho'; the weight is
-    # 1 / var(d) = rho'^2 / (sigma_r^2 + sigma_a^2 rho'^2): a wall facing the beam (rho' ~ 0) says little
-    # about the rotation, a slanted one a lot, up to the bearing quantisation of the reference
-    sigma_range_m: float = 0.02
-    sigma_bearing_rad: float = math.radians(0.25)
-    robust_rotation: bool = True
-    fit: int = 0
+    # IDC pairs every k-th point so that about 180 remain (361 beams: k = 2); the matching-range rule, the
+    # costly one (wide windows early), every k-th of those so that about 90 remain
+    idc_points: int = 180
+    mrp_points: int = 90
     # closest-point gate shrinks with the same time constant from gate0 to gate_min
     gate0_m: float = 0.5
     gate_min_m: float = 0.1
-    tol_m: float = 1e-4
-    tol_rad: float = 1e-4
+    tol_m: float = 1e-3
+    tol_rad: float = 1e-3
     max_cp_bins: int = 120  # closest-point search never looks further than +-30 deg of bearing
+    # point-to-line polish of the closest-point pairs after IDC (0 = pure IDC)
+    polish_iterations: int = 6
+    # odometry prior of the polish, in units of one pair (sigma 3 cm): sigma = 5 cm + 20 % of the step,
+    # 1 deg + 50 % of the turn (CSAIL's odometry under-reports fast turns by up to half)
+    pair_sigma_m: float = 0.03
+    prior_sigma_m: float = 0.05
+    prior_sigma_rel: float = 0.2
+    prior_sigma_rad: float = math.radians(1.0)
+    prior_sigma_rel_rad: float = 0.5
     # acceptance gates
     min_pairs: int = 40
     min_pair_fraction: float = 0.3
     max_residual_m: float = 0.08
-    degenerate_ratio: float = 0.0  # smallest / largest eigenvalue of the translational information
-    # a correction beyond 0.3 m / 10 deg plus 50 % of the odometry increment is not believed (CSAIL's
-    # odometry under-reports fast turns by up to half)
+    # degenerate geometry: the smallest eigenvalue of the translational point-to-line information counts the
+    # pairs that constrain the weakest direction; the dev logs never go below 31, a bare corridor is ~0
+    degenerate_min_info: float = 5.0
+    # a correction beyond 0.3 m / 10 deg plus 50 % of the odometry increment is not believed
     max_correction_m: float = 0.3
     max_correction_rad: float = math.radians(10.0)
     max_correction_rel: float = 0.5
@@ -91,23 +106,46 @@ class IdcParams:
     reset_after_failures: int = 5  # consecutive failures -> restart the map from the current scan
 
 
+def _compose(a: F64, b: F64) -> F64:
+    """a ∘ b for single poses (scalar math: the numpy version costs ~10 us per call, this is per scan)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    th = math.remainder(a[2] + b[2], 2.0 * math.pi)
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], th])
+
+
+def _inverse(a: F64) -> F64:
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([-(c * a[0] + s * a[1]), s * a[0] - c * a[1], -a[2]])
+
+
+class _Outcome(NamedTuple):
+    laser: F64  # estimated laser pose (corrected frame)
+    pairs: int
+    residual_m: float
+    iterations: int
+    reason: str  # "" when accepted
+
+
 class IdcMatcher:
-    """Stateful IDC corrector; see the module docstring."""
+    """Stateful IDC corrector; see the module docstring. One instance per log, ``update`` in time order."""
 
     name = "idc"
 
     def __init__(self, params: IdcParams | None = None) -> None:
         self.params = params if params is not None else IdcParams()
-        self._prev_pose: F64 | None = None
-        self._anchor_pose: F64 | None = None
-        self._anchor_odom: F64 | None = None
-        self._last_incr = np.zeros(3)
+        self._started = False
+        self._prev_pose = np.zeros(3)
+        self._anchor_pose = np.zeros(3)  # corrected pose and odometry of the last scan with fresh odometry
+        self._anchor_odom = np.zeros(3)
+        self._last_incr = np.zeros(3)  # previous corrected increment (constant-velocity prediction)
         self._stalled = False
+        self._failures = 0
+        # keyframe ring: points in the corrected frame, their count, next slot, pose of the newest
         self._kf_xy = np.zeros((self.params.map_keyframes, 0, 2))
         self._kf_n = np.zeros(self.params.map_keyframes, dtype=np.int64)
         self._kf_next = 0
         self._kf_pose: F64 | None = None
-        self._failures = 0
+        self._last_info = np.zeros((3, 3))
 
     # -- map -------------------------------------------------------------------------------------------
     def _reset_map(self) -> None:
@@ -129,114 +167,128 @@ class IdcMatcher:
     def _is_keyframe(self, laser_pose: F64) -> bool:
         if self._kf_pose is None:
             return True
-        d = compose(inverse(self._kf_pose), laser_pose)
+        d = _compose(_inverse(self._kf_pose), laser_pose)
         p = self.params
         return bool(math.hypot(d[0], d[1]) >= p.keyframe_dist_m or abs(d[2]) >= p.keyframe_angle_rad)
 
     # -- update ----------------------------------------------------------------------------------------
-    def _priors(self, odom_a: F64) -> list[tuple[F64, F64]]:
-        """Predicted robot poses for this scan (best first), each with the odometry increment it assumes.
+    def _priors(self, odom_a: F64) -> tuple[list[tuple[F64, F64]], int]:
+        """Predicted robot poses for this scan, best first, each with the increment it assumes, and how many
+        of them to match before choosing (the others are fallbacks, tried only when these fail).
 
-        The first is the previous corrected pose ∘ odometry increment. Odometry can *stall*: MIT CSAIL's
-        pose repeats for ~1 s during fast turns, then jumps. While it repeats and the robot was clearly
-        moving, the first prior repeats the previous corrected increment (constant velocity); the first fresh
-        odometry is then composed from the last fresh scan (the anchor), so the stalled motion is not counted
-        twice. The others (constant velocity, no motion) are only tried when the first one fails.
+        Normally the previous corrected pose ∘ odometry increment. Odometry can *stall*: MIT CSAIL's pose
+        repeats for ~1 s during fast turns, then jumps. While it repeats and the robot was clearly moving,
+        the prior is the previous corrected increment again (constant velocity). On the first fresh
+        odometry two priors compete: the anchor (last scan with fresh odometry) ∘ the odometry since then,
+        which does not count the stalled motion twice but inherits the odometry's error over the whole
+        stall, and constant velocity, right when the stalled scans were matched; the match with more pairs
+        wins. Fallbacks: constant velocity, then no motion.
         """
-        assert self._prev_pose is not None and self._anchor_odom is not None and self._anchor_pose is not None
         p = self.params
-        cv = compose(self._prev_pose, self._last_incr)
+        cv = (_compose(self._prev_pose, self._last_incr), self._last_incr)
         still = (self._prev_pose, np.zeros(3))
         if p.handle_stalls and np.array_equal(odom_a, self._anchor_odom):
             fast = (math.hypot(self._last_incr[0], self._last_incr[1]) >= p.stall_min_step_m
                     or abs(self._last_incr[2]) >= p.stall_min_step_rad)
             if self._stalled or fast:
                 self._stalled = True
-                return [(cv, self._last_incr), still]
+                return [cv, still], 1
+        resumed = self._stalled
         self._stalled = False
-        incr = compose(inverse(self._anchor_odom), odom_a)
-        return [(compose(self._anchor_pose, incr), incr), (cv, self._last_incr), still]
+        incr = _compose(_inverse(self._anchor_odom), odom_a)
+        odo = (_compose(self._anchor_pose, incr), incr)
+        return [odo, cv, still], (2 if resumed else 1)
 
     def update(self, scan: Scan, odom: Pose2D) -> MatchResult:
         """Correct the pose of this scan (see the module docstring); scans must come in time order."""
         p = self.params
         r = scan.ranges_m
-        use = np.isfinite(r) & (r >= max(p.min_range_m, scan.min_range_m)) & (r <= p.max_range_m)
+        with np.errstate(invalid="ignore"):
+            use = (r >= max(p.min_range_m, scan.min_range_m)) & (r <= p.max_range_m)
         pr = np.ascontiguousarray(r[use])
-        pa = np.ascontiguousarray(scan.angles_rad[use])
+        pa = scan.angles_rad[use]
         px, py = pr * np.cos(pa), pr * np.sin(pa)
-        pts = np.column_stack([px, py])
         sensor = scan.sensor_pose.as_array()
         odom_a = odom.as_array()
-        if self._prev_pose is None:
+        if not self._started:
+            self._started = True
             self._prev_pose = self._anchor_pose = self._anchor_odom = odom_a
-            self._add_keyframe(compose(odom_a, sensor), pts)
-            return MatchResult(odom, True, 0, float("nan"), 0)
-        priors = self._priors(odom_a)
-        prior = priors[0][0]
-        iters_total = 0
-        first: tuple[F64, int, float, int, str] | None = None
-        for k_h, (hyp, incr) in enumerate(priors[: 1 + p.fallback_priors]):
-            res = self._match(px, py, pr, pa, compose(hyp, sensor), incr)
-            iters_total += res[3]
-            if first is None:
-                first = res
-            if not res[4]:
+            self._add_keyframe(_compose(odom_a, sensor), np.column_stack([px, py]))
+            return MatchResult(odom, True, 0, math.nan, 0)
+        priors, compete = self._priors(odom_a)
+        iterations = 0
+        outcomes: list[_Outcome] = []
+        for h, (hyp, incr) in enumerate(priors[: max(compete, 1 + p.fallback_priors)]):
+            out = self._match(px, py, pr, _compose(hyp, sensor), incr)
+            iterations += out.iterations
+            outcomes.append(out)
+            if out.iterations == 0:
+                break  # nothing to match (too few beams): another prior will not help
+            if h + 1 >= compete and any(not o.reason for o in outcomes):
                 break
-            if k_h == 0 and res[1] < 0.5 * max(p.min_pairs, 1) and res[3] == 0:
-                break  # nothing to match (too few beams): other priors will not help
-        else:
-            res = first
-        assert res is not None
-        est_laser, pairs, resid, _, reason = res
-        if reason:
-            pose = prior
+        accepted = [o for o in outcomes if not o.reason]
+        # the accepted match with most pairs (then the smallest residual), else the first failure
+        res = min(accepted, key=lambda o: (-o.pairs, o.residual_m)) if accepted else outcomes[0]
+        if res.reason:
+            pose = priors[0][0]
             self._failures += 1
             if self._failures >= p.reset_after_failures:
                 self._reset_map()
-                self._add_keyframe(compose(prior, sensor), pts)
+                self._add_keyframe(_compose(pose, sensor), np.column_stack([px, py]))
                 self._failures = 0
         else:
             self._failures = 0
-            pose = compose(est_laser, inverse(sensor))
-            if self._is_keyframe(est_laser):
-                self._add_keyframe(est_laser, pts)
-        self._last_incr = compose(inverse(self._prev_pose), pose)
+            pose = _compose(res.laser, _inverse(sensor))
+            if self._is_keyframe(res.laser):
+                self._add_keyframe(res.laser, np.column_stack([px, py]))
+        self._last_incr = _compose(_inverse(self._prev_pose), pose)
         self._prev_pose = pose
         if not self._stalled:
             self._anchor_pose, self._anchor_odom = pose, odom_a
-        return MatchResult(Pose2D.from_array(pose), not reason, pairs, resid, iters_total, reason)
+        return MatchResult(Pose2D.from_array(pose), not res.reason, res.pairs, res.residual_m, iterations,
+                           res.reason)
 
-    def _match(self, px: F64, py: F64, pr: F64, pa: F64, laser_prior: F64,
-               incr: F64) -> tuple[F64, int, float, int, str]:
+    def _match(self, px: F64, py: F64, pr: F64, laser_prior: F64, incr: F64) -> _Outcome:
+        """Align the scan with the map rendered at ``laser_prior`` and apply the acceptance gates."""
         p = self.params
         n = px.shape[0]
         need = max(p.min_pairs, math.ceil(p.min_pair_fraction * n))
         if n < need:
-            return laser_prior, 0, math.nan, 0, f"too few valid beams: {n} < {need}"
-        ref_x, ref_y, ok, nxt = k.render_reference(
+            return _Outcome(laser_prior, 0, math.nan, 0, f"too few valid beams: {n} < {need}")
+        ref_x, ref_y, ref_r, ref_a, ok, nxt = k.render_reference(
             self._kf_xy, self._kf_n, laser_prior[0], laser_prior[1], laser_prior[2], p.n_bins,
             p.min_range_m, p.max_range_m + p.gate0_m, p.blend_m, p.seg_abs_m, p.seg_rel, p.gap_bins)
-        win0 = min(p.win_max_rad, p.win0_rad + p.win_rel * abs(incr[2]))
+        ex, ey, il, nx, ny, cover = k.segments(ref_x, ref_y, ok, nxt, p.normal_chord_m)
+        stride = max(1, n // p.idc_points)
         x, y, th, iters, _ = k.idc_align(
-            px, py, pr, pa, ref_x, ref_y, ok, nxt, p.max_iterations, win0, p.win_tau, p.win_min_rad,
-            p.gate0_m, p.gate_min_m, p.tol_m, p.tol_rad, p.max_cp_bins, p.gap_bins, p.mrp_stride,
-            p.sigma_range_m, p.sigma_bearing_rad, p.robust_rotation, p.fit)
-        pairs, resid, info = k.match_quality(px, py, x, y, th, ref_x, ref_y, ok, nxt, p.gate_min_m,
-                                             p.max_cp_bins, p.gap_bins)
-        est = compose(laser_prior, np.array([x, y, th]))
-        corr_m = math.hypot(x, y)
+            px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, 0.0, 0.0, 0.0,
+            p.max_iterations, p.win0_rad, p.win_tau, p.win_min_rad, p.gate0_m, p.gate_min_m, p.tol_m,
+            p.tol_rad, p.max_cp_bins, stride, max(1, n // (stride * p.mrp_points)))
+        if p.polish_iterations > 0:
+            w_t = (p.pair_sigma_m / (p.prior_sigma_m + p.prior_sigma_rel * math.hypot(incr[0], incr[1]))) ** 2
+            w_r = (p.pair_sigma_m / (p.prior_sigma_rad + p.prior_sigma_rel_rad * abs(incr[2]))) ** 2
+            x, y, th, it2, pairs, resid, info = k.polish_point_to_line(
+                px, py, ref_x, ref_y, nxt, cover, ex, ey, il, nx, ny, x, y, th, p.polish_iterations,
+                p.gate_min_m, p.tol_m, p.tol_rad, p.max_cp_bins, w_t, w_r)
+            iters += it2
+        else:
+            pairs, resid, info = k.match_quality(px, py, x, y, th, ref_x, ref_y, nxt, cover, ex, ey, il, nx,
+                                                 ny, p.gate_min_m, p.max_cp_bins)
+        self._last_info = info
+        est = _compose(laser_prior, np.array([x, y, th]))
         if pairs < need:
-            return est, pairs, resid, iters, f"too few pairs: {pairs} < {need}"
+            return _Outcome(est, pairs, resid, iters, f"too few pairs: {pairs} < {need}")
         if resid > p.max_residual_m:
-            return est, pairs, resid, iters, f"residual {resid:.3f} m > {p.max_residual_m} m"
+            return _Outcome(est, pairs, resid, iters, f"residual {resid:.3f} m > {p.max_residual_m} m")
+        weakest = float(np.linalg.eigvalsh(info[:2, :2])[0])
+        if weakest < p.degenerate_min_info:
+            return _Outcome(est, pairs, resid, iters,
+                            f"degenerate geometry: translation unobservable (information {weakest:.1f} "
+                            f"< {p.degenerate_min_info})")
+        corr_m = math.hypot(x, y)
         max_m = p.max_correction_m + p.max_correction_rel * math.hypot(incr[0], incr[1])
         max_rad = p.max_correction_rad + p.max_correction_rel * abs(incr[2])
         if corr_m > max_m or abs(th) > max_rad:
-            return est, pairs, resid, iters, (f"correction {corr_m:.3f} m, {math.degrees(th):.1f} deg "
-                                              "too far from odometry")
-        if p.degenerate_ratio > 0.0:
-            ev = np.linalg.eigvalsh(info[:2, :2])
-            if ev[1] <= 0.0 or ev[0] < p.degenerate_ratio * ev[1]:
-                return est, pairs, resid, iters, "degenerate geometry (translation unobservable)"
-        return est, pairs, resid, iters, ""
+            return _Outcome(est, pairs, resid, iters,
+                            f"correction {corr_m:.3f} m, {math.degrees(th):.1f} deg too far from odometry")
+        return _Outcome(est, pairs, resid, iters, "")

@@ -1,0 +1,170 @@
+"""The matcher factory, trajectory correction over a tick stream, and the ``scanmatch`` command's function."""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import ScanMatchError
+from ..evaluation import Relations, RelationStats, relation_errors, write_tum
+from ..types import Tick
+from .base import Matcher, OdomMatcher
+from .idc import IdcMatcher, IdcParams
+from .kiss import KissIcpMatcher, KissParams
+
+__all__ = ["METHODS", "CorrectedTrajectory", "MatcherReport", "correct_trajectory", "make_matcher",
+           "matcher_report", "run_scanmatch"]
+
+Method = Literal["idc", "kiss-icp", "odom"]
+METHODS: tuple[Method, ...] = ("odom", "idc", "kiss-icp")
+
+
+def make_matcher(method: Method, *, idc: IdcParams | None = None, kiss: KissParams | None = None) -> Matcher:
+    """A fresh matcher; each gets only its own parameters.
+
+    Raises:
+        ScanMatchError: unknown method.
+    """
+    if method == "idc":
+        return IdcMatcher(idc)
+    if method == "kiss-icp":
+        return KissIcpMatcher(kiss)
+    if method == "odom":
+        return OdomMatcher()
+    raise ScanMatchError(f"unknown matcher {method!r}: expected one of {', '.join(METHODS)}")
+
+
+@dataclass(frozen=True, eq=False)
+class CorrectedTrajectory:
+    """One matcher's output over a log.
+
+    Attributes:
+        method: matcher name.
+        t_ns: (N,) int64 scan stamps.
+        poses: (N, 3) corrected robot poses (x, y, theta).
+        ok: (N,) bool, False where the match failed (MATCH_FAILED).
+        pairs, iterations: (N,) int64 per-scan figures; residual_m: (N,) float64.
+        ms: (N,) float64 wall-clock time of each ``update`` call [ms] (the only non-deterministic field).
+        reasons: failure reason -> count.
+    """
+
+    method: str
+    t_ns: NDArray[np.int64]
+    poses: NDArray[np.float64]
+    ok: NDArray[np.bool_]
+    pairs: NDArray[np.int64]
+    residual_m: NDArray[np.float64]
+    iterations: NDArray[np.int64]
+    ms: NDArray[np.float64]
+    reasons: dict[str, int]
+
+    @property
+    def failures(self) -> int:
+        return int(np.count_nonzero(~self.ok))
+
+
+def correct_trajectory(ticks: Iterable[Tick], matcher: Matcher) -> CorrectedTrajectory:
+    """Run ``matcher`` over the ticks (time order) and collect its corrected trajectory and timings."""
+    t: list[int] = []
+    poses: list[tuple[float, float, float]] = []
+    ok: list[bool] = []
+    pairs: list[int] = []
+    resid: list[float] = []
+    iters: list[int] = []
+    ms: list[float] = []
+    reasons: dict[str, int] = {}
+    for tick in ticks:
+        t0 = time.perf_counter_ns()
+        res = matcher.update(tick.scan, tick.odom)
+        ms.append((time.perf_counter_ns() - t0) * 1e-6)
+        t.append(tick.t_ns)
+        poses.append((res.pose.x, res.pose.y, res.pose.theta))
+        ok.append(res.ok)
+        pairs.append(res.pairs)
+        resid.append(res.residual_m)
+        iters.append(res.iterations)
+        if not res.ok:
+            key = res.reason.split(":")[0]
+            reasons[key] = reasons.get(key, 0) + 1
+    return CorrectedTrajectory(
+        matcher.name, np.array(t, dtype=np.int64), np.array(poses, dtype=np.float64).reshape(-1, 3),
+        np.array(ok, dtype=bool), np.array(pairs, dtype=np.int64), np.array(resid, dtype=np.float64),
+        np.array(iters, dtype=np.int64), np.array(ms, dtype=np.float64), reasons)
+
+
+@dataclass(frozen=True)
+class MatcherReport:
+    """One row of the ``scanmatch`` table.
+
+    Attributes:
+        method: matcher name.
+        scans: scans processed.
+        failures: failed matches (odometry increment kept).
+        ms_median, ms_p99: time per scan [ms] (the first scan, which only initialises, is excluded).
+        relations: relation errors, when relations were given.
+        tum_path: the trajectory written, when an output folder was given.
+    """
+
+    method: str
+    scans: int
+    failures: int
+    ms_median: float
+    ms_p99: float
+    relations: RelationStats | None = None
+    tum_path: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"method": self.method, "scans": self.scans, "failures": self.failures,
+                "ms_median": self.ms_median, "ms_p99": self.ms_p99,
+                "relations": None if self.relations is None else self.relations.to_dict(),
+                "tum_path": self.tum_path}
+
+
+def matcher_report(traj: CorrectedTrajectory, relations: Relations | None = None, *, tol_s: float = 1e-4,
+                   tum_path: str | None = None) -> MatcherReport:
+    """Summarise a corrected trajectory (timings, failures, relation errors)."""
+    ms = traj.ms[1:] if traj.ms.size > 1 else traj.ms
+    med = float(np.median(ms)) if ms.size else math.nan
+    p99 = float(np.percentile(ms, 99)) if ms.size else math.nan
+    stats = None if relations is None else relation_errors(traj.t_ns, traj.poses, relations, tol_s=tol_s)
+    return MatcherReport(traj.method, int(traj.t_ns.size), traj.failures, med, p99, stats, tum_path)
+
+
+def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence[Method] = METHODS, *,
+                  relations: Relations | None = None, out_dir: str | os.PathLike[str] | None = None,
+                  idc: IdcParams | None = None, kiss: KissParams | None = None,
+                  tol_s: float = 1e-4) -> list[MatcherReport]:
+    """The ``gndreplay scanmatch`` command as a function: each matcher over the same log, one report each.
+
+    Args:
+        ticks_factory: returns a fresh tick stream of the log (called once per matcher).
+        methods: matchers to run, in table order.
+        relations: reference relations for the error columns.
+        out_dir: when given, one TUM trajectory per matcher is written there as ``<method>.tum``.
+        idc, kiss: matcher parameters.
+        tol_s: stamp tolerance for relations [s].
+
+    Raises:
+        ScanMatchError: unknown method.
+    """
+    out = None if out_dir is None else Path(out_dir)
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    rows: list[MatcherReport] = []
+    for method in methods:
+        traj = correct_trajectory(ticks_factory(), make_matcher(method, idc=idc, kiss=kiss))
+        tum = None
+        if out is not None:
+            path = out / f"{method}.tum"
+            write_tum(path, traj.t_ns, traj.poses)
+            tum = str(path)
+        rows.append(matcher_report(traj, relations, tol_s=tol_s, tum_path=tum))
+    return rows

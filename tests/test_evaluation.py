@@ -1,0 +1,138 @@
+"""Relations metric and TUM writer: known answers, matching by stamp, error messages, round trip."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gndreplay.errors import GndReplayError
+from gndreplay.evaluation import load_relations, relation_errors, write_tum
+from gndreplay.geometry import relative
+
+T0 = 1_134_864_629_895_182_000  # a CSAIL-like stamp (ns): floats would lose the last digits
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def test_load_relations_parses_stamps_exactly(tmp_path: Path) -> None:
+    p = _write(tmp_path / "r.relations", "# t1 t2 x y z roll pitch yaw\n\n"
+               "1134864645.90321 1134864646.32420 0.31293 0.02935 0.00000  0.00000 0.00000 0.24198\n"
+               "90.239599 90.719599 0.422330 -0.000750 0 0 0 0.017260\n")
+    rel = load_relations(p)
+    assert len(rel) == 2
+    assert rel.t1_ns.tolist() == [1_134_864_645_903_210_000, 90_239_599_000]
+    assert rel.t2_ns.tolist() == [1_134_864_646_324_200_000, 90_719_599_000]
+    np.testing.assert_allclose(rel.dx, [0.31293, 0.422330])
+    np.testing.assert_allclose(rel.dy, [0.02935, -0.000750])
+    np.testing.assert_allclose(rel.dyaw, [0.24198, 0.017260])
+
+
+def test_load_relations_errors_name_file_and_line(tmp_path: Path) -> None:
+    p = _write(tmp_path / "bad.relations", "1 2 0 0 0 0 0 0\n1 2 0 0 0 0\n")
+    with pytest.raises(GndReplayError, match=r"bad\.relations line 2: expected 8 numbers .* found 6"):
+        load_relations(p)
+    p = _write(tmp_path / "nan.relations", "1 2 x 0 0 0 0 0\n")
+    with pytest.raises(GndReplayError, match=r"nan\.relations line 1: not a number"):
+        load_relations(p)
+    with pytest.raises(GndReplayError, match="cannot read relations file"):
+        load_relations(tmp_path / "missing.relations")
+
+
+def _relations_file(tmp_path: Path, rows: list[tuple[int, int, float, float, float]]) -> Path:
+    lines = [f"{a // 10**9}.{a % 10**9:09d} {b // 10**9}.{b % 10**9:09d} {x!r} {y!r} 0 0 0 {th!r}\n"
+             for a, b, x, y, th in rows]
+    return _write(tmp_path / "r.relations", "".join(lines))
+
+
+def test_relation_errors_exact_trajectory_is_zero(tmp_path: Path) -> None:
+    t = T0 + np.arange(5, dtype=np.int64) * 200_000_000
+    poses = np.array([[0, 0, 0], [1, 0, 0.5], [2, 1, 1.0], [2, 3, 2.5], [0, 3, -3.0]], dtype=float)
+    rows = []
+    for i, j in [(0, 1), (1, 3), (0, 4), (2, 4)]:
+        d = relative(poses[i], poses[j])
+        rows.append((int(t[i]), int(t[j]), float(d[0]), float(d[1]), float(d[2])))
+    rel = load_relations(_relations_file(tmp_path, rows))
+    s = relation_errors(t[::-1], poses[::-1], rel)  # any order
+    assert (s.matched, s.unmatched) == (4, 0)
+    assert s.trans_max_m < 1e-12 and s.rot_max_deg < 1e-9
+
+
+def test_relation_errors_known_answer(tmp_path: Path) -> None:
+    # estimated: second pose 0.1 m too far ahead and 2 deg over-rotated, in the frame of the first
+    t = np.array([T0, T0 + 10**8], dtype=np.int64)
+    poses = np.array([[5.0, 5.0, math.pi / 2], [5.0, 6.1, math.pi / 2 + math.radians(2.0)]])
+    rel = load_relations(_relations_file(tmp_path, [(T0, T0 + 10**8, 1.0, 0.0, 0.0)]))
+    s = relation_errors(t, poses, rel)
+    assert s.matched == 1
+    assert s.trans_mean_m == pytest.approx(0.1, abs=1e-9)
+    assert s.rot_mean_deg == pytest.approx(2.0, abs=1e-9)
+    assert s.trans_std_m == 0.0 and s.trans_max_m == pytest.approx(0.1, abs=1e-9)
+
+
+def test_relation_errors_rotation_wraps(tmp_path: Path) -> None:
+    t = np.array([T0, T0 + 10**8], dtype=np.int64)
+    poses = np.array([[0.0, 0.0, math.radians(179.0)], [0.0, 0.0, math.radians(-179.0)]])
+    rel = load_relations(_relations_file(tmp_path, [(T0, T0 + 10**8, 0.0, 0.0, math.radians(1.0))]))
+    assert relation_errors(t, poses, rel).rot_mean_deg == pytest.approx(1.0, abs=1e-6)
+
+
+def test_relation_errors_stamp_tolerance(tmp_path: Path) -> None:
+    t = np.array([T0, T0 + 10**8], dtype=np.int64)
+    poses = np.zeros((2, 3))
+    rows = [(T0 + 90_000, T0 + 10**8 - 90_000, 0.0, 0.0, 0.0),  # within 1e-4 s
+            (T0 + 110_000, T0 + 10**8, 0.0, 0.0, 0.0),  # 1.1e-4 s off: unmatched
+            (T0 - 10**9, T0, 0.0, 0.0, 0.0)]  # before the log
+    rel = load_relations(_relations_file(tmp_path, rows))
+    s = relation_errors(t, poses, rel)
+    assert (s.matched, s.unmatched) == (1, 2)
+    assert s.index.tolist() == [0]
+    assert (relation_errors(t, poses, rel, tol_s=2e-4).matched) == 2
+
+
+def test_relation_errors_nothing_matched(tmp_path: Path) -> None:
+    rel = load_relations(_relations_file(tmp_path, [(T0, T0 + 1, 0.0, 0.0, 0.0)]))
+    s = relation_errors(np.array([5], dtype=np.int64), np.zeros((1, 3)), rel)
+    assert (s.matched, s.unmatched) == (0, 1) and math.isnan(s.trans_mean_m)
+    assert s.to_dict()["unmatched"] == 1
+
+
+def test_relation_errors_shape_error(tmp_path: Path) -> None:
+    rel = load_relations(_relations_file(tmp_path, [(T0, T0 + 1, 0.0, 0.0, 0.0)]))
+    with pytest.raises(ValueError, match=r"poses must be \(N, 3\)"):
+        relation_errors(np.array([T0]), np.zeros((2, 3)), rel)
+
+
+def test_write_tum_round_trip_full_precision(tmp_path: Path) -> None:
+    t = np.array([T0, T0 + 123_456_789, 70_289_900_000], dtype=np.int64)
+    poses = np.array([[576.536523, 0.106594, -2.255213], [1e-9, -3.5, math.pi], [0.0, 0.0, 0.1]])
+    path = tmp_path / "traj.tum"
+    write_tum(path, t, poses)
+    lines = [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
+    assert lines[0].split()[0] == "1134864629.895182000"
+    assert lines[1].split()[0] == "1134864630.018638789"
+    data = np.loadtxt(path)
+    np.testing.assert_array_equal(data[:, 1:3], poses[:, :2])
+    np.testing.assert_array_equal(data[:, 3], 0.0)
+    np.testing.assert_allclose(data[:, 4:6], 0.0)
+    yaw = 2.0 * np.arctan2(data[:, 6], data[:, 7])
+    np.testing.assert_allclose(np.angle(np.exp(1j * (yaw - poses[:, 2]))), 0.0, atol=1e-12)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["traj.tum"]  # no temporary file left
+
+
+def test_write_tum_is_deterministic(tmp_path: Path) -> None:
+    t = np.array([1, 2], dtype=np.int64)
+    poses = np.array([[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]])
+    write_tum(tmp_path / "a.tum", t, poses)
+    write_tum(tmp_path / "b.tum", t, poses)
+    assert (tmp_path / "a.tum").read_bytes() == (tmp_path / "b.tum").read_bytes()
+
+
+def test_write_tum_shape_error(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match=r"poses must be \(N, 3\)"):
+        write_tum(tmp_path / "x.tum", np.array([1, 2]), np.zeros((2, 2)))

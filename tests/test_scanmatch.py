@@ -1,0 +1,328 @@
+"""Scan matching on synthetic scans with known answers: a room under known motions, a corridor, failures."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gndreplay.errors import ScanMatchError
+from gndreplay.evaluation import Relations
+from gndreplay.geometry import compose, inverse, relative
+from gndreplay.scanmatch import (
+    IdcMatcher,
+    IdcParams,
+    KissParams,
+    Matcher,
+    OdomMatcher,
+    correct_trajectory,
+    make_matcher,
+    run_scanmatch,
+)
+from gndreplay.scanmatch import _idc_kernels as kern
+from gndreplay.types import Pose2D, Scan, Tick
+
+WHEELCHAIR_LASER = Pose2D(0.72, 0.0, 0.0)
+ON_AXIS = Pose2D(0.0, 0.0, 0.0)
+
+
+def _box(cx: float, cy: float, w: float, h: float) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    x0, x1, y0, y1 = cx - w / 2, cx + w / 2, cy - h / 2, cy + h / 2
+    c = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+    return [(c[i], c[(i + 1) % 4]) for i in range(4)]
+
+
+def room() -> np.ndarray:
+    """A 10 x 7 m room with a few boxes (no symmetry), as (S, 2, 2) wall segments."""
+    segs = _box(1.0, 0.5, 10.0, 7.0) + _box(3.0, 1.5, 0.6, 0.4) + _box(-2.0, -1.5, 0.5, 0.5)
+    segs += _box(4.0, -2.0, 1.0, 0.3) + _box(-1.5, 2.5, 0.3, 0.8)
+    return np.array(segs, dtype=float)
+
+
+def corridor() -> np.ndarray:
+    """Two bare parallel walls 2 m apart, 200 m long: translation along them is unobservable."""
+    return np.array([((-100.0, -1.0), (100.0, -1.0)), ((-100.0, 1.0), (100.0, 1.0))])
+
+
+def cast(segs: np.ndarray, robot: np.ndarray, *, sensor: Pose2D = ON_AXIS, n: int = 361,
+         noise_m: float = 0.0, rng: np.random.Generator | None = None, t_ns: int = 0,
+         max_range_m: float = 30.0) -> Scan:
+    """Ray-cast a 180 deg scan from the laser at robot ∘ sensor (vectorised over beams x segments)."""
+    ang = np.linspace(-math.pi / 2, math.pi / 2, n)
+    lx, ly, lth = compose(robot, sensor.as_array())
+    d = np.stack([np.cos(lth + ang), np.sin(lth + ang)], axis=1)
+    a, e = segs[:, 0], segs[:, 1] - segs[:, 0]
+    den = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]
+    ox, oy = a[None, :, 0] - lx, a[None, :, 1] - ly
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (ox * e[None, :, 1] - oy * e[None, :, 0]) / den
+        u = (ox * d[:, None, 1] - oy * d[:, None, 0]) / den
+    hit = (np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
+    r = np.where(hit, t, np.inf).min(axis=1)
+    if noise_m and rng is not None:
+        r = r + rng.normal(0.0, noise_m, r.shape)
+    r = np.where(r >= max_range_m, np.inf, r)
+    return Scan(t_ns, r, ang, max_range_m, sensor_pose=sensor)
+
+
+def motion(dx: float, dy: float, dth_deg: float) -> np.ndarray:
+    return np.array([dx, dy, math.radians(dth_deg)])
+
+
+def pose_error(est: Pose2D, truth: np.ndarray) -> tuple[float, float]:
+    """Translational [m] and rotational [deg] error of est w.r.t. truth."""
+    e = relative(truth, est.as_array())
+    return float(math.hypot(e[0], e[1])), float(abs(math.degrees(e[2])))
+
+
+START = np.array([2.0, -1.0, 0.3])  # robot pose of the first scan (truth = odometry there)
+ODOM0 = np.array([10.0, 5.0, -1.0])  # the odometry frame differs from the world frame
+
+
+def two_scan_match(segs: np.ndarray, move: np.ndarray, odom_move: np.ndarray, *, noise_m: float = 0.0,
+                   sensor: Pose2D = ON_AXIS, params: IdcParams | None = None,
+                   start: np.ndarray = START):
+    """Match scan 2 (robot moved by ``move``) against scan 1 with odometry reporting ``odom_move``.
+
+    Returns (result, truth of scan 2 in the odometry frame)."""
+    rng = np.random.default_rng(7)
+    m = IdcMatcher(params)
+    first = m.update(cast(segs, start, sensor=sensor, noise_m=noise_m, rng=rng), Pose2D.from_array(ODOM0))
+    assert first.ok and first.pose == Pose2D.from_array(ODOM0)
+    res = m.update(cast(segs, compose(start, move), sensor=sensor, noise_m=noise_m, rng=rng, t_ns=10**8),
+                   Pose2D.from_array(compose(ODOM0, odom_move)))
+    return res, compose(ODOM0, move)
+
+
+# odometry that under-reports: 80 % of the translation, 50 % of the rotation, 3 cm sideways slip
+def bad_odometry(m: np.ndarray) -> np.ndarray:
+    return np.array([0.8 * m[0], 0.8 * m[1] + 0.03, 0.5 * m[2]])
+
+
+@pytest.mark.parametrize("noise_m", [0.0, 0.01])
+@pytest.mark.parametrize("move", [motion(0.3, 0.0, 0.0), motion(0.0, 0.0, 10.0), motion(0.0, 0.0, -20.0),
+                                  motion(0.0, 0.0, 20.0), motion(0.25, -0.1, 15.0), motion(0.2, 0.15, -20.0)],
+                         ids=["x30cm", "rot10", "rot-20", "rot20", "both15", "both-20"])
+def test_idc_recovers_known_motion(move: np.ndarray, noise_m: float) -> None:
+    res, truth = two_scan_match(room(), move, bad_odometry(move), noise_m=noise_m)
+    assert res.ok, res.reason
+    et, er = pose_error(res.pose, truth)
+    assert et < 0.01 and er < 0.2, (et, er)
+    assert res.pairs > 300 and res.iterations > 0 and res.residual_m < 0.02 + noise_m
+
+
+def test_idc_honours_laser_mounting() -> None:
+    """The laser 0.72 m ahead of the axle (wheelchair): a pure rotation of the base moves the laser."""
+    move = motion(0.1, 0.0, 15.0)
+    res, truth = two_scan_match(room(), move, bad_odometry(move), sensor=WHEELCHAIR_LASER, noise_m=0.005)
+    assert res.ok, res.reason
+    et, er = pose_error(res.pose, truth)
+    assert et < 0.01 and er < 0.2, (et, er)
+
+
+def test_idc_finds_20_deg_from_no_odometry() -> None:
+    """IDC's widening window: from a prior that says "no motion" it still finds a 20 deg turn."""
+    move = motion(0.1, 0.05, 20.0)
+    params = IdcParams(max_correction_rad=math.radians(30.0))
+    res, truth = two_scan_match(room(), move, np.zeros(3), noise_m=0.01, params=params)
+    assert res.ok, res.reason
+    et, er = pose_error(res.pose, truth)
+    assert et < 0.01 and er < 0.2, (et, er)
+
+
+def test_pure_idc_without_polish_also_converges() -> None:
+    move = motion(0.25, -0.1, 15.0)
+    params = IdcParams(polish_iterations=0, max_iterations=60, tol_m=1e-5, tol_rad=1e-5)
+    res, truth = two_scan_match(room(), move, bad_odometry(move), params=params)
+    assert res.ok, res.reason
+    et, er = pose_error(res.pose, truth)
+    assert et < 0.01 and er < 0.2, (et, er)
+
+
+def test_corridor_is_reported_degenerate_not_a_confident_answer() -> None:
+    move = motion(0.5, 0.0, 0.0)
+    odom_move = motion(0.3, 0.0, 0.0)  # odometry 20 cm short: nothing in a bare corridor can tell
+    res, _ = two_scan_match(corridor(), move, odom_move, noise_m=0.005, start=np.array([0.0, 0.2, 0.1]))
+    assert not res.ok
+    assert res.reason.startswith("degenerate geometry")
+    # the failed match keeps the odometry increment
+    np.testing.assert_allclose(res.pose.as_array(), compose(ODOM0, odom_move), atol=1e-12)
+
+
+def test_no_returns_fail_and_keep_odometry_increment() -> None:
+    m = IdcMatcher()
+    m.update(cast(room(), START), Pose2D.from_array(ODOM0))
+    empty = Scan(10**8, np.full(361, np.inf), np.linspace(-math.pi / 2, math.pi / 2, 361), 30.0)
+    odom = Pose2D.from_array(compose(ODOM0, motion(0.2, 0.0, 5.0)))
+    res = m.update(empty, odom)
+    assert not res.ok and res.reason.startswith("too few valid beams")
+    assert res.pairs == 0 and res.iterations == 0
+    np.testing.assert_allclose(res.pose.as_array(), odom.as_array(), atol=1e-12)
+
+
+def test_failure_then_recovery_keeps_the_chain() -> None:
+    """A failed scan keeps the odometry increment; the next scan is corrected from there."""
+    segs = room()
+    m = IdcMatcher()
+    truth = [START, compose(START, motion(0.2, 0, 5)), compose(START, motion(0.4, 0, 8))]
+    odo = [ODOM0, compose(ODOM0, motion(0.25, 0, 2)), compose(ODOM0, motion(0.5, 0, 3))]
+    m.update(cast(segs, truth[0]), Pose2D.from_array(odo[0]))
+    nan_scan = Scan(1, np.full(361, np.nan), np.linspace(-math.pi / 2, math.pi / 2, 361), 30.0)
+    r1 = m.update(nan_scan, Pose2D.from_array(odo[1]))
+    assert not r1.ok
+    np.testing.assert_allclose(r1.pose.as_array(), odo[1], atol=1e-12)
+    r2 = m.update(cast(segs, truth[2], t_ns=2), Pose2D.from_array(odo[2]))
+    assert r2.ok
+    et, er = pose_error(r2.pose, compose(ODOM0, relative(START, truth[2])))
+    assert et < 0.01 and er < 0.2
+
+
+def _drive(segs: np.ndarray, n: int, rng: np.random.Generator) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """A loop in the room: true poses and odometry with 3 % scale error, 2 % heading drift, noise."""
+    truth = [START.copy()]
+    odom = [ODOM0.copy()]
+    for i in range(n):
+        step = motion(0.08, 0.0, 6.0 if (i // 10) % 2 == 0 else -2.0)
+        truth.append(compose(truth[-1], step))
+        noisy = np.array([step[0] * 1.03 + rng.normal(0, 0.005), rng.normal(0, 0.005),
+                          step[2] * 1.02 + 0.005 + rng.normal(0, 0.003)])
+        odom.append(compose(odom[-1], noisy))
+    return truth, odom
+
+
+def test_idc_sequence_drifts_less_than_odometry() -> None:
+    rng = np.random.default_rng(3)
+    segs = room()
+    truth, odom = _drive(segs, 40, rng)
+    m = IdcMatcher()
+    est = []
+    for i, (tp, op) in enumerate(zip(truth, odom, strict=True)):
+        res = m.update(cast(segs, tp, noise_m=0.01, rng=rng, t_ns=i * 10**8), Pose2D.from_array(op))
+        assert res.ok, (i, res.reason)
+        est.append(res.pose.as_array())
+    truth_odom = [compose(ODOM0, relative(START, tp)) for tp in truth]  # truth in the odometry frame
+    e_idc = relative(truth_odom[-1], est[-1])
+    e_odo = relative(truth_odom[-1], odom[-1])
+    assert math.hypot(e_idc[0], e_idc[1]) < 0.02 and abs(math.degrees(e_idc[2])) < 0.3
+    assert math.hypot(e_odo[0], e_odo[1]) > 0.1  # the odometry really was off
+
+
+def test_idc_is_deterministic() -> None:
+    segs = room()
+    outs = []
+    for _ in range(2):
+        rng = np.random.default_rng(11)
+        truth, odom = _drive(segs, 12, rng)
+        m = IdcMatcher()
+        outs.append([m.update(cast(segs, tp, noise_m=0.01, rng=rng), Pose2D.from_array(op))
+                     for tp, op in zip(truth, odom, strict=True)])
+    assert outs[0] == outs[1]
+
+
+def test_odom_matcher_returns_odometry() -> None:
+    m = OdomMatcher()
+    p = Pose2D(1.0, 2.0, 0.5)
+    res = m.update(cast(room(), START), p)
+    assert res.ok and res.pose == p and res.reason == ""
+
+
+def test_make_matcher_and_protocol() -> None:
+    for method, cls_name in [("idc", "IdcMatcher"), ("kiss-icp", "KissIcpMatcher"), ("odom", "OdomMatcher")]:
+        m = make_matcher(method, kiss=KissParams(max_num_threads=1))
+        assert isinstance(m, Matcher) and type(m).__name__ == cls_name and m.name == method
+    with pytest.raises(ScanMatchError, match="unknown matcher 'icp': expected one of odom, idc, kiss-icp"):
+        make_matcher("icp")  # type: ignore[arg-type]
+
+
+def test_kiss_adapter_tracks_a_short_drive() -> None:
+    """kiss-icp through the adapter: first pose = odometry, frames and mounting handled (loose bound)."""
+    rng = np.random.default_rng(5)
+    segs = room()
+    truth, odom = _drive(segs, 15, rng)
+    m = make_matcher("kiss-icp", kiss=KissParams(voxel_m=0.1, odom_prior=True))
+    est = [m.update(cast(segs, tp, sensor=WHEELCHAIR_LASER, rng=rng, noise_m=0.005), Pose2D.from_array(op))
+           for tp, op in zip(truth, odom, strict=True)]
+    assert est[0].pose == Pose2D.from_array(ODOM0)
+    e = relative(compose(ODOM0, relative(START, truth[-1])), est[-1].pose.as_array())
+    assert math.hypot(e[0], e[1]) < 0.05 and abs(math.degrees(e[2])) < 1.0
+    assert all(r.ok and r.pairs > 0 for r in est)
+
+
+def _ticks(segs: np.ndarray, truth: list[np.ndarray], odom: list[np.ndarray]) -> list[Tick]:
+    rng = np.random.default_rng(2)
+    return [Tick(i, 1_000_000_000 + i * 100_000_000, cast(segs, tp, noise_m=0.01, rng=rng,
+                                                          t_ns=1_000_000_000 + i * 100_000_000),
+                 Pose2D.from_array(op)) for i, (tp, op) in enumerate(zip(truth, odom, strict=True))]
+
+
+def test_correct_trajectory_and_run_scanmatch(tmp_path: Path) -> None:
+    segs = room()
+    truth, odom = _drive(segs, 20, np.random.default_rng(4))
+    ticks = _ticks(segs, truth, odom)
+    traj = correct_trajectory(ticks, IdcMatcher())
+    assert traj.t_ns.shape == (21,) and traj.poses.shape == (21, 3) and traj.failures == 0
+    assert traj.ms.shape == (21,) and np.all(traj.ms >= 0)
+    # relations from the truth: scan 0 -> 20 and consecutive pairs
+    pairs = [(0, 20)] + [(i, i + 1) for i in range(20)]
+    rel_d = np.array([relative(truth[i], truth[j]) for i, j in pairs])
+    t1 = np.array([ticks[i].t_ns for i, _ in pairs])
+    t2 = np.array([ticks[j].t_ns for _, j in pairs])
+    relations = Relations(t1, t2, rel_d[:, 0], rel_d[:, 1], rel_d[:, 2])
+    rows = run_scanmatch(lambda: ticks, ("odom", "idc"), relations=relations, out_dir=tmp_path / "out")
+    assert [r.method for r in rows] == ["odom", "idc"]
+    odo, idc = rows
+    assert odo.relations is not None and idc.relations is not None
+    assert idc.relations.matched == 21 and idc.relations.unmatched == 0
+    assert idc.relations.trans_mean_m < 0.01 and idc.relations.trans_mean_m < 0.5 * odo.relations.trans_mean_m
+    assert idc.failures == 0 and idc.scans == 21 and idc.ms_median > 0
+    d = idc.to_dict()
+    assert d["method"] == "idc" and d["relations"]["matched"] == 21 and d["tum_path"].endswith("idc.tum")
+    first = (tmp_path / "out" / "idc.tum").read_bytes()
+    run_scanmatch(lambda: ticks, ("idc",), out_dir=tmp_path / "out")
+    assert (tmp_path / "out" / "idc.tum").read_bytes() == first  # byte-identical rerun
+    lines = first.decode().splitlines()
+    assert lines[1].split()[0] == "1.000000000" and len(lines) == 22
+
+
+# -- kernels --------------------------------------------------------------------------------------------
+
+
+def test_fast_atan2_accuracy() -> None:
+    rng = np.random.default_rng(0)
+    special = [(0.0, 1.0), (0.0, -1.0), (1.0, 0.0), (-1.0, 0.0), (0.0, 0.0), (1e-300, -1.0)]
+    for y, x in [*rng.normal(size=(2000, 2)).tolist(), *special]:
+        assert abs(kern.fast_atan2(y, x) - math.atan2(y, x)) < 2e-6 or (x == 0.0 and y == 0.0)
+
+
+def test_render_reference_sees_nearest_wall() -> None:
+    """Two keyframes of a wall at x = 2 and a farther wall behind it: the render keeps the near one."""
+    ys = np.linspace(-1.0, 1.0, 401)  # 5 mm apart: every 0.25 deg bin holds a point of the near wall
+    near = np.column_stack([np.full_like(ys, 2.0), ys])
+    far = np.column_stack([np.full_like(ys, 4.0), ys])
+    kf = np.stack([near, far])
+    ref_x, ref_y, ref_r, _, ok, nxt = kern.render_reference(
+        kf, np.array([401, 401]), 0.0, 0.0, 0.0, 1440, 0.05, 40.0, 0.05, 0.2, 0.05, 4)
+    assert ok.sum() > 100
+    np.testing.assert_allclose(ref_x[ok], 2.0, atol=1e-12)
+    np.testing.assert_allclose(np.hypot(ref_x[ok], ref_y[ok]), ref_r[ok])
+    assert np.all(nxt[ok][:-1] >= 0)  # one continuous wall
+    # seen from (0, 0, pi): the wall is behind, at bearing ~ +-pi
+    _, _, _, ref_a2, ok2, _ = kern.render_reference(kf, np.array([401, 401]), 0.0, 0.0, math.pi, 1440, 0.05,
+                                                    40.0, 0.05, 0.2, 0.05, 4)
+    assert np.all(np.abs(ref_a2[ok2]) > math.radians(150))
+
+
+def test_weighted_median() -> None:
+    v = np.array([0.0, 1.0, 2.0, 100.0])
+    assert kern._weighted_median(v, np.ones(4)) in (1.0, 2.0)
+    assert kern._weighted_median(v, np.array([1.0, 1.0, 10.0, 1.0])) == 2.0
+
+
+def test_inverse_helpers_agree_with_geometry() -> None:
+    from gndreplay.scanmatch.idc import _compose, _inverse
+
+    a, b = np.array([1.0, -2.0, 3.0]), np.array([-0.5, 0.3, -2.9])
+    np.testing.assert_allclose(_compose(a, b), compose(a, b), atol=1e-12)
+    np.testing.assert_allclose(_inverse(a), inverse(a), atol=1e-12)
