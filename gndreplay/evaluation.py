@@ -26,7 +26,7 @@ from .errors import GndReplayError
 from .fsutil import atomic_write_text
 from .geometry import relative, wrap_angle
 
-__all__ = ["RelationStats", "Relations", "load_relations", "relation_errors", "write_tum"]
+__all__ = ["RelationStats", "Relations", "load_relations", "read_tum", "relation_errors", "write_tum"]
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -190,6 +190,35 @@ def _fmt_time(t_ns: int) -> str:
     sign = "-" if t_ns < 0 else ""
     a = abs(int(t_ns))
     return f"{sign}{a // NS_PER_S}.{a % NS_PER_S:09d}"
+
+
+def read_tum(path: str | os.PathLike[str]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Read a planar TUM trajectory (``t x y z qx qy qz qw``, ``#`` comments): exact int-ns stamps and
+    (N, 3) poses (x, y [m], yaw [rad] from qz, qw), the inverse of :func:`write_tum`.
+
+    Raises:
+        GndReplayError: unreadable file, or a line without 8 numbers (the message names file and line).
+    """
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except OSError as err:
+        raise GndReplayError(f"{p}: cannot read trajectory ({err.strerror or err})") from err
+    t_ns: list[int] = []
+    poses: list[tuple[float, float, float]] = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        tok = line.split()
+        if not tok or tok[0].startswith("#"):
+            continue
+        try:
+            if len(tok) != 8:
+                raise ValueError(f"expected 8 fields, found {len(tok)}")
+            x, y, qz, qw = float(tok[1]), float(tok[2]), float(tok[6]), float(tok[7])
+            t_ns.append(_seconds_to_ns(tok[0]))
+        except ValueError as err:
+            raise GndReplayError(f"{p} line {lineno}: not a TUM pose 't x y z qx qy qz qw' ({err})") from err
+        poses.append((x, y, 2.0 * math.atan2(qz, qw)))
+    return np.asarray(t_ns, dtype=np.int64), np.asarray(poses, dtype=np.float64).reshape(len(poses), 3)
 
 
 def write_tum(path: str | os.PathLike[str], t_ns: ArrayLike, poses: ArrayLike) -> None:

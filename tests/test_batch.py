@@ -32,7 +32,6 @@ from gndreplay.batch import (
     load_thresholds,
     make_tasks,
     metrics_from_summary,
-    read_tum,
     run_batch,
     run_tasks,
     summary_csv,
@@ -302,14 +301,14 @@ def test_metrics_from_summary() -> None:
 
 
 def test_read_tum_round_trip(tmp_path: Path) -> None:
-    from gndreplay.evaluation import write_tum
+    from gndreplay.evaluation import read_tum, write_tum
 
     t = [1_700_000_000_123_456_789, 1_700_000_001_000_000_000]
     poses = [(1.5, -2.0, 0.3), (2.0, 0.25, -3.0)]
     write_tum(tmp_path / "t.tum", t, poses)
     t2, p2 = read_tum(tmp_path / "t.tum")
-    assert t2 == t
-    assert [c for pose in p2 for c in pose] == pytest.approx([c for pose in poses for c in pose], abs=1e-12)
+    assert t2.tolist() == t
+    assert p2.ravel().tolist() == pytest.approx([c for pose in poses for c in pose], abs=1e-12)
     (tmp_path / "bad.tum").write_text("1.0 2 3\n")
     with pytest.raises(GndReplayError, match=r"bad.tum line 1: not a TUM pose .*found 3"):
         read_tum(tmp_path / "bad.tum")

@@ -15,7 +15,7 @@ from .metrics import COUNT_METRICS, LATENCY_METRICS, RELATION_METRICS, metrics_f
 from .report import CSV_COLUMNS, junit_xml, summary_csv, summary_md
 from .run import DASK_EXTRA_HINT, BatchResult, make_tasks, run_batch, run_tasks
 from .thresholds import DEFAULT_LIMITS, THRESHOLD_KEYS, InputRule, Thresholds, check_limits, load_thresholds
-from .worker import InputResult, Runner, RunOutcome, Status, Task, execute, pin_threads, read_tum, run_input
+from .worker import InputResult, Runner, RunOutcome, Status, Task, execute, pin_threads, run_input
 
 __all__ = [
     "COUNT_METRICS",
@@ -46,7 +46,6 @@ __all__ = [
     "make_tasks",
     "metrics_from_summary",
     "pin_threads",
-    "read_tum",
     "run_batch",
     "run_input",
     "run_tasks",

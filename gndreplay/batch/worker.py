@@ -8,7 +8,6 @@ numeric libraries read their thread settings.
 from __future__ import annotations
 
 import logging
-import math
 import os
 import time
 import traceback
@@ -37,7 +36,6 @@ __all__ = [
     "error_result",
     "execute",
     "pin_threads",
-    "read_tum",
     "run_input",
 ]
 
@@ -172,54 +170,13 @@ def error_result(
     )
 
 
-def _seconds_to_ns(text: str) -> int:
-    whole, _, frac = text.partition(".")
-    sign = -1 if whole.startswith("-") else 1
-    return int(whole) * 1_000_000_000 + sign * (int((frac + "000000000")[:9]) if frac else 0)
-
-
-def read_tum(path: Path) -> tuple[list[int], list[tuple[float, float, float]]]:
-    """Read a planar TUM trajectory (``t x y z qx qy qz qw``): stamps [ns] and (x, y, yaw) poses.
-
-    Raises:
-        GndReplayError: unreadable file or a line without 8 numbers (message names file and line).
-    """
-    try:
-        text = path.read_text()
-    except OSError as err:
-        raise GndReplayError(f"{path}: cannot read trajectory ({err.strerror})") from err
-    t_ns: list[int] = []
-    poses: list[tuple[float, float, float]] = []
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        tok = line.split()
-        if not tok or tok[0].startswith("#"):
-            continue
-        try:
-            if len(tok) != 8:
-                raise ValueError(f"expected 8 fields, found {len(tok)}")
-            x, y, qz, qw = float(tok[1]), float(tok[2]), float(tok[6]), float(tok[7])
-            t_ns.append(_seconds_to_ns(tok[0]))
-        except ValueError as err:
-            raise GndReplayError(
-                f"{path} line {lineno}: not a TUM pose 't x y z qx qy qz qw' ({err})"
-            ) from err
-        poses.append((x, y, 2.0 * math.atan2(qz, qw)))
-    return t_ns, poses
-
-
 def _scored_metrics(outcome: RunOutcome, job: Job) -> dict[str, float]:
     metrics = metrics_from_summary(outcome.data)
     if job.relations is not None:
-        import numpy as np
-
-        from ..evaluation import load_relations, relation_errors
+        from ..evaluation import load_relations, read_tum, relation_errors
 
         t_ns, poses = read_tum(Path(outcome.out_dir) / "trajectory_corrected.tum")
-        stats = relation_errors(
-            np.asarray(t_ns, dtype=np.int64),
-            np.asarray(poses, dtype=np.float64).reshape(-1, 3),
-            load_relations(job.relations),
-        )
+        stats = relation_errors(t_ns, poses, load_relations(job.relations))
         metrics.update(relation_metrics(stats))
     return metrics
 

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import GndReplayError
+from ..evaluation import read_tum as read_tum_ns
 from .maps import MAPS_FILE, MapsData, load_maps
 
 __all__ = ["Commands", "RunData", "RunDirError", "Timing", "load_run", "read_commands", "read_timing",
@@ -148,21 +149,18 @@ def read_timing(path: Path) -> Timing:
 
 
 def read_tum(path: Path) -> F64:
-    """A planar TUM trajectory as (M, 4) t [s], x, y [m], yaw [rad] (yaw from qz, qw).
+    """A planar TUM trajectory as (M, 4) t [s], x, y [m], yaw [rad] (see ``evaluation.read_tum``).
 
     Raises:
         RunDirError: missing file or not 8 numbers per line.
     """
     try:
-        data = np.loadtxt(_need(path), comments="#", dtype=np.float64, ndmin=2)
-    except ValueError as err:
-        raise RunDirError(f"{path}: not a TUM trajectory (t x y z qx qy qz qw): {err}") from err
-    if data.size == 0:
-        return np.zeros((0, 4))
-    if data.shape[1] != 8:
-        raise RunDirError(f"{path}: expected 8 columns (t x y z qx qy qz qw), got {data.shape[1]}")
-    yaw = 2.0 * np.arctan2(data[:, 6], data[:, 7])
-    return np.column_stack([data[:, 0], data[:, 1], data[:, 2], yaw])
+        t_ns, poses = read_tum_ns(_need(path))
+    except RunDirError:
+        raise
+    except GndReplayError as err:
+        raise RunDirError(str(err)) from err
+    return np.column_stack([t_ns / 1e9, poses]) if t_ns.size else np.zeros((0, 4))
 
 
 def load_run(run_dir: Path) -> RunData:
