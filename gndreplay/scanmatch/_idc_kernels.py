@@ -15,7 +15,7 @@ from numba import njit
 TWO_PI = 2.0 * math.pi
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _bin(a: float, inv_res: float, n_bins: int) -> int:
     b = int((a + math.pi) * inv_res)
     if b < 0:
@@ -25,7 +25,7 @@ def _bin(a: float, inv_res: float, n_bins: int) -> int:
     return b
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def fast_atan2(y: float, x: float) -> float:
     """atan2 within 2e-6 rad, ~5x faster than math.atan2 (minimax polynomial of atan on [0, 1]).
 
@@ -49,7 +49,7 @@ def fast_atan2(y: float, x: float) -> float:
     return a
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _pm_pi(a: float) -> float:
     """Bring a difference of two angles in (-pi, pi] (so within (-2 pi, 2 pi)) back to [-pi, pi]."""
     if a > math.pi:
@@ -59,7 +59,7 @@ def _pm_pi(a: float) -> float:
     return a
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r, blend_m, seg_abs_m, seg_rel, gap_bins):
     """Render keyframe points (world frame) as a polar reference scan seen from the pose (ox, oy, oth).
 
@@ -100,18 +100,17 @@ def render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r, blend_m, se
             ly[m] = y
             lr[m] = r
             lb[m] = b
-            if r < rmin[b]:
-                rmin[b] = r
+            rmin[b] = min(r, rmin[b])  # no branch: which keyframe's point is nearer is unpredictable
             m += 1
     sx = np.zeros(n_bins)
     sy = np.zeros(n_bins)
     cnt = np.zeros(n_bins)
     for i in range(m):
         b = lb[i]
-        if lr[i] <= rmin[b] + blend_m:
-            sx[b] += lx[i]
-            sy[b] += ly[i]
-            cnt[b] += 1.0
+        w = 1.0 if lr[i] <= rmin[b] + blend_m else 0.0  # a select, not an unpredictable branch
+        sx[b] += w * lx[i]
+        sy[b] += w * ly[i]
+        cnt[b] += w
     ref_x = np.zeros(n_bins)
     ref_y = np.zeros(n_bins)
     ref_r = np.zeros(n_bins)
@@ -128,7 +127,9 @@ def render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r, blend_m, se
         if not ok[b]:
             continue
         for g in range(1, gap_bins + 1):
-            j = (b + g) % n_bins
+            j = b + g
+            if j >= n_bins:
+                j -= n_bins
             if ok[j]:
                 lim = seg_abs_m + seg_rel * max(ref_r[b], ref_r[j]) * g
                 if (ref_x[j] - ref_x[b]) ** 2 + (ref_y[j] - ref_y[b]) ** 2 <= lim * lim:
@@ -137,7 +138,7 @@ def render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r, blend_m, se
     return ref_x, ref_y, ref_r, ref_a, ok, nxt
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _closest_on_polyline(qx, qy, rq2, bq, w_max, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il, best_d2,
                          sin2):
     """Closest point to q = (qx, qy) on the reference polyline, searching outwards from q's bin bq.
@@ -152,30 +153,45 @@ def _closest_on_polyline(qx, qy, rq2, bq, w_max, ref_x, ref_y, nxt, cover, seg_e
     n_bins = ref_x.shape[0]
     jbest = -1
     ubest = 0.0
+    # a segment covers consecutive bins: skip a j just tried on the same side (or at k = 0), its distance
+    # is the same and cannot beat best_d2 (strict <): the result is that of trying every bin. Points without
+    # a segment have seg_ex = seg_ey = seg_il = 0 (u = 0), and so do zero-length segments.
+    last_r = -2
+    last_l = -2
     for k in range(0, w_max + 1):
-        if rq2 * sin2[k] > best_d2:
+        if rq2 * sin2[np.uint64(k)] > best_d2:
             break
-        for side in range(2):
-            if side == 0:
-                b = bq + k
-                if b >= n_bins:
-                    b -= n_bins
-            else:
-                if k == 0:
-                    continue
-                b = bq - k
-                if b < 0:
-                    b += n_bins
-            j = cover[b]
-            if j < 0:
-                continue
+        b = bq + k
+        if b >= n_bins:
+            b -= n_bins
+        j = cover[b]
+        if j >= 0 and j != last_r:
+            last_r = j
+            if k == 0:
+                last_l = j
             dx = qx - ref_x[j]
             dy = qy - ref_y[j]
-            u = 0.0
-            if nxt[j] >= 0:
-                u = min(1.0, max(0.0, (dx * seg_ex[j] + dy * seg_ey[j]) * seg_il[j]))
-                dx -= u * seg_ex[j]
-                dy -= u * seg_ey[j]
+            u = min(1.0, max(0.0, (dx * seg_ex[j] + dy * seg_ey[j]) * seg_il[j]))
+            dx -= u * seg_ex[j]
+            dy -= u * seg_ey[j]
+            d2 = dx * dx + dy * dy
+            if d2 < best_d2:
+                best_d2 = d2
+                jbest = j
+                ubest = u
+        if k == 0:
+            continue
+        b = bq - k
+        if b < 0:
+            b += n_bins
+        j = cover[b]
+        if j >= 0 and j != last_l:
+            last_l = j
+            dx = qx - ref_x[j]
+            dy = qy - ref_y[j]
+            u = min(1.0, max(0.0, (dx * seg_ex[j] + dy * seg_ey[j]) * seg_il[j]))
+            dx -= u * seg_ex[j]
+            dy -= u * seg_ey[j]
             d2 = dx * dx + dy * dy
             if d2 < best_d2:
                 best_d2 = d2
@@ -184,7 +200,7 @@ def _closest_on_polyline(qx, qy, rq2, bq, w_max, ref_x, ref_y, nxt, cover, seg_e
     return jbest, ubest, best_d2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _matching_range(rq, aq, bq, bw, ref_r, ref_a, ok, nxt):
     """Matching-range-point rule: the bearing offset d, |d| <= bw and smallest, at which the reference
     polyline (range interpolated linearly in bearing) has the range rq of the point at bearing aq.
@@ -216,7 +232,7 @@ def _matching_range(rq, aq, bq, bw, ref_r, ref_a, ok, nxt):
             if m < 0:
                 continue
             d1 = _pm_pi(ref_a[j] - aq)
-            d2 = _pm_pi(ref_a[m] - aq)
+            d2 = _pm_pi(ref_a[np.uint64(m)] - aq)
             if side == 0 and min(d1, d2) > best:
                 open_r = False
                 continue
@@ -224,7 +240,7 @@ def _matching_range(rq, aq, bq, bw, ref_r, ref_a, ok, nxt):
                 open_l = False
                 continue
             r1 = ref_r[j] - rq
-            r2 = ref_r[m] - rq
+            r2 = ref_r[np.uint64(m)] - rq
             if r1 * r2 > 0.0 or abs(d2 - d1) > math.pi:
                 continue
             u = 0.5 if r1 == r2 else r1 / (r1 - r2)
@@ -236,7 +252,7 @@ def _matching_range(rq, aq, bq, bw, ref_r, ref_a, ok, nxt):
     return found, dbest
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _weighted_median(v, w):
     """Weighted median of v: a robust location of the matching-range-point offsets."""
     order = np.argsort(v)
@@ -249,7 +265,7 @@ def _weighted_median(v, w):
     return v[order[-1]]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _sin2_table(n_bins, w_max):
     """sin² of the smallest bearing difference, (k - 2) bins clamped to [0, pi/2], of a segment first met k
     bins away from the query's bin (see _closest_on_polyline)."""
@@ -260,7 +276,7 @@ def _sin2_table(n_bins, w_max):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def segments(ref_x, ref_y, ok, nxt, normal_chord_m):
     """Per bin: the vector to the next point of the polyline, its inverse squared length, the unit normal of
     the surface there, and ``cover`` (see _closest_on_polyline).
@@ -277,9 +293,14 @@ def segments(ref_x, ref_y, ok, nxt, normal_chord_m):
         m = nxt[j]
         if m >= 0:
             prv[m] = j
-            span = (m - j) % n_bins
+            span = m - j
+            if span < 0:
+                span += n_bins
             for g in range(span):
-                cover[(j + g) % n_bins] = j
+                jg = j + g
+                if jg >= n_bins:
+                    jg -= n_bins
+                cover[jg] = j
     for j in range(n_bins):
         if cover[j] < 0 and ok[j]:
             cover[j] = j
@@ -323,7 +344,7 @@ def segments(ref_x, ref_y, ok, nxt, normal_chord_m):
     return ex, ey, il, nx, ny, cover
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, seg_ex, seg_ey, seg_il, x0, y0, th0,
               max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride,
               mrp_every):
@@ -356,6 +377,7 @@ def idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, seg_ex, se
         bw = max(win_min, win0 * math.exp(-it / win_tau))
         gate = max(gate_min, gate0 * math.exp(-it / win_tau))
         gate2 = gate * gate
+        w_mrp = min(n_bins // 2 - 1, int(bw * n_bins / TWO_PI) + 2)
         c, s = math.cos(th), math.sin(th)
         n_m = 0
         n_cp = 0
@@ -367,14 +389,61 @@ def idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, seg_ex, se
         sxy = 0.0
         syx = 0.0
         syy = 0.0
-        for i_s, i in enumerate(range(0, n, stride)):
+        mrp_count = 0  # i_s % mrp_every without the integer division: every mrp_every-th point does MRP
+        for i in range(0, n, stride):
             qx = c * px[i] - s * py[i] + x
             qy = s * px[i] + c * py[i] + y
             rq2 = qx * qx + qy * qy
             aq = fast_atan2(qy, qx)
             bq = _bin(aq, inv_res, n_bins)
-            j, u, _ = _closest_on_polyline(qx, qy, rq2, bq, max_cp_bins, ref_x, ref_y, nxt, cover, seg_ex,
-                                           seg_ey, seg_il, gate2, sin2)
+            # closest point (see _closest_on_polyline; inlined by hand: a call passing arrays costs an
+            # atomic incref/decref per array, more than the search itself)
+            best_d2 = gate2
+            j = -1
+            u = 0.0
+            last_r = -2
+            last_l = -2
+            for k in range(0, max_cp_bins + 1):
+                if rq2 * sin2[np.uint64(k)] > best_d2:
+                    break
+                b = bq + k
+                if b >= n_bins:
+                    b -= n_bins
+                jj = cover[np.uint64(b)]
+                uj = np.uint64(jj)  # unsigned index: no negative-index wraparound code
+                if jj >= 0 and jj != last_r:
+                    last_r = jj
+                    if k == 0:
+                        last_l = jj
+                    dx = qx - ref_x[uj]
+                    dy = qy - ref_y[uj]
+                    uu = min(1.0, max(0.0, (dx * seg_ex[uj] + dy * seg_ey[uj]) * seg_il[uj]))
+                    dx -= uu * seg_ex[uj]
+                    dy -= uu * seg_ey[uj]
+                    dd = dx * dx + dy * dy
+                    if dd < best_d2:
+                        best_d2 = dd
+                        j = jj
+                        u = uu
+                if k == 0:
+                    continue
+                b = bq - k
+                if b < 0:
+                    b += n_bins
+                jj = cover[np.uint64(b)]
+                uj = np.uint64(jj)  # unsigned index: no negative-index wraparound code
+                if jj >= 0 and jj != last_l:
+                    last_l = jj
+                    dx = qx - ref_x[uj]
+                    dy = qy - ref_y[uj]
+                    uu = min(1.0, max(0.0, (dx * seg_ex[uj] + dy * seg_ey[uj]) * seg_il[uj]))
+                    dx -= uu * seg_ex[uj]
+                    dy -= uu * seg_ey[uj]
+                    dd = dx * dx + dy * dy
+                    if dd < best_d2:
+                        best_d2 = dd
+                        j = jj
+                        u = uu
             if j >= 0:
                 cx = ref_x[j] + u * seg_ex[j]
                 cy = ref_y[j] + u * seg_ey[j]
@@ -387,9 +456,63 @@ def idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, seg_ex, se
                 sxy += px[i] * cy
                 syx += py[i] * cx
                 syy += py[i] * cy
-            if i_s % mrp_every != 0:
+            mrp_count -= 1
+            if mrp_count > 0:
                 continue
-            fm, d = _matching_range(math.sqrt(rq2), aq, bq, bw, ref_r, ref_a, ok, nxt)
+            mrp_count = mrp_every
+            # matching range point (see _matching_range; inlined by hand like the closest point)
+            rq = math.sqrt(rq2)
+            best = bw
+            d = 0.0
+            fm = False
+            open_r = True
+            open_l = True
+            # (the two sides written out; nxt is -1 where ok is False, so ok needs no test)
+            for k in range(0, w_mrp + 1):
+                if not (open_r or open_l):
+                    break
+                if open_r:
+                    jj = bq + k
+                    if jj >= n_bins:
+                        jj -= n_bins
+                    uj = np.uint64(jj)  # unsigned index: no negative-index wraparound code
+                    m = nxt[uj]
+                    if m >= 0:
+                        d1 = _pm_pi(ref_a[uj] - aq)
+                        d2 = _pm_pi(ref_a[np.uint64(m)] - aq)
+                        if min(d1, d2) > best:
+                            open_r = False
+                        else:
+                            r1 = ref_r[uj] - rq
+                            r2 = ref_r[np.uint64(m)] - rq
+                            if r1 * r2 <= 0.0 and abs(d2 - d1) <= math.pi:
+                                uu = 0.5 if r1 == r2 else r1 / (r1 - r2)
+                                dd = d1 + uu * (d2 - d1)
+                                if abs(dd) < best:
+                                    best = abs(dd)
+                                    d = dd
+                                    fm = True
+                if open_l:
+                    jj = bq - k - 1
+                    if jj < 0:
+                        jj += n_bins
+                    uj = np.uint64(jj)  # unsigned index: no negative-index wraparound code
+                    m = nxt[uj]
+                    if m >= 0:
+                        d1 = _pm_pi(ref_a[uj] - aq)
+                        d2 = _pm_pi(ref_a[np.uint64(m)] - aq)
+                        if max(d1, d2) < -best:
+                            open_l = False
+                        else:
+                            r1 = ref_r[uj] - rq
+                            r2 = ref_r[np.uint64(m)] - rq
+                            if r1 * r2 <= 0.0 and abs(d2 - d1) <= math.pi:
+                                uu = 0.5 if r1 == r2 else r1 / (r1 - r2)
+                                dd = d1 + uu * (d2 - d1)
+                                if abs(dd) < best:
+                                    best = abs(dd)
+                                    d = dd
+                                    fm = True
             if fm:
                 md[n_m] = d
                 mw[n_m] = pr[i] * pr[i]
@@ -417,7 +540,7 @@ def idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, seg_ex, se
     return x, y, th, it, converged
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _pairs_point_to_line(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il, seg_nx, seg_ny,
                          gate2, max_cp_bins, sin2, h, g):
     """Closest-point pairs at pose (x, y, th): fills the point-to-line normal equations h (3x3), g (3) and
@@ -437,8 +560,56 @@ def _pairs_point_to_line(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg
         qx = rx + x
         qy = ry + y
         bq = _bin(fast_atan2(qy, qx), inv_res, n_bins)
-        j, u, d2 = _closest_on_polyline(qx, qy, qx * qx + qy * qy, bq, max_cp_bins, ref_x, ref_y, nxt, cover,
-                                        seg_ex, seg_ey, seg_il, gate2, sin2)
+        rq2 = qx * qx + qy * qy
+        # closest point (see _closest_on_polyline; inlined by hand: a call passing arrays costs an
+        # atomic incref/decref per array, more than the search itself)
+        best_d2 = gate2
+        j = -1
+        u = 0.0
+        last_r = -2
+        last_l = -2
+        for k in range(0, max_cp_bins + 1):
+            if rq2 * sin2[np.uint64(k)] > best_d2:
+                break
+            b = bq + k
+            if b >= n_bins:
+                b -= n_bins
+            jj = cover[np.uint64(b)]
+            uj = np.uint64(jj)  # unsigned index: no negative-index wraparound code
+            if jj >= 0 and jj != last_r:
+                last_r = jj
+                if k == 0:
+                    last_l = jj
+                dx = qx - ref_x[uj]
+                dy = qy - ref_y[uj]
+                uu = min(1.0, max(0.0, (dx * seg_ex[uj] + dy * seg_ey[uj]) * seg_il[uj]))
+                dx -= uu * seg_ex[uj]
+                dy -= uu * seg_ey[uj]
+                dd = dx * dx + dy * dy
+                if dd < best_d2:
+                    best_d2 = dd
+                    j = jj
+                    u = uu
+            if k == 0:
+                continue
+            b = bq - k
+            if b < 0:
+                b += n_bins
+            jj = cover[np.uint64(b)]
+            uj = np.uint64(jj)  # unsigned index: no negative-index wraparound code
+            if jj >= 0 and jj != last_l:
+                last_l = jj
+                dx = qx - ref_x[uj]
+                dy = qy - ref_y[uj]
+                uu = min(1.0, max(0.0, (dx * seg_ex[uj] + dy * seg_ey[uj]) * seg_il[uj]))
+                dx -= uu * seg_ex[uj]
+                dy -= uu * seg_ey[uj]
+                dd = dx * dx + dy * dy
+                if dd < best_d2:
+                    best_d2 = dd
+                    j = jj
+                    u = uu
+        d2 = best_d2
         if j < 0:
             continue
         cx = ref_x[j] + u * seg_ex[j]
@@ -466,7 +637,7 @@ def _pairs_point_to_line(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg
     return pairs, sd
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il, seg_nx, seg_ny, x0, y0,
                          th0, max_iter, gate, tol_t, tol_r, max_cp_bins, w_t, w_r):
     """Gauss-Newton refinement on the closest-point pairs with the point-to-line distance.
@@ -514,7 +685,7 @@ def polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_i
     return x, y, th, it, pairs, (sd / pairs if pairs > 0 else np.inf), info
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def match_quality(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il, seg_nx, seg_ny, gate,
                   max_cp_bins):
     """Closest-point pairs at a pose: (pairs, mean distance [m], 3x3 point-to-line information).
@@ -529,3 +700,37 @@ def match_quality(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, se
     pairs, sd = _pairs_point_to_line(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il,
                                      seg_nx, seg_ny, gate * gate, max_cp_bins, sin2, h, g)
     return pairs, (sd / pairs if pairs > 0 else np.inf), h
+
+
+@njit(cache=True, error_model="numpy")
+def match_scan(kf_xy, kf_n, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend_m, seg_abs_m, seg_rel,
+               gap_bins, normal_chord_m, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r,
+               max_cp_bins, stride, mrp_every, polish_iter, w_t, w_r):
+    """The whole match in one call (one dispatch instead of four): render the reference at (ox, oy, oth),
+    its segments, IDC from the prediction, then the point-to-line polish (``polish_iter`` > 0) or just the
+    quality of the IDC pose.
+
+    Returns (x, y, th, iterations, pairs, mean pair distance [m], 3x3 point-to-line information, smallest
+    eigenvalue of its translational 2x2 block).
+    """
+    ref_x, ref_y, ref_r, ref_a, ok, nxt = render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r,
+                                                           blend_m, seg_abs_m, seg_rel, gap_bins)
+    ex, ey, il, nx, ny, cover = segments(ref_x, ref_y, ok, nxt, normal_chord_m)
+    x, y, th, iters, _ = idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, 0.0,
+                                   0.0, 0.0, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r,
+                                   max_cp_bins, stride, mrp_every)
+    if polish_iter > 0:
+        x, y, th, it2, pairs, resid, info = polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, ex, ey, il,
+                                                                 nx, ny, x, y, th, polish_iter, gate_min,
+                                                                 tol_t, tol_r, max_cp_bins, w_t, w_r)
+        iters += it2
+    else:
+        pairs, resid, info = match_quality(px, py, x, y, th, ref_x, ref_y, nxt, cover, ex, ey, il, nx, ny,
+                                           gate_min, max_cp_bins)
+    # smallest eigenvalue of the symmetric 2x2 block [[a, b], [b, c]]
+    a = info[0, 0]
+    b = info[0, 1]
+    c = info[1, 1]
+    hm = 0.5 * (a - c)
+    weakest = 0.5 * (a + c) - math.sqrt(hm * hm + b * b)
+    return x, y, th, iters, pairs, resid, info, weakest

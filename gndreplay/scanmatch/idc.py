@@ -255,32 +255,23 @@ class IdcMatcher:
         need = max(p.min_pairs, math.ceil(p.min_pair_fraction * n))
         if n < need:
             return _Outcome(laser_prior, 0, math.nan, 0, f"too few valid beams: {n} < {need}")
-        ref_x, ref_y, ref_r, ref_a, ok, nxt = k.render_reference(
-            self._kf_xy, self._kf_n, laser_prior[0], laser_prior[1], laser_prior[2], p.n_bins,
-            p.min_range_m, p.max_range_m + p.gate0_m, p.blend_m, p.seg_abs_m, p.seg_rel, p.gap_bins)
-        ex, ey, il, nx, ny, cover = k.segments(ref_x, ref_y, ok, nxt, p.normal_chord_m)
         stride = max(1, n // p.idc_points)
-        x, y, th, iters, _ = k.idc_align(
-            px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, 0.0, 0.0, 0.0,
-            p.max_iterations, p.win0_rad, p.win_tau, p.win_min_rad, p.gate0_m, p.gate_min_m, p.tol_m,
-            p.tol_rad, p.max_cp_bins, stride, max(1, n // (stride * p.mrp_points)))
+        w_t = w_r = 0.0
         if p.polish_iterations > 0:
             w_t = (p.pair_sigma_m / (p.prior_sigma_m + p.prior_sigma_rel * math.hypot(incr[0], incr[1]))) ** 2
             w_r = (p.pair_sigma_m / (p.prior_sigma_rad + p.prior_sigma_rel_rad * abs(incr[2]))) ** 2
-            x, y, th, it2, pairs, resid, info = k.polish_point_to_line(
-                px, py, ref_x, ref_y, nxt, cover, ex, ey, il, nx, ny, x, y, th, p.polish_iterations,
-                p.gate_min_m, p.tol_m, p.tol_rad, p.max_cp_bins, w_t, w_r)
-            iters += it2
-        else:
-            pairs, resid, info = k.match_quality(px, py, x, y, th, ref_x, ref_y, nxt, cover, ex, ey, il, nx,
-                                                 ny, p.gate_min_m, p.max_cp_bins)
+        x, y, th, iters, pairs, resid, info, weakest = k.match_scan(
+            self._kf_xy, self._kf_n, laser_prior[0], laser_prior[1], laser_prior[2], px, py, pr, p.n_bins,
+            p.min_range_m, p.max_range_m + p.gate0_m, p.blend_m, p.seg_abs_m, p.seg_rel, p.gap_bins,
+            p.normal_chord_m, p.max_iterations, p.win0_rad, p.win_tau, p.win_min_rad, p.gate0_m, p.gate_min_m,
+            p.tol_m, p.tol_rad, p.max_cp_bins, stride, max(1, n // (stride * p.mrp_points)),
+            p.polish_iterations, w_t, w_r)
         self._last_info = info
         est = _compose(laser_prior, np.array([x, y, th]))
         if pairs < need:
             return _Outcome(est, pairs, resid, iters, f"too few pairs: {pairs} < {need}")
         if resid > p.max_residual_m:
             return _Outcome(est, pairs, resid, iters, f"residual {resid:.3f} m > {p.max_residual_m} m")
-        weakest = float(np.linalg.eigvalsh(info[:2, :2])[0])
         if weakest < p.degenerate_min_info:
             return _Outcome(est, pairs, resid, iters,
                             f"degenerate geometry: translation unobservable (information {weakest:.1f} "
