@@ -690,3 +690,17 @@ def test_cli_batch_over_the_dev_logs_and_a_corrupted_file(tmp_path: Path, datase
     assert all(c.find("failure") is None for c in cases)
     rows = (tmp_path / "batch" / "summary.csv").read_text().splitlines()
     assert len(rows) == 5 and sum(",pass," in r for r in rows) == 3
+
+
+def test_largest_inputs_are_submitted_first(tmp_path: Path) -> None:
+    from gndreplay.batch.run import largest_first
+
+    sizes = {"small.clf": 10, "big.clf": 1000, "mid.clf": 100, "tie.clf": 100}
+    for name, n in sizes.items():
+        (tmp_path / name).write_bytes(b"x" * n)
+    from gndreplay.config import Config
+    from gndreplay.replay import RunOptions
+
+    jobs = expand_inputs([tmp_path / n for n in sizes])
+    tasks = make_tasks(jobs, cfg=Config(), options=RunOptions(), thresholds=Thresholds(), out_dir=tmp_path)
+    assert [tasks[i].job.name for i in largest_first(tasks)] == ["big", "mid", "tie", "small"]

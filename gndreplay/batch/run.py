@@ -169,6 +169,23 @@ def _remove_stale_temp_dirs(task: Task) -> None:
                 shutil.rmtree(entry, ignore_errors=True)
 
 
+def _input_bytes(task: Task) -> int:
+    """Size of an input on disk (a ROS2 bag folder: its files), a cheap proxy for its replay time."""
+    path = Path(task.job.path)
+    try:
+        if path.is_dir():
+            return sum(f.stat().st_size for f in path.iterdir() if f.is_file())
+        return path.stat().st_size
+    except OSError:
+        return 0
+
+
+def largest_first(tasks: Sequence[Task]) -> list[int]:
+    """Submission order: largest inputs first (longest-processing-time scheduling), so a long log does not
+    start last and leave the other workers idle; results are still reported in input order."""
+    return sorted(range(len(tasks)), key=lambda i: (-_input_bytes(tasks[i]), i))
+
+
 def _pool_run(
     tasks: Sequence[Task], runner: Runner, workers: int, emit: Callable[[int, InputResult], None]
 ) -> None:
@@ -178,9 +195,9 @@ def _pool_run(
         max_workers=min(workers, len(tasks)), mp_context=ctx, initializer=pin_threads
     ) as pool:
         futures: dict[Future[InputResult], int] = {}
-        for i, task in enumerate(tasks):
+        for i in largest_first(tasks):
             try:
-                futures[pool.submit(execute, task, runner)] = i
+                futures[pool.submit(execute, tasks[i], runner)] = i
             except BrokenProcessPool:
                 broken.append(i)
         try:
@@ -226,8 +243,8 @@ def _dask_run(
         raise ConfigError(f"cannot connect to the dask scheduler at {address!r}: {err}") from err
     with client:
         futures = {
-            client.submit(execute, task, runner, key=f"gndreplay-batch-{batch_id}-{i}", pure=False): i
-            for i, task in enumerate(tasks)
+            client.submit(execute, tasks[i], runner, key=f"gndreplay-batch-{batch_id}-{i}", pure=False): i
+            for i in largest_first(tasks)
         }
         pending = set(futures)
         try:
