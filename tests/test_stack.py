@@ -76,15 +76,16 @@ def test_goal_inside_an_obstacle_switches_to_mnd(name: str) -> None:
 
 
 @pytest.mark.parametrize("name", PRESET_NAMES)
-def test_enclosed_robot_has_no_path_and_never_drives(name: str) -> None:
+def test_enclosed_robot_stops_and_rotates(name: str) -> None:
     cfg = PRESETS[name]
     ring = regular_polygon(0.0, 0.0, cfg.robot.outer_radius_m + 0.15, sides=24)
     results = run(cfg, np.vstack([ROOM, ring]), Pose2D(0, 0, 0), (4.0, 0.0), n=4, beams=AROUND)
-    for r in results[1:]:
+    for r in results:
         assert r.flags & Flag.PLANNER_NO_PATH
         assert r.flags & Flag.REACTOR_NO_REGION
-        assert r.mode in (Mode.ROTATE, Mode.EMERGENCY, Mode.ESCAPE)
+        assert r.mode is Mode.ROTATE  # GND: no free walking area -> stop and rotate
         assert r.v_mps == 0.0 and r.vy_mps == 0.0
+        assert r.w_radps == pytest.approx(cfg.supervisor.rotate_w_frac * cfg.robot.wmax_radps)
 
 
 def test_half_seen_enclosure_plans_through_the_unknown_side() -> None:
