@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -235,13 +236,9 @@ def _parse_goal(value: str | None) -> tuple[float, float] | None:
         x, y = (float(p) for p in parts)
     except ValueError:
         raise typer.BadParameter(f"expected X,Y in metres (e.g. 3.5,-1.0), got {value!r}") from None
-    if not all(map(_finite, (x, y))):
+    if not (math.isfinite(x) and math.isfinite(y)):
         raise typer.BadParameter(f"the goal must be finite, got {value!r}")
     return (x, y)
-
-
-def _finite(x: float) -> bool:
-    return x == x and abs(x) != float("inf")
 
 
 def _sample_log() -> Path:
@@ -701,8 +698,6 @@ def _num(value: object, fmt: str = "{:.2f}") -> str:
 
 
 def _with_matcher(cfg: object, matcher: str) -> object:
-    import dataclasses
-
     from .config import Config, apply_overrides
 
     assert isinstance(cfg, Config)
@@ -710,8 +705,6 @@ def _with_matcher(cfg: object, matcher: str) -> object:
         return apply_overrides(cfg, {"scanmatch": {"method": matcher}})
     except GndReplayError:
         raise typer.BadParameter(f"--matcher must be idc, kiss-icp or odom, got {matcher!r}") from None
-    finally:
-        del dataclasses
 
 
 def _run_sinks(*, figures: bool, mcap: bool) -> list[object]:

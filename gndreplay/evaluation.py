@@ -160,10 +160,7 @@ def relation_errors(t_ns: ArrayLike, poses: ArrayLike, relations: Relations, *,
     Raises:
         ValueError: shapes disagree.
     """
-    t = np.asarray(t_ns, dtype=np.int64)
-    p = np.asarray(poses, dtype=np.float64)
-    if t.ndim != 1 or p.shape != (t.shape[0], 3):
-        raise ValueError(f"poses must be (N, 3) with N = len(t_ns) = {t.shape[0]}, got shape {p.shape}")
+    t, p = _trajectory_arrays(t_ns, poses)
     m = len(relations)
     empty = np.zeros(0)
     if t.size == 0 or m == 0:
@@ -183,6 +180,15 @@ def relation_errors(t_ns: ArrayLike, poses: ArrayLike, relations: Relations, *,
     n_ok = int(ok.sum())
     index = np.flatnonzero(ok).astype(np.int64)
     return RelationStats(n_ok, m - n_ok, tm, ts_, tx, rm, rs, rx, index, e_t, e_r)
+
+
+def _trajectory_arrays(t_ns: ArrayLike, poses: ArrayLike) -> tuple[I64, F64]:
+    """(N,) int64 stamps and (N, 3) float64 poses; ValueError when the shapes disagree."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    p = np.asarray(poses, dtype=np.float64)
+    if t.ndim != 1 or p.shape != (t.shape[0], 3):
+        raise ValueError(f"poses must be (N, 3) with N = len(t_ns) = {t.shape[0]}, got shape {p.shape}")
+    return t, p
 
 
 def _fmt_time(t_ns: int) -> str:
@@ -231,10 +237,7 @@ def write_tum(path: str | os.PathLike[str], t_ns: ArrayLike, poses: ArrayLike) -
     Raises:
         ValueError: shapes disagree.
     """
-    t = np.asarray(t_ns, dtype=np.int64)
-    p = np.asarray(poses, dtype=np.float64)
-    if t.ndim != 1 or p.shape != (t.shape[0], 3):
-        raise ValueError(f"poses must be (N, 3) with N = len(t_ns) = {t.shape[0]}, got shape {p.shape}")
+    t, p = _trajectory_arrays(t_ns, poses)
     half = 0.5 * p[:, 2]
     qz, qw = np.sin(half), np.cos(half)
     lines = [f"{_fmt_time(int(ti))} {x!r} {y!r} 0.0 0.0 0.0 {z!r} {w!r}\n"
