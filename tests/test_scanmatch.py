@@ -326,3 +326,24 @@ def test_inverse_helpers_agree_with_geometry() -> None:
     a, b = np.array([1.0, -2.0, 3.0]), np.array([-0.5, 0.3, -2.9])
     np.testing.assert_allclose(_compose(a, b), compose(a, b), atol=1e-12)
     np.testing.assert_allclose(_inverse(a), inverse(a), atol=1e-12)
+
+
+def test_stopping_after_a_fast_turn_in_a_round_hall_does_not_keep_turning() -> None:
+    """Odometry repeats after a fast turn: stalled (still turning) or stopped? In a round hall every heading
+    matches, so constant velocity alone would keep the estimate turning scan after scan (it did, on ACES);
+    matched against "no motion" too, the robot that stopped stays put."""
+    a = np.linspace(0.0, 2.0 * math.pi, 49)
+    hall = np.stack([np.stack([4 * np.cos(a[:-1]), 4 * np.sin(a[:-1])], 1),
+                     np.stack([4 * np.cos(a[1:]), 4 * np.sin(a[1:])], 1)], 1)
+    start = np.array([0.3, 0.2, 0.0])
+    for turn_deg in (20.0, 45.0, 60.0):
+        truth, odo = [start], [ODOM0]
+        for i in range(10):  # four fast turning scans, then six standing ones with the same odometry
+            step = motion(0.0, 0.0, turn_deg if i < 4 else 0.0)
+            truth.append(compose(truth[-1], step))
+            odo.append(compose(odo[-1], step))
+        m = IdcMatcher()
+        for i, (tp, op) in enumerate(zip(truth, odo, strict=True)):
+            res = m.update(cast(hall, tp, t_ns=i), Pose2D.from_array(op))
+        et, er = pose_error(res.pose, compose(ODOM0, relative(start, truth[-1])))
+        assert et < 0.01 and er < 0.2, (turn_deg, et, er)

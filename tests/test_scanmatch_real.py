@@ -2,11 +2,17 @@
 
 On MIT CSAIL and ACES, idc's mean translational relation error must beat the published scan-matching
 baseline of the benchmark (Kümmerle et al. 2009: CSAIL 0.106 m, ACES 0.173 m), raw odometry and kiss-icp
-(at its best setting on these logs, KissParams defaults) measured here on the same ticks. Runs in ~20 s.
+(at its best setting on these logs, KissParams defaults) measured here on the same ticks.
+
+Most of that error comes from the relations that close loops (scans minutes apart at one place), where it is
+the drift accumulated in between, and drift is chaotic: starting the same matcher one scan later moves idc
+between 0.04 and 0.09 m on CSAIL and kiss-icp between 0.44 and 0.80 m. So every matcher runs from three
+start scans and the medians are compared; idc must beat the baseline from every start. Runs in ~40 s.
 """
 
 from __future__ import annotations
 
+import statistics
 from pathlib import Path
 
 import pytest
@@ -17,7 +23,8 @@ from gndreplay.scanmatch import IdcParams, correct_trajectory, make_matcher, mat
 pytestmark = pytest.mark.slow
 
 LOGS = {"mit-csail": 0.106, "aces": 0.173}  # published scan-matching baseline, mean translational error [m]
-Result = tuple[str, dict[str, RelationStats], dict[str, int]]
+STARTS = (0, 2, 5)  # first scan of each run
+Result = tuple[str, dict[str, list[RelationStats]], dict[str, int]]
 
 
 @pytest.fixture(scope="module", params=sorted(LOGS))
@@ -27,31 +34,40 @@ def errors(request: pytest.FixtureRequest, datasets: Path) -> Result:
     name = request.param
     ticks = list(read_ticks(datasets / "carmen" / f"{name}.clf.bz2"))
     relations = load_relations(datasets / "relations" / f"{name}.relations")
-    stats: dict[str, RelationStats] = {}
+    stats: dict[str, list[RelationStats]] = {}
     failures: dict[str, int] = {}
     for method in ("odom", "idc", "kiss-icp"):
-        row = matcher_report(correct_trajectory(ticks, make_matcher(method)), relations)
-        assert row.relations is not None
-        stats[method], failures[method] = row.relations, row.failures
+        for start in STARTS:
+            row = matcher_report(correct_trajectory(ticks[start:], make_matcher(method)), relations)
+            assert row.relations is not None
+            stats.setdefault(method, []).append(row.relations)
+            failures[method] = max(failures.get(method, 0), row.failures)
     return name, stats, failures
+
+
+def _median(runs: list[RelationStats], field: str) -> float:
+    return statistics.median(getattr(s, field) for s in runs)
 
 
 def test_all_relations_matched(errors: Result) -> None:
     _, stats, _ = errors
-    assert all(s.unmatched == 0 and s.matched > 1000 for s in stats.values())
+    assert all(runs[0].unmatched == 0 for runs in stats.values())  # STARTS[0] == 0: every scan is there
+    assert all(s.matched > 1000 for runs in stats.values() for s in runs)
 
 
 def test_idc_beats_baseline_odometry_and_kiss(errors: Result) -> None:
     name, stats, failures = errors
-    idc = stats["idc"].trans_mean_m
-    assert idc < LOGS[name], f"{name}: idc {idc:.3f} m >= published baseline {LOGS[name]} m"
-    assert idc < stats["odom"].trans_mean_m, f"{name}: idc {idc:.3f} m >= odometry"
-    assert idc < stats["kiss-icp"].trans_mean_m, f"{name}: idc {idc:.3f} m >= kiss-icp"
-    assert stats["idc"].rot_mean_deg < stats["odom"].rot_mean_deg
-    assert failures["idc"] < 0.01 * stats["idc"].matched  # failures are rare on real data
+    worst = max(s.trans_mean_m for s in stats["idc"])
+    assert worst < LOGS[name], f"{name}: idc {worst:.3f} m >= published baseline {LOGS[name]} m"
+    idc = _median(stats["idc"], "trans_mean_m")
+    assert idc < _median(stats["odom"], "trans_mean_m"), f"{name}: idc {idc:.3f} m >= odometry"
+    assert idc < _median(stats["kiss-icp"], "trans_mean_m"), f"{name}: idc {idc:.3f} m >= kiss-icp"
+    assert _median(stats["idc"], "rot_mean_deg") < _median(stats["odom"], "rot_mean_deg")
+    assert failures["idc"] < 0.01 * stats["idc"][0].matched  # failures are rare on real data
 
 
 def test_idc_params_are_the_defaults() -> None:
     """The numbers above are for the defaults; a changed default must be re-benchmarked."""
     p = IdcParams()
-    assert (p.map_keyframes, p.n_bins, p.polish_iterations) == (40, 1440, 6)
+    defaults = (p.map_keyframes, p.keyframe_dist_m, p.n_bins, p.tol_m, p.polish_iterations)
+    assert defaults == (40, 0.5, 1440, 3e-3, 12)

@@ -60,6 +60,25 @@ def _pm_pi(a: float) -> float:
 
 
 @njit(cache=True, error_model="numpy")
+def scan_points(ranges, angles, min_r, max_r):
+    """The beams with a range in [min_r, max_r] (no-return +inf and invalid nan fail the test) as points of
+    the laser frame: (x, y, range), each of length <= len(ranges)."""
+    n = ranges.shape[0]
+    px = np.empty(n)
+    py = np.empty(n)
+    pr = np.empty(n)
+    m = 0
+    for i in range(n):
+        r = ranges[i]
+        if r >= min_r and r <= max_r:
+            px[m] = r * math.cos(angles[i])
+            py[m] = r * math.sin(angles[i])
+            pr[m] = r
+            m += 1
+    return px[:m], py[:m], pr[:m]
+
+
+@njit(cache=True, error_model="numpy")
 def render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r, blend_m, seg_abs_m, seg_rel, gap_bins):
     """Render keyframe points (world frame) as a polar reference scan seen from the pose (ox, oy, oth).
 
