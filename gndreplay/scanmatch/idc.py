@@ -12,7 +12,7 @@ closest-point pairs penalises sliding along walls. A few Gauss-Newton steps on t
 with the point-to-line distance (``polish_iterations``; 0 = pure IDC) finish the alignment; they carry a
 weak odometry prior so that directions the scan cannot observe follow the odometry. This departure from the
 paper is deliberate: on the dev logs the polish lowers the error of the relations between scans less than
-1 s apart from 0.031 to 0.025 m (CSAIL) and roughly halves the drift over loops (benchmarks/scanmatch.py
+1 s apart from 0.031 to 0.025 m (CSAIL) and about halves the mean relation error (benchmarks/scanmatch.py
 prints both, with and without it).
 
 A match fails (odometry increment kept, MATCH_FAILED, ``reason`` says why) on too few pairs, a large
