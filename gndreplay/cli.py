@@ -11,14 +11,23 @@ import functools
 import logging
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Annotated, ParamSpec, TypeVar
+from typing import TYPE_CHECKING, Annotated, ParamSpec, TypeVar, cast
 
 import typer
 
 from . import __version__
 from .errors import GndReplayError
+
+if TYPE_CHECKING:  # the CLI imports its heavy modules lazily, inside the commands, to start fast
+    from rich.console import Console
+
+    from .config import Config
+    from .replay import RunSink
+    from .scanmatch import MatcherReport
+    from .scanmatch.run import Method
+    from .types import Tick
 
 __all__ = ["app", "cli_errors", "main"]
 
@@ -472,14 +481,14 @@ def scanmatch(
     from .io import open_log
     from .scanmatch import METHODS, run_scanmatch
 
-    methods = list(METHODS) if matcher == "all" else [matcher]
-    if any(m not in METHODS for m in methods):
+    if matcher != "all" and matcher not in METHODS:
         raise typer.BadParameter(f"--matcher must be one of {', '.join(METHODS)} or all, got {matcher!r}")
+    methods: list[Method] = list(METHODS) if matcher == "all" else [cast("Method", matcher)]
     cfg = load_config(config)
     refs = load_relations(relations) if relations is not None else None
     out_dir = out if out is not None else Path("out") / f"{_log_stem(log)}-scanmatch"
 
-    def ticks() -> object:
+    def ticks() -> Iterator[Tick]:
         with open_log(log, fmt=fmt, scan_topic=scan_topic, odom_topic=odom_topic, strict=strict) as reader:
             yield from reader.ticks()
 
@@ -496,7 +505,7 @@ def scanmatch(
     _print_scanmatch(rows, relations is not None)
 
 
-def _print_scanmatch(rows: list[object], with_relations: bool) -> None:
+def _print_scanmatch(rows: Sequence[MatcherReport], with_relations: bool) -> None:
     from rich.table import Table
 
     table = Table(title="scan matching, side by side in one run", title_justify="left")
@@ -506,7 +515,7 @@ def _print_scanmatch(rows: list[object], with_relations: bool) -> None:
     for c in cols:
         table.add_column(c, justify="left" if c == "matcher" else "right")
     for r in rows:
-        d = r.to_dict()  # type: ignore[attr-defined]
+        d = r.to_dict()
         cells = [d["method"], f"{d['ms_median']:.2f}", f"{d['ms_p99']:.2f}", str(d["failures"])]
         rel = d["relations"]
         if with_relations and rel is not None:
@@ -521,12 +530,12 @@ def _print_scanmatch(rows: list[object], with_relations: bool) -> None:
     console = _console()
     console.print(table)
     for r in rows:
-        d = r.to_dict()  # type: ignore[attr-defined]
+        d = r.to_dict()
         if d["tum_path"]:
             console.print(f"{d['method']}: {d['scans']} scans -> {d['tum_path']}", highlight=False)
 
 
-def _console() -> object:
+def _console() -> Console:
     """The terminal's console; when stdout is not a terminal, wide enough that tables do not fold."""
     from rich.console import Console
 
@@ -687,7 +696,7 @@ def _print_batch(result: object) -> None:
             _num(m.get("match_failures"), "{:.0f}"),
             why or "",
         )
-    _console().print(table)  # type: ignore[attr-defined]
+    _console().print(table)
     typer.echo(
         f"summary: {result.summary_csv}, {result.summary_md}" + (f", {result.junit}" if result.junit else "")
     )
@@ -697,18 +706,17 @@ def _num(value: object, fmt: str = "{:.2f}") -> str:
     return fmt.format(value) if isinstance(value, int | float) else "-"
 
 
-def _with_matcher(cfg: object, matcher: str) -> object:
-    from .config import Config, apply_overrides
+def _with_matcher(cfg: Config, matcher: str) -> Config:
+    from .config import apply_overrides
 
-    assert isinstance(cfg, Config)
     try:
         return apply_overrides(cfg, {"scanmatch": {"method": matcher}})
     except GndReplayError:
         raise typer.BadParameter(f"--matcher must be idc, kiss-icp or odom, got {matcher!r}") from None
 
 
-def _run_sinks(*, figures: bool, mcap: bool) -> list[object]:
-    sinks: list[object] = []
+def _run_sinks(*, figures: bool, mcap: bool) -> list[RunSink]:
+    sinks: list[RunSink] = []
     if figures:
         from .report import MapSink
 
