@@ -7,6 +7,7 @@ and rows are streamed to files in a temporary directory that is renamed into pla
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -97,16 +98,17 @@ def _make_matcher(cfg: Config) -> Matcher:
 
 
 def _warm_up_matcher(cfg: Config) -> None:
-    """Compile the matcher's kernels on synthetic scans of a bumpy round room before timing (with
-    writable and read-only arrays, as readers may hand out either)."""
-    for read_only in (False, True):
+    """Compile the matcher's kernels on synthetic scans of a bumpy round room before timing, with every
+    mix of writable and read-only ranges and angles (numba compiles each apart; the CARMEN reader hands out
+    writable ranges with shared read-only beam angles)."""
+    for ranges_ro, angles_ro in itertools.product((False, True), repeat=2):
         matcher = _make_matcher(cfg)
         angles = np.linspace(-math.pi / 2, math.pi / 2, 361)
-        angles.flags.writeable = not read_only
+        angles.flags.writeable = not angles_ro
         for k in range(3):
             pose = Pose2D(0.05 * k, 0.0, 0.01 * k)
             ranges = 4.0 + 0.4 * np.sin(5.0 * (angles + pose.theta)) - pose.x * np.cos(angles)
-            ranges.flags.writeable = not read_only
+            ranges.flags.writeable = not ranges_ro
             matcher.update(Scan(t_ns=k, ranges_m=ranges, angles_rad=angles, max_range_m=30.0), pose)
 
 
