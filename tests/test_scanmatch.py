@@ -347,3 +347,27 @@ def test_stopping_after_a_fast_turn_in_a_round_hall_does_not_keep_turning() -> N
             res = m.update(cast(hall, tp, t_ns=i), Pose2D.from_array(op))
         et, er = pose_error(res.pose, compose(ODOM0, relative(start, truth[-1])))
         assert et < 0.01 and er < 0.2, (turn_deg, et, er)
+
+
+def test_standing_robot_gets_the_mean_of_its_matches() -> None:
+    """Odometry repeats after slow motion: every noisy scan measures the same pose, and the corrected pose
+    is their running mean, so it settles instead of jumping with each scan's noise."""
+    segs = room()
+    pose = compose(START, motion(0.05, 0.0, 1.0))
+    odo = compose(ODOM0, motion(0.05, 0.0, 1.0))
+    truth = compose(ODOM0, relative(START, pose))
+    spread, final = {}, {}
+    for average in (False, True):
+        rng = np.random.default_rng(11)
+        m = IdcMatcher(IdcParams(average_when_still=average))
+        m.update(cast(segs, START, noise_m=0.02, rng=rng), Pose2D.from_array(ODOM0))
+        poses = []
+        for i in range(30):  # the robot stopped: the same odometry pose, 30 noisy scans
+            res = m.update(cast(segs, pose, noise_m=0.02, rng=rng, t_ns=i + 1), Pose2D.from_array(odo))
+            assert res.ok, res.reason
+            poses.append(res.pose.as_array())
+        last = np.array(poses[-10:])
+        spread[average] = float(np.max(np.hypot(*(last[:, :2] - last[:, :2].mean(axis=0)).T)))
+        final[average] = pose_error(res.pose, truth)
+    assert spread[True] < 0.3 * spread[False], spread
+    assert final[True][0] < 0.005 and final[True][1] < 0.1, final

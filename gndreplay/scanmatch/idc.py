@@ -18,6 +18,11 @@ prints both, with and without it).
 A match fails (odometry increment kept, MATCH_FAILED, ``reason`` says why) on too few pairs, a large
 residual, a degenerate geometry (a featureless corridor: translation along it unobservable), or a
 correction implausibly far from odometry.
+
+While odometry repeats after slow motion the robot stands still, and the corrected pose is the running mean
+of the matches since it stopped: each scan then measures the same pose against the same map, and taking the
+last one alone let the heading wander by up to +-2 deg in a crowded hall (ACES), an error the rest of the
+run inherits.
 """
 
 from __future__ import annotations
@@ -107,6 +112,11 @@ class IdcParams:
     # odometry stalls (see IdcMatcher._priors): constant velocity while the pose repeats after a step of at
     # least 0.1 m or 5 deg (a robot slowing down to a real stop moves less than that per scan)
     handle_stalls: bool = True
+    # repeated odometry after slow motion: the robot stands, each scan measures the same pose against the same
+    # map, and the corrected pose is their running mean (see IdcMatcher._standing_mean)
+    average_when_still: bool = True
+    still_max_m: float = 0.1
+    still_max_rad: float = math.radians(5.0)
     stall_min_step_m: float = 0.1
     stall_min_step_rad: float = math.radians(5.0)
     fallback_priors: int = 2  # after a failed match, retry from constant velocity, then from no motion
@@ -161,6 +171,9 @@ class IdcMatcher:
         self._stalled = False
         self._failures = 0
         self._last_pairs = 0
+        self._still_ref = ZERO  # standstill averaging (see _standing_mean)
+        self._still_sum = [0.0, 0.0, 0.0]
+        self._still_n = 0
         # keyframe ring: points in the corrected frame, their count, next slot, pose of the newest
         self._kf_xy = np.zeros((self.params.map_keyframes, 0, 2))
         self._kf_n = np.zeros(self.params.map_keyframes, dtype=np.int64)
@@ -193,9 +206,10 @@ class IdcMatcher:
         return bool(math.hypot(d[0], d[1]) >= p.keyframe_dist_m or abs(d[2]) >= p.keyframe_angle_rad)
 
     # -- update ----------------------------------------------------------------------------------------
-    def _priors(self, odom_a: P3) -> tuple[list[tuple[P3, P3]], int]:
-        """Predicted robot poses for this scan, best first, each with the increment it assumes, and how many
-        of them to match before choosing (the others are fallbacks, tried only when these fail).
+    def _priors(self, odom_a: P3) -> tuple[list[tuple[P3, P3]], int, bool]:
+        """Predicted robot poses for this scan, best first, each with the increment it assumes; how many
+        of them to match before choosing (the others are fallbacks, tried only when these fail); and whether
+        the first is the odometry's own prediction (fresh odometry, no stall before it).
 
         Normally the previous corrected pose ∘ odometry increment. Odometry can *stall*: MIT CSAIL's pose
         repeats for ~1 s during fast turns, then jumps. While it repeats and the robot was clearly moving,
@@ -215,12 +229,12 @@ class IdcMatcher:
                     or abs(self._last_incr[2]) >= p.stall_min_step_rad)
             if self._stalled or fast:
                 self._stalled = True
-                return [cv, still], 2
+                return [cv, still], 2, False
         resumed = self._stalled
         self._stalled = False
         incr = _compose(_inverse(self._anchor_odom), odom_a)
         odo = (_compose(self._anchor_pose, incr), incr)
-        return [odo, cv, still], (2 if resumed else 1)
+        return [odo, cv, still], (2 if resumed else 1), not resumed
 
     def update(self, scan: Scan, odom: Pose2D) -> MatchResult:
         """Correct the pose of this scan (see the module docstring); scans must come in time order."""
@@ -235,11 +249,16 @@ class IdcMatcher:
             self._prev_pose = self._anchor_pose = self._anchor_odom = odom_a
             self._add_keyframe(_compose(odom_a, sensor), np.column_stack([px, py]))
             return MatchResult(odom, True, 0, math.nan, 0)  # the first scan defines the corrected frame
-        priors, compete = self._priors(odom_a)
+        priors, compete, fresh = self._priors(odom_a)
+        # every hypothesis is judged by its distance from the odometry's prediction when there is one
+        gate = (_compose(priors[0][0], sensor), priors[0][1]) if fresh else None
+        standing = p.average_when_still and odom_a == self._anchor_odom and not self._stalled
+        if not standing:
+            self._still_n = 0
         iterations = 0
         outcomes: list[_Outcome] = []
         for h, (hyp, incr) in enumerate(priors[: max(compete, 1 + p.fallback_priors)]):
-            out = self._match(px, py, pr, _compose(hyp, sensor), incr)
+            out = self._match(px, py, pr, _compose(hyp, sensor), incr, gate)
             iterations += out.iterations
             outcomes.append(out)
             if out.iterations == 0:
@@ -263,8 +282,12 @@ class IdcMatcher:
             overlap_drop = res.pairs < p.keyframe_pair_ratio * self._last_pairs
             self._last_pairs = res.pairs
             pose = _compose(res.laser, _inverse(sensor))
-            if overlap_drop or self._is_keyframe(res.laser):
-                self._add_keyframe(res.laser, np.column_stack([px, py]))
+            laser = res.laser
+            if standing:
+                pose = self._standing_mean(pose)
+                laser = _compose(pose, sensor)
+            if overlap_drop or self._is_keyframe(laser):
+                self._add_keyframe(laser, np.column_stack([px, py]))
         self._last_incr = _compose(_inverse(self._prev_pose), pose)
         self._prev_pose = pose
         if not self._stalled:
@@ -272,8 +295,46 @@ class IdcMatcher:
         return MatchResult(_pose(pose), not res.reason, res.pairs, res.residual_m, iterations,
                            res.reason)
 
-    def _match(self, px: F64, py: F64, pr: F64, laser_prior: P3, incr: P3) -> _Outcome:
-        """Align the scan with the map rendered at ``laser_prior`` and apply the acceptance gates."""
+    def _standing_mean(self, pose: P3) -> P3:
+        """The mean of this standstill's matched poses (the last moving one included): while the robot
+        stands, every scan measures the same pose against the same map. A match further than
+        ``still_max_m`` / ``still_max_rad`` from where the robot stopped says it is moving after all (the
+        odometry lags or stalls): it is taken as it is, and a new standstill may start from it."""
+        p = self.params
+        if self._still_n == 0:
+            self._still_ref = self._prev_pose
+            self._still_sum = [0.0, 0.0, 0.0]
+            self._still_n = 1
+        d = _compose(_inverse(self._still_ref), pose)
+        if math.hypot(d[0], d[1]) > p.still_max_m or abs(d[2]) > p.still_max_rad:
+            self._still_n = 0
+            return pose
+        for i in range(3):
+            self._still_sum[i] += d[i]
+        self._still_n += 1
+        n = self._still_n
+        sx, sy, sth = self._still_sum
+        return _compose(self._still_ref, (sx / n, sy / n, sth / n))
+
+    def _too_far(self, corr: P3, incr: P3) -> str:
+        """Why a correction ``corr`` of a prediction that assumed the increment ``incr`` is not believed
+        (beyond 0.3 m / 10 deg plus 50 % of the increment), or "" when it is."""
+        p = self.params
+        corr_m = math.hypot(corr[0], corr[1])
+        max_m = p.max_correction_m + p.max_correction_rel * math.hypot(incr[0], incr[1])
+        max_rad = p.max_correction_rad + p.max_correction_rel * abs(incr[2])
+        if corr_m > max_m or abs(corr[2]) > max_rad:
+            return f"correction {corr_m:.3f} m, {math.degrees(corr[2]):.1f} deg too far from odometry"
+        return ""
+
+    def _match(self, px: F64, py: F64, pr: F64, laser_prior: P3, incr: P3,
+               gate: tuple[P3, P3] | None) -> _Outcome:
+        """Align the scan with the map rendered at ``laser_prior`` and apply the acceptance gates.
+
+        The correction gate accepts a pose near the prior itself or near ``gate`` (the laser pose that fresh
+        odometry predicts, and its increment): a fallback prior (no motion) that finds the pose odometry
+        roughly agrees with must not be refused for being far from its own guess (ACES, a 17 deg turn),
+        while constant velocity must still rescue a fast turn that CSAIL's odometry under-reports."""
         p = self.params
         n = px.shape[0]
         need = max(p.min_pairs, math.ceil(p.min_pair_fraction * n))
@@ -300,10 +361,9 @@ class IdcMatcher:
             return _Outcome(est, pairs, resid, iters,
                             f"degenerate geometry: translation unobservable (information {weakest:.1f} "
                             f"< {p.degenerate_min_info})")
-        corr_m = math.hypot(x, y)
-        max_m = p.max_correction_m + p.max_correction_rel * math.hypot(incr[0], incr[1])
-        max_rad = p.max_correction_rad + p.max_correction_rel * abs(incr[2])
-        if corr_m > max_m or abs(th) > max_rad:
-            return _Outcome(est, pairs, resid, iters,
-                            f"correction {corr_m:.3f} m, {math.degrees(th):.1f} deg too far from odometry")
+        far = self._too_far((x, y, th), incr)
+        if far and gate is not None:
+            far = self._too_far(_compose(_inverse(gate[0]), est), gate[1])
+        if far:
+            return _Outcome(est, pairs, resid, iters, far)
         return _Outcome(est, pairs, resid, iters, "")
