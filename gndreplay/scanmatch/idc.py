@@ -112,13 +112,13 @@ class IdcParams:
     # odometry stalls (see IdcMatcher._priors): constant velocity while the pose repeats after a step of at
     # least 0.1 m or 5 deg (a robot slowing down to a real stop moves less than that per scan)
     handle_stalls: bool = True
+    stall_min_step_m: float = 0.1
+    stall_min_step_rad: float = math.radians(5.0)
     # repeated odometry after slow motion: the robot stands, each scan measures the same pose against the same
     # map, and the corrected pose is their running mean (see IdcMatcher._standing_mean)
     average_when_still: bool = True
     still_max_m: float = 0.1
     still_max_rad: float = math.radians(5.0)
-    stall_min_step_m: float = 0.1
-    stall_min_step_rad: float = math.radians(5.0)
     fallback_priors: int = 2  # after a failed match, retry from constant velocity, then from no motion
     # a match pairing fewer than this fraction of the previous match's pairs may sit in a wrong basin (a fast
     # turn): the fallback priors are tried too and the match with most pairs wins
@@ -250,7 +250,7 @@ class IdcMatcher:
             self._add_keyframe(_compose(odom_a, sensor), np.column_stack([px, py]))
             return MatchResult(odom, True, 0, math.nan, 0)  # the first scan defines the corrected frame
         priors, compete, fresh = self._priors(odom_a)
-        # every hypothesis is judged by its distance from the odometry's prediction when there is one
+        # a hypothesis is believed near its own guess or near the odometry's prediction (see _match)
         gate = (_compose(priors[0][0], sensor), priors[0][1]) if fresh else None
         standing = p.average_when_still and odom_a == self._anchor_odom and not self._stalled
         if not standing:
