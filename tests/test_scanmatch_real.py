@@ -6,7 +6,7 @@ baseline of the benchmark (Kümmerle et al. 2009: CSAIL 0.106 m, ACES 0.173 m), 
 
 Most of that error comes from the relations that close loops (scans minutes apart at one place), where it is
 the drift accumulated in between, and drift is chaotic: starting the same matcher one scan later moves idc
-between 0.04 and 0.09 m on CSAIL and kiss-icp between 0.44 and 0.80 m. So every matcher runs from three
+between 0.04 and 0.08 m on CSAIL and kiss-icp between 0.44 and 0.80 m. So every matcher runs from three
 start scans and the medians are compared; idc must beat the baseline from every start. Runs in ~40 s.
 """
 
