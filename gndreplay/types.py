@@ -90,6 +90,12 @@ class Scan:
     min_range_m: float = 0.0
     sensor_pose: Pose2D = IDENTITY
 
+    def __post_init__(self) -> None:
+        # numba kernels index both arrays by beam without bounds checks
+        if self.ranges_m.ndim != 1 or self.ranges_m.shape != self.angles_rad.shape:
+            raise ValueError(f"scan at {self.t_ns} ns: ranges of shape {self.ranges_m.shape} but angles of "
+                             f"shape {self.angles_rad.shape}")
+
     @property
     def t_s(self) -> float:
         return self.t_ns / NS_PER_S

@@ -320,12 +320,15 @@ def test_weighted_median() -> None:
     assert kern._weighted_median(v, np.array([1.0, 1.0, 10.0, 1.0])) == 2.0
 
 
-def test_inverse_helpers_agree_with_geometry() -> None:
-    from gndreplay.scanmatch.idc import _compose, _inverse
+def test_pose_helpers_agree_with_geometry() -> None:
+    from gndreplay.scanmatch.idc import _compose, _inverse, _pose
 
-    a, b = np.array([1.0, -2.0, 3.0]), np.array([-0.5, 0.3, -2.9])
-    np.testing.assert_allclose(_compose(a, b), compose(a, b), atol=1e-12)
-    np.testing.assert_allclose(_inverse(a), inverse(a), atol=1e-12)
+    a, b = (1.0, -2.0, 3.0), (-0.5, 0.3, -2.9)
+    np.testing.assert_allclose(_compose(a, b), compose(np.array(a), np.array(b)), atol=1e-12)
+    np.testing.assert_allclose(_inverse(a), inverse(np.array(a)), atol=1e-12)
+    assert _pose((1.0, 2.0, -math.pi)) == Pose2D(1.0, 2.0, math.pi)  # Pose2D's theta is in (-pi, pi]
+    np.testing.assert_allclose(_pose(_compose(a, b)).as_array(),
+                               Pose2D.from_array(compose(np.array(a), np.array(b))).as_array(), atol=1e-12)
 
 
 def test_stopping_after_a_fast_turn_in_a_round_hall_does_not_keep_turning() -> None:
@@ -350,11 +353,12 @@ def test_stopping_after_a_fast_turn_in_a_round_hall_does_not_keep_turning() -> N
 
 
 def test_standing_robot_gets_the_mean_of_its_matches() -> None:
-    """Odometry repeats after slow motion: every noisy scan measures the same pose, and the corrected pose
-    is their running mean, so it settles instead of jumping with each scan's noise."""
+    """Odometry repeats after a robot came to rest (last step 5 mm): every noisy scan measures the same
+    pose, and the corrected pose is their running mean, so it settles instead of jumping with each scan's
+    noise."""
     segs = room()
-    pose = compose(START, motion(0.05, 0.0, 1.0))
-    odo = compose(ODOM0, motion(0.05, 0.0, 1.0))
+    pose = compose(START, motion(0.005, 0.0, 0.2))
+    odo = compose(ODOM0, motion(0.005, 0.0, 0.2))
     truth = compose(ODOM0, relative(START, pose))
     spread, final = {}, {}
     for average in (False, True):
@@ -362,7 +366,7 @@ def test_standing_robot_gets_the_mean_of_its_matches() -> None:
         m = IdcMatcher(IdcParams(average_when_still=average))
         m.update(cast(segs, START, noise_m=0.02, rng=rng), Pose2D.from_array(ODOM0))
         poses = []
-        for i in range(30):  # the robot stopped: the same odometry pose, 30 noisy scans
+        for i in range(31):  # a last small step, then the same odometry pose for 30 noisy scans
             res = m.update(cast(segs, pose, noise_m=0.02, rng=rng, t_ns=i + 1), Pose2D.from_array(odo))
             assert res.ok, res.reason
             poses.append(res.pose.as_array())
@@ -371,3 +375,23 @@ def test_standing_robot_gets_the_mean_of_its_matches() -> None:
         final[average] = pose_error(res.pose, truth)
     assert spread[True] < 0.3 * spread[False], spread
     assert final[True][0] < 0.005 and final[True][1] < 0.1, final
+
+
+def test_odometry_frozen_while_moving_is_not_taken_for_a_standstill() -> None:
+    """Odometry that freezes while the robot keeps moving 3 cm and 2 deg per scan (a lagging driver) must
+    not start the standstill averaging, which would hold the estimate back by half the motion: the last
+    odometry step was a moving robot's, not one of a robot coming to rest."""
+    segs = room()
+    truth, odo = [START], [ODOM0]
+    for i in range(9):  # three scans with odometry, then six with the odometry frozen
+        step = motion(0.03, 0.0, 2.0)
+        truth.append(compose(truth[-1], step))
+        odo.append(compose(odo[-1], step) if i < 3 else odo[-1])
+    m = IdcMatcher()
+    rng = np.random.default_rng(5)
+    worst = (0.0, 0.0)
+    for i, (tp, op) in enumerate(zip(truth, odo, strict=True)):
+        res = m.update(cast(segs, tp, noise_m=0.01, rng=rng, t_ns=i), Pose2D.from_array(op))
+        et, er = pose_error(res.pose, compose(ODOM0, relative(START, tp)))
+        worst = (max(worst[0], et), max(worst[1], er))
+    assert worst[0] < 0.01 and worst[1] < 0.3, worst

@@ -338,8 +338,7 @@ class RobotCentredGrid:
         max_range = float(scan.max_range_m) if scan.max_range_m > 0.0 else math.inf  # nan/0: no limit
         ranges = np.ascontiguousarray(scan.ranges_m, dtype=np.float64)
         angles = np.ascontiguousarray(scan.angles_rad, dtype=np.float64)
-        if ranges.shape != angles.shape or ranges.ndim != 1:
-            raise ValueError(f"scan ranges {ranges.shape} and angles {angles.shape} must be equal 1-D shapes")
+        # equal 1-D shapes: checked when the Scan was built
         traced, hits = _integrate_kernel(
             self.cells,
             ranges,
