@@ -12,8 +12,8 @@ closest-point pairs penalises sliding along walls. A few Gauss-Newton steps on t
 with the point-to-line distance (``polish_iterations``; 0 = pure IDC) finish the alignment; they carry a
 weak odometry prior so that directions the scan cannot observe follow the odometry. This departure from the
 paper is deliberate: on the dev logs the polish lowers the error of the relations between scans less than
-1 s apart from 0.031 to 0.025 m (CSAIL) and about halves the mean relation error (benchmarks/scanmatch.py
-prints both, with and without it).
+1 s apart from 0.031 to 0.025 m (CSAIL), and the mean relation error from 0.078 to 0.052 m (CSAIL) and from
+0.106 to 0.042 m (ACES) (benchmarks/scanmatch.py prints both, with and without it).
 
 A match fails (odometry increment kept, MATCH_FAILED, ``reason`` says why) on too few pairs, a large
 residual, a degenerate geometry (a featureless corridor: translation along it unobservable), or a
@@ -215,8 +215,8 @@ class IdcMatcher:
     def _priors(self, odom_a: P3) -> tuple[list[tuple[P3, P3]], int, bool]:
         """Predicted robot poses for this scan, best first, each with the increment it assumes; how many
         of them to match before choosing (the others are fallbacks, tried only when these fail or pair
-        suspiciously few points, see ``recheck_pair_ratio``); and whether
-        the first is the odometry's own prediction (fresh odometry, no stall before it).
+        suspiciously few points, see ``recheck_pair_ratio``); and whether the first is the odometry's own
+        prediction (fresh odometry, no stall before it).
 
         Normally the previous corrected pose ∘ odometry increment. Odometry can *stall*: MIT CSAIL's pose
         repeats for ~1 s during fast turns, then jumps. While it repeats and the robot was clearly moving,
