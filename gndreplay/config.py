@@ -21,13 +21,14 @@ from .pipeline.nd import NdParams
 from .pipeline.nf1 import Nf1Params
 from .pipeline.stack import StackParams
 from .pipeline.supervisor import SupervisorParams
-from .robot import WHEELCHAIR_ROBOT, XR4000_ROBOT, RobotConfig
+from .robot import WHEELCHAIR_LASER, WHEELCHAIR_ROBOT, XR4000_LASER, XR4000_ROBOT, LaserConfig, RobotConfig
 from .scanmatch import IdcParams, KissParams
 
 __all__ = [
     "PRESETS",
     "Config",
     "CspaceConfig",
+    "LaserConfig",
     "RobotConfig",
     "ScanMatchConfig",
     "apply_overrides",
@@ -67,6 +68,7 @@ class Config:
 
     preset: str = "wheelchair"
     robot: RobotConfig = WHEELCHAIR_ROBOT
+    laser: LaserConfig = WHEELCHAIR_LASER
     grid: GridParams = GRID_400
     cspace: CspaceConfig = CspaceConfig()
     planner: Nf1Params = Nf1Params()
@@ -92,7 +94,7 @@ PRESETS: dict[str, Config] = {
     # (vmax, wmax) = (0.3 m/s, 0.5 rad/s), 400 x 400 x 0.05 m grid, time-outs 0.05 / 0.08 / 0.02 s
     "wheelchair": Config(),
     # GND on the Nomadic XR4000: circular holonomic base, 10 x 10 m grid of 5 cm cells
-    "xr4000": Config(preset="xr4000", robot=XR4000_ROBOT, grid=GRID_200),
+    "xr4000": Config(preset="xr4000", robot=XR4000_ROBOT, laser=XR4000_LASER, grid=GRID_200),
 }
 
 

@@ -5,7 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-__all__ = ["WHEELCHAIR_ROBOT", "XR4000_ROBOT", "RobotConfig"]
+__all__ = [
+    "WHEELCHAIR_LASER", "WHEELCHAIR_ROBOT", "XR4000_LASER", "XR4000_ROBOT", "LaserConfig", "RobotConfig",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -20,6 +22,8 @@ class RobotConfig:
         rear_m: distance from the rotation centre backward to the rear edge [m].
         drive: "differential" (v, w) or "holonomic" (vx, vy, w).
         vmax_mps, wmax_radps: velocity limits.
+        accel_mps2, alpha_radps2: acceleration limits (linear, angular); they set the braking horizon and
+            bound the simulated motion.
         laser_x_m, laser_y_m, laser_theta_rad: laser pose in the robot frame (used when the log gives none).
     """
 
@@ -33,6 +37,9 @@ class RobotConfig:
     drive: Literal["differential", "holonomic"] = "differential"
     vmax_mps: float = 0.3
     wmax_radps: float = 0.5
+    # choice: the wheelchair paper gives no acceleration; a chair carrying a person accelerates gently
+    accel_mps2: float = 0.5
+    alpha_radps2: float = 1.0
     laser_x_m: float = 0.72
     laser_y_m: float = 0.0
     laser_theta_rad: float = 0.0
@@ -51,8 +58,35 @@ class RobotConfig:
 
 
 WHEELCHAIR_ROBOT = RobotConfig()
+# GND paper: accelerations of up to 1.5 m/s^2 (the angular limit is a choice)
 XR4000_ROBOT = RobotConfig(
     shape="circle", radius_m=0.3, drive="holonomic", vmax_mps=0.5, wmax_radps=1.57,
-    laser_x_m=0.0, front_m=0.3, rear_m=0.3, width_m=0.6,
+    accel_mps2=1.5, alpha_radps2=3.0, laser_x_m=0.0, front_m=0.3, rear_m=0.3, width_m=0.6,
 )
+
+
+@dataclass(frozen=True, slots=True)
+class LaserConfig:
+    """The robot's 2D laser as the simulator renders it (a replayed log brings its own geometry).
+
+    The mounting is ``RobotConfig.laser_x_m / laser_y_m / laser_theta_rad`` (one place for it).
+
+    Attributes:
+        beams: readings per scan, evenly spread over ``fov_deg`` (first beam at -fov/2, right to left).
+        fov_deg: field of view [deg].
+        max_range_m: readings at or beyond this are no-returns [m].
+        noise_std_m: standard deviation of the Gaussian range noise [m].
+        period_s: time between scans [s].
+    """
+
+    beams: int = 361
+    fov_deg: float = 180.0
+    max_range_m: float = 32.0
+    noise_std_m: float = 0.01
+    period_s: float = 0.2
+
+
+# the papers' SICK: 180 deg, 361 beams (0.5 deg), 32 m; 0.2 s on the chair, 0.15 s on the XR4000
+WHEELCHAIR_LASER = LaserConfig()
+XR4000_LASER = LaserConfig(period_s=0.15)
 
