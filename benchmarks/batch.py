@@ -90,6 +90,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="gndreplay-bench-batch-") as tmp:
         # warm-up: page cache, numba's on-disk cache
         run_batch(jobs[:2], cfg=cfg, options=options, out_dir=Path(tmp) / "warm", workers=2, runner=runner)
+        # each repetition replaces the previous batch folder of the same --jobs value (--overwrite)
         for rep in range(args.runs):
             for workers in (1, 2):  # interleaved, so drifts of the machine hit both alike
                 cpu0 = _children_cpu_s()
@@ -101,6 +102,7 @@ def main() -> None:
                     out_dir=Path(tmp) / f"j{workers}",
                     workers=workers,
                     runner=runner,
+                    overwrite=True,
                 )
                 wall = time.perf_counter() - t0
                 walls[workers].append(wall)

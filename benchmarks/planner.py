@@ -1,30 +1,48 @@
-"""NF1 planner speed on synthetic 400 x 400 office C-spaces (5 cm cells, 20 m x 20 m).
+"""Planner speed: NF1 and the tunnel planner side by side, on dev-log ticks and on synthetic offices.
 
-Each map has room walls every 3.5-6 m with 1 m doors, and furniture blocks; occupied cells
-are inflated by 0.4 m with a Euclidean distance transform (what ``cspace.free_cspace`` computes). The robot
+Dev logs (``--log``, repeatable; default: the bundled sample log and ACES from ../shared/datasets when
+present): the wheelchair stack (400 x 400 grid of 5 cm, IDC-corrected poses, goal 5 m ahead along the
+corrected trajectory, as ``gndreplay run``) runs over the first ``--ticks`` ticks; on every tick both planners
+plan on the same grid, robot cell and goal, each through its ``Planner.plan`` (C-space included), one after
+the other on one core, ``--repeat`` times (the fastest counts: scheduling noise on a shared machine
+otherwise dominates the p99 of both). Prints median / p99 / max [ms] per planner, how often each found a
+way, the course difference where both did, and the tunnel planner's nodes expanded.
+
+Synthetic offices (``--maps``, 0 to skip): each map has room walls every 3.5-6 m with 1 m doors, and
+furniture blocks; occupied cells are inflated by 0.4 m (what ``cspace.free_cspace`` computes). The robot
 stands on a random free cell of the central control zone (N/4 square), as in the robot-centred grid. Goals:
 a free cell 5 m away, and a point 30 m away, projected onto the grid border. Prints median and p99 [ms] of
-each part (wavefront with early exit as ``plan`` runs it, descent, tightening), of the whole ``plan`` call,
-and of a full-grid wave without early exit for reference.
+each NF1 part (wavefront with early exit as ``plan`` runs it, descent, tightening), of the whole ``plan``
+call, of a full-grid wave without early exit for reference, and of the tunnel planner's ``plan``.
 
-Run: ``/work/venv/bin/python benchmarks/planner.py [--maps 10] [--trials 40]``
+Run: ``.venv/bin/python benchmarks/planner.py [--log LOG ...] [--ticks 600] [--repeat 3] [--maps 10]
+[--trials 40]``
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import itertools
 import math
 import time
 from collections.abc import Callable
 from itertools import pairwise
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
+from gndreplay.config import PRESETS
+from gndreplay.geometry import wrap_angle
+from gndreplay.io import read_ticks
 from gndreplay.pipeline.cspace import free_cspace
 from gndreplay.pipeline.model import FREE, OCCUPIED
-from gndreplay.pipeline.nf1 import Nf1Params, descend, nf1_wavefront, plan, tighten
+from gndreplay.pipeline.nf1 import Nf1Params, Planner, descend, nf1_wavefront, plan, tighten
+from gndreplay.pipeline.stack import NavigationStack, make_planner, warm_up
+from gndreplay.pipeline.tunnel import TunnelParams, tunnel_plan, warm_up_planners
+from gndreplay.replay import RunOptions, assign_goals, corrected_stream
 
 N = 400
 CELL_M = 0.05
@@ -101,17 +119,23 @@ def run(n_maps: int, trials: int, connectivity: Literal[4, 8], seed: int = 1) ->
     times: dict[str, dict[str, list[float]]] = {}
     flags: dict[str, dict[str, int]] = {}
     for _ in range(n_maps):
-        free = cspace(office(rng))
+        occ = office(rng)
+        free = cspace(occ)
+        cells = np.where(occ, OCCUPIED, FREE).astype(np.uint8)
         for _ in range(trials):
             sg = start_and_goals(free, rng)
             if sg is None:
                 continue
             start, near, far = sg
             for name, goal in (("goal 5 m", near), ("goal at border", far)):
-                parts = ("wavefront", "descent", "tightening", "plan", "full wave")
+                parts = ("wavefront", "descent", "tightening", "plan", "full wave", "tunnel plan")
                 t = times.setdefault(name, {k: [] for k in parts})
                 res, ms = timed(plan, free, start, goal, cell_m=CELL_M, params=params)
                 t["plan"].append(ms)
+                tun, ms = timed(tunnel_plan, cells, start, goal, cell_m=CELL_M, radius_m=INFLATE_M)
+                t["tunnel plan"].append(ms)
+                ft = flags.setdefault(name + " tunnel", {})
+                ft[tun.flag.name or "NONE"] = ft.get(tun.flag.name or "NONE", 0) + 1
                 f = flags.setdefault(name, {})
                 f[res.flag.name or "NONE"] = f.get(res.flag.name or "NONE", 0) + 1
                 if not res.ok or res.n_escape:
@@ -127,7 +151,8 @@ def run(n_maps: int, trials: int, connectivity: Literal[4, 8], seed: int = 1) ->
                 t["tightening"].append(ms)
                 _, ms = timed(nf1_wavefront, free, g, connectivity=params.connectivity)
                 t["full wave"].append(ms)  # reference: the whole grid, no early exit
-    print(f"connectivity {connectivity}, {N}x{N} cells of {CELL_M} m, inflation {INFLATE_M} m")
+    print(f"synthetic offices, connectivity {connectivity}, {N}x{N} cells of {CELL_M} m, "
+          f"inflation {INFLATE_M} m (tunnel: the same radius)")
     print(f"  {'case':<16}{'part':<12}{'n':>6}{'median ms':>12}{'p99 ms':>10}{'max ms':>10}")
     for name, t in times.items():
         for part, v in t.items():
@@ -136,18 +161,83 @@ def run(n_maps: int, trials: int, connectivity: Literal[4, 8], seed: int = 1) ->
                 f"  {name:<16}{part:<12}{a.size:>6}{np.median(a):>12.3f}"
                 f"{np.percentile(a, 99):>10.3f}{a.max():>10.3f}"
             )
-        print(f"  {name:<16}flags {flags[name]}")
+        print(f"  {name:<16}flags {flags[name]}, tunnel {flags[name + ' tunnel']}")
+
+
+def _stats(v: list[float]) -> str:
+    a = np.asarray(v)
+    return f"{np.median(a):>9.3f}{np.percentile(a, 99):>9.3f}{a.max():>9.3f}"
+
+
+def dev_log(log: Path, n_ticks: int, repeat: int) -> None:
+    """Both planners on the grids of the first ``n_ticks`` ticks of ``log`` (wheelchair preset); each plan
+    runs ``repeat`` times per tick and the fastest counts (the machine's scheduling noise is not the
+    planner's cost)."""
+    cfg = PRESETS["wheelchair"]
+    params = cfg.stack_params()
+    planners: dict[str, Planner] = {
+        "nf1": make_planner(params),
+        "tunnel": make_planner(dataclasses.replace(params, planner_kind="tunnel")),
+    }
+    warm_up(params)
+    warm_up_planners(params.tunnel)
+    stack = NavigationStack(params)
+    ms: dict[str, list[float]] = {k: [] for k in planners}
+    ok = dict.fromkeys(planners, 0)
+    nodes: list[float] = []
+    course_diff: list[float] = []
+    length_ratio: list[float] = []
+    ticks = itertools.islice(read_ticks(log), n_ticks)
+    n = 0
+    for m, goal in assign_goals(corrected_stream(ticks, cfg, RunOptions()), RunOptions()):
+        stack.step(m.tick, m.pose, goal)
+        start = stack.grid.robot_cell(m.pose)
+        goal_rc = stack.grid.world_to_cell_float(np.asarray([goal]))[0]
+        res = {}
+        for name, planner in planners.items():
+            runs = [timed(planner.plan, stack.grid.cells, start, goal_rc) for _ in range(repeat)]
+            res[name] = runs[0][0]
+            ms[name].append(min(t for _, t in runs))
+            ok[name] += res[name].ok
+        nodes.append(res["tunnel"].nodes_expanded)
+        if res["nf1"].ok and res["tunnel"].ok:
+            course_diff.append(abs(float(wrap_angle(res["nf1"].direction_rad - res["tunnel"].direction_rad))))
+            if res["nf1"].length_m > 0:
+                length_ratio.append(res["tunnel"].length_m / res["nf1"].length_m)
+        n += 1
+    print(f"{log.name}: {n} ticks, {N}x{N} grid, wheelchair preset, fastest of {repeat} runs per tick")
+    print(f"  {'planner':<10}{'median':>9}{'p99':>9}{'max':>9}  ms   found a way")
+    for name in planners:
+        print(f"  {name:<10}{_stats(ms[name])}       {ok[name]}/{n}")
+    print(f"  tunnel / nf1 median time: {np.median(ms['tunnel']) / np.median(ms['nf1']):.2f}")
+    print(f"  tunnel nodes expanded: median {np.median(nodes):.0f}, p99 {np.percentile(nodes, 99):.0f}, "
+          f"max {max(nodes):.0f}")
+    if course_diff:
+        d = np.degrees(course_diff)
+        print(f"  course difference where both found a way [deg]: median {np.median(d):.1f}, "
+              f"p90 {np.percentile(d, 90):.1f}; tunnel/nf1 length median {np.median(length_ratio):.2f}")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--maps", type=int, default=10)
+    ap.add_argument("--log", type=Path, action="append", help="dev log (repeatable)")
+    ap.add_argument("--ticks", type=int, default=600, help="ticks per dev log (0: skip the dev logs)")
+    ap.add_argument("--repeat", type=int, default=3, help="runs per tick and planner; the fastest counts")
+    ap.add_argument("--maps", type=int, default=10, help="synthetic office maps (0: skip)")
     ap.add_argument("--trials", type=int, default=40)
     args = ap.parse_args()
+    root = Path(__file__).resolve().parents[1]
+    defaults = (root / "sample_logs" / "office.clf.bz2", root.parent / "shared/datasets/carmen/aces.clf.bz2")
+    logs = args.log or [p for p in defaults if p.exists()]
+    for log in logs if args.ticks > 0 else []:
+        dev_log(log, args.ticks, max(args.repeat, 1))
+    if args.maps <= 0:
+        return
     warm = np.ones((N, N), dtype=bool)  # compile (or load the numba cache) outside timing
     warm[N // 2 - 5 : N // 2 + 5, N // 2 + 5] = False
     for c in (4, 8):
         plan(warm, (N // 2, N // 2), (N / 2, N + 100.5), cell_m=CELL_M, params=Nf1Params(connectivity=c))
+    warm_up_planners(TunnelParams())
     run(args.maps, args.trials, 4)
     run(args.maps, args.trials, 8)
 

@@ -11,9 +11,10 @@ import functools
 import logging
 import math
 import sys
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, ParamSpec, TypeVar, cast
+from typing import TYPE_CHECKING, Annotated, ParamSpec, TextIO, TypeVar, cast
 
 import typer
 
@@ -22,6 +23,7 @@ from .errors import GndReplayError
 
 if TYPE_CHECKING:  # the CLI imports its heavy modules lazily, inside the commands, to start fast
     from rich.console import Console
+    from rich.progress import Progress, TaskID
 
     from .config import Config
     from .replay import RunSink
@@ -59,6 +61,8 @@ def cli_errors(fn: Callable[P, R]) -> Callable[P, R]:
         logger = logging.getLogger("gndreplay")
         handler = _StderrHandler(level=logging.WARNING)
         logger.addHandler(handler)
+        shown = warnings.showwarning
+        warnings.showwarning = _show_warning
         try:
             return fn(*args, **kwargs)
         except GndReplayError as err:
@@ -68,10 +72,34 @@ def cli_errors(fn: Callable[P, R]) -> Callable[P, R]:
         except KeyboardInterrupt:
             typer.echo("gndreplay: interrupted", err=True)
             raise typer.Exit(EXIT_INTERRUPTED) from None
+        except SystemError as err:
+            # Ctrl-C / SIGTERM arriving inside a numba kernel call surfaces as "returned a result with an
+            # exception set", caused by the KeyboardInterrupt / SystemExit: report that, not a traceback
+            cause = err.__cause__
+            if isinstance(cause, KeyboardInterrupt):
+                typer.echo("gndreplay: interrupted", err=True)
+                raise typer.Exit(EXIT_INTERRUPTED) from None
+            if isinstance(cause, SystemExit):
+                raise typer.Exit(cause.code if isinstance(cause.code, int) else 1) from None
+            raise
         finally:
             logger.removeHandler(handler)
+            warnings.showwarning = shown
 
     return wrapper
+
+
+def _show_warning(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: TextIO | None = None,
+    line: str | None = None,
+) -> None:
+    """A Python warning (e.g. numpy's RuntimeWarning) as one line, without the source line it came from."""
+    where = f"{Path(filename).name}:{lineno}"
+    typer.echo(f"gndreplay: warning: {category.__name__}: {message} ({where})", err=True)
 
 
 class _StderrHandler(logging.Handler):
@@ -148,6 +176,21 @@ StrictOpt = Annotated[
         "--strict",
         help="A malformed line or message is an error instead of being skipped and counted.",
         rich_help_panel=_LOG_PANEL,
+    ),
+]
+OverwriteOpt = Annotated[
+    bool,
+    typer.Option(
+        "--overwrite",
+        help="Replace an earlier gndreplay output at --out (never a folder gndreplay did not write).",
+    ),
+]
+PlannerOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--planner",
+        help="Global planner: nf1 (GND) or tunnel (the wheelchair paper). Default: the config's, nf1.",
+        show_default=False,
     ),
 ]
 LogArg = Annotated[
@@ -265,11 +308,14 @@ def _sample_log() -> Path:
 
 
 def _log_stem(log: Path) -> str:
+    """The default output name of a log: its name less the log suffixes, never ``.``/``..``/empty/hidden."""
+    from .fsutil import safe_name
+
     name = log.name.rstrip("/")
     for suffix in (".gz", ".bz2", ".clf", ".log", ".carmen", ".bag", ".mcap"):
         if name.endswith(suffix):
             name = name[: -len(suffix)]
-    return name or "run"
+    return safe_name(name)
 
 
 @app.command()
@@ -309,14 +355,16 @@ def run(
         ),
     ] = None,
     goal_ahead: Annotated[
-        float,
+        float | None,
         typer.Option(
             "--goal-ahead",
             min=0.1,
             help="Goal = the pose this many metres further along the log's corrected trajectory.",
             rich_help_panel=_NAV_PANEL,
+            show_default="5.0",
         ),
-    ] = 5.0,
+    ] = None,
+    planner: PlannerOpt = None,
     matcher: Annotated[
         str | None,
         typer.Option(
@@ -338,10 +386,12 @@ def run(
         Path | None,
         typer.Option(
             "--out",
-            help="Run directory (default: out/<log-stem>).",
+            help="Run directory (default: out/<log-stem>). An earlier run there is kept: the new one is "
+            "written beside it (out/<log-stem>-2, ...) unless --overwrite.",
             rich_help_panel=_RUN_PANEL,
         ),
     ] = None,
+    overwrite: OverwriteOpt = False,
     until: Annotated[
         float | None,
         typer.Option(
@@ -404,14 +454,18 @@ def run(
     from .replay import ReadOptions, RunOptions, run_log
 
     goal_xy = _parse_goal(goal)
+    if goal_xy is not None and goal_ahead is not None:
+        raise typer.BadParameter("--goal and --goal-ahead exclude each other: give one", param_hint="--goal")
     log_path = log if log is not None else _sample_log()
-    cfg = load_config(config, preset_name=preset_name)
+    cfg = _with_planner(load_config(config, preset_name=preset_name), planner)
     if matcher is not None:
         cfg = _with_matcher(cfg, matcher)
     if enforce_budgets:
         cfg = dataclasses.replace(cfg, supervisor=dataclasses.replace(cfg.supervisor, enforce_budgets=True))
     out_dir = out if out is not None else Path("out") / _log_stem(log_path)
-    options = RunOptions(goal_xy=goal_xy, goal_ahead_m=goal_ahead, until_s=until, every=every)
+    options = RunOptions(
+        goal_xy=goal_xy, goal_ahead_m=5.0 if goal_ahead is None else goal_ahead, until_s=until, every=every
+    )
     read = ReadOptions(
         fmt=fmt,
         scan_topic=scan_topic,
@@ -420,13 +474,23 @@ def run(
         truth_topic=truth_topic,
         strict=strict,
     )
-    sinks = _run_sinks(figures=figures, mcap=mcap)
-    with _progress(enabled=not (quiet or json_out), label=log_path.name) as on_tick:
-        summary = run_log(log_path, cfg, out_dir, options=options, read=read, sinks=sinks, on_tick=on_tick)
-    if figures:
-        from .report import build_report
-
-        build_report(summary.out_dir)
+    with _RunProgress(enabled=not (quiet or json_out), label=log_path.name, until_s=until) as progress:
+        summary = run_log(
+            log_path,
+            cfg,
+            out_dir,
+            options=options,
+            read=read,
+            sinks=_run_sinks(figures=figures, mcap=mcap, on_draw=progress.on_draw),
+            overwrite=overwrite,
+            on_tick=progress.on_tick,
+            on_open=progress.on_open,
+            on_stage=progress.on_stage,
+            on_compile=progress.on_compile,
+        )
+    if summary.out_dir != out_dir and not (quiet or json_out):
+        typer.echo(f"gndreplay: {out_dir} holds an earlier run; wrote {summary.out_dir} "
+                   "(--overwrite replaces it)", err=True)
     if json_out:
         import json
 
@@ -495,7 +559,8 @@ def scanmatch(
     with open_log(log, fmt=fmt, scan_topic=scan_topic, odom_topic=odom_topic, strict=strict):
         pass  # fail fast, before any matcher runs, on an unreadable log or a bad topic
     rows = run_scanmatch(
-        ticks, methods, relations=refs, out_dir=out_dir, idc=cfg.scanmatch.idc, kiss=cfg.scanmatch.kiss
+        ticks, methods, relations=refs, out_dir=out_dir, idc=cfg.scanmatch.idc, kiss=cfg.scanmatch.kiss,
+        relations_name=str(relations),
     )
     if json_out:
         import json
@@ -568,21 +633,109 @@ def report(
 @app.command()
 @cli_errors
 def simulate(
-    scenario: Annotated[str, typer.Argument(help="Scenario name: office.", show_default=False)] = "office",
-    out: Annotated[
-        Path, typer.Option("--out", help="The CARMEN log to write (.clf, .clf.gz, .clf.bz2).")
-    ] = Path("office.clf.bz2"),
+    scenario: Annotated[
+        str | None,
+        typer.Argument(
+            help="A scenario file (.yaml), a shipped scenario's name (see --list), or office (the scripted "
+            "sample log).",
+            show_default=False,
+        ),
+    ] = None,
+    preset_name: Annotated[
+        str | None,
+        typer.Option("--preset", help="wheelchair or xr4000 (default: the scenario's).", show_default=False),
+    ] = None,
+    config: Annotated[Path | None, typer.Option("--config", help="TOML overriding the preset.")] = None,
     seed: Annotated[
         int, typer.Option("--seed", help="Seed of every random draw (the same seed gives the same bytes).")
     ] = 0,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            help="Run directory (default out/sim/<scenario>-<preset>-<seed>); for office: the CARMEN log to "
+            "write (.clf, .clf.gz, .clf.bz2; default office.clf.bz2).",
+            show_default=False,
+        ),
+    ] = None,
+    latency: Annotated[
+        str,
+        typer.Option(
+            "--latency",
+            help="Seconds from a scan to its command taking effect, or 'measured' (the stack's own time: "
+            "not deterministic).",
+        ),
+    ] = "0",
+    perfect_odometry: Annotated[
+        bool, typer.Option("--perfect-odometry", help="No odometry drift (scan matching still runs).")
+    ] = False,
+    time_limit: Annotated[
+        float | None,
+        typer.Option(
+            "--time-limit", min=0.1, help="Override the scenario's time limit (seconds).", show_default=False
+        ),
+    ] = None,
+    figures: Annotated[bool, typer.Option("--figures/--no-figures", help="Draw the figures.")] = True,
+    overwrite: OverwriteOpt = False,
+    list_: Annotated[bool, typer.Option("--list", help="List the shipped scenarios and exit.")] = False,
+    json_out: Annotated[bool, typer.Option("--json", help="Print result.json to stdout.")] = False,
 ) -> None:
-    """Simulate a scenario (laser, odometry with wheel-slip drift, ground truth) and write it as a log.
+    """Drive the navigation stack in closed loop through a simulated world and score it.
 
-    The bundled sample log is `gndreplay simulate office --seed 0 --out sample_logs/office.clf.bz2`.
+    Writes a run directory like `gndreplay run` plus result.json (outcome, collision, time to goal, path,
+    clearance, ...), log.mcap (scan, odometry, commands, ground truth; `gndreplay run` replays it) and
+    fig_world.png. Exit 0 on success, 1 on a collision or time-out, 2 on a bad scenario.
+
+    `gndreplay simulate office --seed 0 --out sample_logs/office.clf.bz2` writes the bundled sample log.
     """
-    from .sim.scenario import simulate as run_simulation
+    if list_:
+        from .sim.scenario_file import shipped_scenarios
 
-    typer.echo(str(run_simulation(scenario, seed=seed, out=out)))
+        for name, text in shipped_scenarios().items():
+            typer.echo(f"{name:24s} {text}")
+        return
+    if scenario is None:
+        raise typer.BadParameter("give a scenario file or name (or --list)")
+    from .sim.scenario import SCENARIOS
+
+    if scenario in SCENARIOS:
+        from .sim.scenario import simulate as run_simulation
+
+        typer.echo(str(run_simulation(scenario, seed=seed, out=out or Path(f"{scenario}.clf.bz2"))))
+        return
+    import json
+
+    from .config import load_config
+    from .sim import resolve_scenario, simulate_scenario
+
+    if latency == "measured":
+        latency_s: float | None = None
+    else:
+        try:
+            latency_s = float(latency)
+        except ValueError:
+            raise typer.BadParameter(f"--latency must be seconds or 'measured', got {latency!r}") from None
+        if not 0.0 <= latency_s < 10.0:
+            raise typer.BadParameter(f"--latency must be in [0, 10) s, got {latency!r}")
+    spec = resolve_scenario(scenario)
+    cfg = load_config(config, preset_name=preset_name or spec.preset)
+    out_dir = out if out is not None else Path("out") / "sim" / f"{spec.name}-{cfg.preset}-{seed}"
+    result = simulate_scenario(spec, out_dir=out_dir, cfg=cfg, seed=seed, latency_s=latency_s,
+                               perfect_odometry=perfect_odometry, time_limit_s=time_limit, figures=figures,
+                               overwrite=overwrite)
+    if result.out_dir != out_dir and not json_out:
+        typer.echo(f"gndreplay: {out_dir} holds an earlier run; wrote {result.out_dir} "
+                   "(--overwrite replaces it)", err=True)
+    if json_out:
+        typer.echo(json.dumps(result.result, allow_nan=True))
+    else:
+        c = result.collision
+        what = (f"collision with {c['object']} at {c['t_s']:.2f} s" if c else
+                f"{result.outcome} at {result.end_time_s:.1f} s")
+        typer.echo(f"{spec.name} ({cfg.preset}, seed {seed}): {what}; path {result.path_length_m:.1f} m, "
+                   f"min clearance {_num(result.min_clearance_m, '{:.3f}')} m -> {result.out_dir}")
+    if not result.success:
+        raise typer.Exit(1)
 
 
 @app.command()
@@ -601,9 +754,15 @@ def batch(
             "--thresholds", help="TOML of pass/fail limits and per-input settings (relations, goal)."
         ),
     ] = None,
-    out: Annotated[Path, typer.Option("--out", help="Batch folder: one run directory per input.")] = Path(
-        "out/batch"
-    ),
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            help="Batch folder: one run directory per input. If it holds an earlier batch, the new one is "
+            "written beside it (out/batch-2, ...) unless --overwrite.",
+        ),
+    ] = Path("out/batch"),
+    overwrite: OverwriteOpt = False,
     junit: Annotated[
         Path | None, typer.Option("--junit", help="Also write JUnit XML (one test case per input).")
     ] = None,
@@ -619,6 +778,7 @@ def batch(
         str | None, typer.Option("--preset", help="wheelchair (default) or xr4000.", show_default=False)
     ] = None,
     config: Annotated[Path | None, typer.Option("--config", help="TOML overriding the preset.")] = None,
+    planner: PlannerOpt = None,
     goal_ahead: Annotated[
         float, typer.Option("--goal-ahead", min=0.1, help="Goal distance ahead (m).")
     ] = 5.0,
@@ -626,13 +786,27 @@ def batch(
         float | None, typer.Option("--until", min=0.0, help="Replay only the first T seconds of each log.")
     ] = None,
     every: Annotated[int, typer.Option("--every", min=1, help="Run the stack on every N-th scan.")] = 1,
-    strict: StrictOpt = False,
+    timeout: Annotated[
+        float,
+        typer.Option(
+            "--timeout",
+            min=0.001,
+            help="Per-input time limit (s): a longer input is stopped, its worker killed, and it is reported "
+            "as an error; the batch goes on.",
+        ),
+    ] = 3600.0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
+    fmt: FormatOpt = None,
+    scan_topic: ScanTopicOpt = None,
+    odom_topic: OdomTopicOpt = None,
+    cmd_topic: CmdTopicOpt = None,
+    truth_topic: TruthTopicOpt = None,
+    strict: StrictOpt = False,
 ) -> None:
     """Replay many logs in parallel, check thresholds, write summary.csv / summary.md / JUnit.
 
-    Each input runs in its own worker process, so a bad or crashing input fails alone and is reported.
-    Exit code: 0 all passed, 1 a threshold was exceeded, 2 an input could not be read.
+    Each input runs in its own worker process, so a bad, crashing or hung input (over --timeout) fails
+    alone and is reported. Exit code: 0 all passed, 1 a threshold was exceeded, 2 an input could not be read.
 
     [bold]Examples[/]
 
@@ -640,12 +814,14 @@ def batch(
 
       gndreplay batch logs/ --thresholds ci.toml --until 120
     """
+    import os
+
     from .batch import expand_inputs, load_thresholds, run_batch
     from .batch.thresholds import Thresholds
     from .config import load_config
     from .replay import ReadOptions, RunOptions
 
-    cfg = load_config(config, preset_name=preset_name)
+    cfg = _with_planner(load_config(config, preset_name=preset_name), planner)
     job_list = expand_inputs(inputs)
     limits = load_thresholds(thresholds) if thresholds is not None else Thresholds()
     options = RunOptions(goal_ahead_m=goal_ahead, until_s=until, every=every)
@@ -660,8 +836,20 @@ def batch(
             dask_address=dask,
             progress=progress,
             junit=junit,
-            read=ReadOptions(strict=strict),
+            read=ReadOptions(
+                fmt=fmt,
+                scan_topic=scan_topic,
+                odom_topic=odom_topic,
+                cmd_topic=cmd_topic,
+                truth_topic=truth_topic,
+                strict=strict,
+            ),
+            timeout_s=timeout,
+            overwrite=overwrite,
         )
+    if result.out_dir != Path(os.path.abspath(out)):
+        typer.echo(f"gndreplay: {out} holds an earlier batch; wrote {result.out_dir} "
+                   "(--overwrite replaces it)", err=True)
     for r in result.results:
         if r.status == "error":
             typer.echo(f"gndreplay: error: {r.name}: {r.error}", err=True)
@@ -706,6 +894,18 @@ def _num(value: object, fmt: str = "{:.2f}") -> str:
     return fmt.format(value) if isinstance(value, int | float) else "-"
 
 
+def _with_planner(cfg: Config, planner: str | None) -> Config:
+    """``cfg`` with ``[planner] kind`` set from ``--planner`` (None keeps the config's)."""
+    from .config import apply_overrides
+
+    if planner is None:
+        return cfg
+    try:
+        return apply_overrides(cfg, {"planner": {"kind": planner.lower()}})
+    except GndReplayError:
+        raise typer.BadParameter(f"--planner must be nf1 or tunnel, got {planner!r}") from None
+
+
 def _with_matcher(cfg: Config, matcher: str) -> Config:
     from .config import apply_overrides
 
@@ -715,7 +915,9 @@ def _with_matcher(cfg: Config, matcher: str) -> Config:
         raise typer.BadParameter(f"--matcher must be idc, kiss-icp or odom, got {matcher!r}") from None
 
 
-def _run_sinks(*, figures: bool, mcap: bool) -> list[RunSink]:
+def _run_sinks(*, figures: bool, mcap: bool, on_draw: Callable[[], None] | None = None) -> list[RunSink]:
+    """The sinks of ``run``: maps + figures + report.md (drawn last, inside the staging directory) and
+    the results MCAP."""
     sinks: list[RunSink] = []
     if figures:
         from .report import MapSink
@@ -725,6 +927,10 @@ def _run_sinks(*, figures: bool, mcap: bool) -> list[RunSink]:
         from .report import McapSink
 
         sinks.append(McapSink())
+    if figures:
+        from .report import ReportSink
+
+        sinks.append(ReportSink(on_draw=on_draw))
     return sinks
 
 
@@ -745,15 +951,32 @@ class _progress:
             return None
         import time
 
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        from rich.console import Console
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            ProgressColumn,
+            TaskProgressColumn,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
 
-        counted = (BarColumn(), MofNCompleteColumn()) if self.total else (TextColumn("{task.completed}"),)
+        counted: tuple[ProgressColumn, ...] = (
+            (BarColumn(), MofNCompleteColumn(), TaskProgressColumn())
+            if self.total
+            else (TextColumn("{task.completed}"),)
+        )
+        eta: tuple[ProgressColumn, ...] = (TextColumn("ETA"), TimeRemainingColumn()) if self.total else ()
         bar = Progress(
             TextColumn("[bold]{task.description}"),
             *counted,
             TextColumn(f"{self.unit} " + "{task.fields[rate]:.1f}/s"),
             TextColumn("{task.fields[last]}"),
             TimeElapsedColumn(),
+            *eta,
+            console=Console(stderr=True),
             transient=True,
         )
         bar.__enter__()
@@ -771,6 +994,107 @@ class _progress:
     def __exit__(self, *exc: object) -> None:
         if self._bar is not None:
             self._bar.__exit__(*exc)  # type: ignore[attr-defined]
+
+
+class _RunProgress:
+    """What ``run`` shows while it works, on stderr: the warm-up ("compiling (first run only)" with the
+    count of kernels when numba's disk cache is cold), then a bar over the log's time with percentage and
+    ETA (total: --until, else the log's duration or scan count when its format knows them; a counter
+    otherwise), then writing and drawing the figures. Disabled: silent. Off a terminal: only the
+    one-line compile notice."""
+
+    def __init__(self, *, enabled: bool, label: str, until_s: float | None) -> None:
+        self.enabled = enabled
+        self.live = enabled and sys.stderr.isatty()
+        self.label = label
+        self.total: float | None = until_s
+        self.unit = "s"
+        self.ticks = 0
+        self.compiled = 0
+        self._t0_ns: int | None = None
+        self._bar: Progress | None = None
+        self._task: TaskID | None = None
+
+    def __enter__(self) -> _RunProgress:
+        if self.live:
+            from rich.console import Console
+            from rich.progress import (
+                BarColumn,
+                Progress,
+                SpinnerColumn,
+                TaskProgressColumn,
+                TextColumn,
+                TimeElapsedColumn,
+                TimeRemainingColumn,
+            )
+
+            self._bar = Progress(
+                SpinnerColumn(),
+                TextColumn("[bold]{task.description}"),
+                BarColumn(),
+                TaskProgressColumn(),
+                TextColumn("{task.fields[detail]}"),
+                TimeElapsedColumn(),
+                TextColumn("ETA"),
+                TimeRemainingColumn(),
+                console=Console(stderr=True),
+                transient=True,
+            )
+            self._bar.start()
+            self._task = self._bar.add_task(f"{self.label}: opening", total=None, detail="")
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.stop()
+
+    def _show(self, **fields: object) -> None:
+        if self._bar is not None and self._task is not None:
+            self._bar.update(self._task, **fields)  # type: ignore[arg-type]
+
+    def on_open(self, desc: object) -> None:
+        """Take the total from the log's description (duration, else scan count) when it knows it."""
+        start, end = getattr(desc, "start_ns", None), getattr(desc, "end_ns", None)
+        if start is not None and end is not None and end > start:
+            duration = (end - start) / 1e9
+            self.total = duration if self.total is None else min(self.total, duration)
+        elif self.total is None:
+            scan = getattr(desc, "scan_stream", None)
+            counts = [s.count for s in getattr(desc, "streams", ()) if s.name == scan and s.count]
+            if counts:
+                self.total, self.unit = float(counts[0]), "scans"
+
+    def on_stage(self, stage: str) -> None:
+        """Switch the bar to the replay's stage."""
+        if stage == "warm-up":
+            self._show(description=f"{self.label}: warming up")
+        elif stage == "replay" and self._bar is not None and self._task is not None:
+            self._bar.reset(self._task, total=self.total, description=self.label, detail="")
+        elif stage == "write":
+            self._show(description=f"{self.label}: writing", completed=self.total or 0)
+
+    def on_compile(self, kernel: str) -> None:
+        """A kernel is being compiled (cold cache): say so, once, and count them."""
+        self.compiled += 1
+        if self.compiled == 1 and self.enabled and not self.live:
+            typer.echo("gndreplay: compiling (first run only)...", err=True)
+        self._show(description=f"{self.label}: compiling (first run only)…",
+                   detail=f"{self.compiled} kernels ({kernel})")
+
+    def on_tick(self, result: object) -> None:
+        """One stack tick: advance by its log time (or by one scan)."""
+        if self._bar is None:
+            return
+        t_ns = int(getattr(result, "t_ns", 0))
+        if self._t0_ns is None:
+            self._t0_ns = t_ns
+        self.ticks += 1
+        done = (t_ns - self._t0_ns) / 1e9 if self.unit == "s" else float(self.ticks)
+        self._show(completed=done, detail=f"{self.ticks} ticks, {done:.0f} {self.unit}")
+
+    def on_draw(self) -> None:
+        """The figures are being drawn."""
+        self._show(description=f"{self.label}: drawing figures")
 
 
 def _print_run(data: dict[str, object], out_dir: Path) -> None:

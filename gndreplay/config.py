@@ -2,15 +2,20 @@
 
 Stage-specific parameter dataclasses live next to the code that uses them (model, scanmatch, nf1, nd,
 supervisor) so a stage receives only its own section; this module composes them into one ``Config``,
-owns the presets and the TOML loader (unknown keys and wrong types are errors naming the key and file).
+owns the presets (case-insensitive names) and the TOML loader (unknown keys and wrong types are errors
+naming the key and file), and holds the physical range of every numeric setting in one table, ``RANGES``,
+plus the constraints between fields, ``CROSS_CHECKS``: every loaded configuration is checked against both
+(``[robot] vmax_mps = -1`` -> "cfg.toml: robot.vmax_mps must be in (0, 10], got -1.0").
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import tomllib
 import types
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
@@ -21,21 +26,29 @@ from .pipeline.nd import NdParams
 from .pipeline.nf1 import Nf1Params
 from .pipeline.stack import StackParams
 from .pipeline.supervisor import SupervisorParams
+from .pipeline.tunnel import TunnelParams
 from .robot import WHEELCHAIR_LASER, WHEELCHAIR_ROBOT, XR4000_LASER, XR4000_ROBOT, LaserConfig, RobotConfig
 from .scanmatch import IdcParams, KissParams
 
 __all__ = [
+    "CROSS_CHECKS",
     "PRESETS",
+    "RANGES",
     "Config",
     "CspaceConfig",
     "LaserConfig",
+    "PlannerConfig",
+    "Range",
     "RobotConfig",
     "ScanMatchConfig",
     "apply_overrides",
     "config_to_dict",
     "config_to_toml",
     "load_config",
+    "numeric_fields",
     "preset",
+    "range_of",
+    "validate_config",
 ]
 
 
@@ -51,6 +64,20 @@ class CspaceConfig:
 
     margin_m: float = 0.05
     unknown_is_free: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class PlannerConfig(Nf1Params):
+    """The planner section: which planner runs, NF1's settings (inherited, so ``[planner] connectivity``
+    keeps working) and the tunnel planner's (``[planner.tunnel]``).
+
+    Attributes:
+        kind: "nf1" (GND) or "tunnel" (the wheelchair paper).
+        tunnel: the tunnel planner's settings.
+    """
+
+    kind: Literal["nf1", "tunnel"] = "nf1"
+    tunnel: TunnelParams = TunnelParams()
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,7 +98,7 @@ class Config:
     laser: LaserConfig = WHEELCHAIR_LASER
     grid: GridParams = GRID_400
     cspace: CspaceConfig = CspaceConfig()
-    planner: Nf1Params = Nf1Params()
+    planner: PlannerConfig = PlannerConfig()
     reactor: NdParams = NdParams()
     supervisor: SupervisorParams = SupervisorParams()
     scanmatch: ScanMatchConfig = ScanMatchConfig()
@@ -82,6 +109,8 @@ class Config:
             robot=self.robot,
             grid=self.grid,
             planner=self.planner,
+            planner_kind=self.planner.kind,
+            tunnel=self.planner.tunnel,
             reactor=self.reactor,
             supervisor=self.supervisor,
             cspace_margin_m=self.cspace.margin_m,
@@ -98,12 +127,264 @@ PRESETS: dict[str, Config] = {
 }
 
 
+def _preset_key(name: str) -> str:
+    """Preset names are case-insensitive (``XR4000`` is ``xr4000``)."""
+    return name.strip().lower()
+
+
 def preset(name: str) -> Config:
-    """A named preset; ConfigError lists the known names."""
+    """A named preset (any case); ConfigError lists the known names."""
     try:
-        return PRESETS[name]
+        return PRESETS[_preset_key(name)]
     except KeyError:
         raise ConfigError(f"unknown preset {name!r}; known: {', '.join(sorted(PRESETS))}") from None
+
+
+# --------------------------------------------------------------------------------------------------
+# Physical ranges: one table for every numeric field of every section (a test checks none is missing)
+
+
+@dataclass(frozen=True, slots=True)
+class Range:
+    """Allowed values of a numeric setting: ``lo`` to ``hi``, each end closed unless ``*_open``.
+
+    Both ends are finite, so nan and inf are always refused.
+    """
+
+    lo: float
+    hi: float
+    lo_open: bool = False
+    hi_open: bool = False
+
+    def __contains__(self, value: float) -> bool:
+        above = value > self.lo if self.lo_open else value >= self.lo
+        below = value < self.hi if self.hi_open else value <= self.hi
+        return bool(above and below)
+
+    def __str__(self) -> str:
+        return f"{'(' if self.lo_open else '['}{_num(self.lo)}, {_num(self.hi)}{')' if self.hi_open else ']'}"
+
+
+def _num(x: float) -> str:
+    """A range end as written in a config file: ``1000000``, ``0.001``, ``6.28319``."""
+    return str(int(x)) if x == int(x) and abs(x) < 1e15 else f"{x:g}"
+
+
+def _pos(hi: float) -> Range:
+    """(0, hi]: a strictly positive quantity (speed, size, time)."""
+    return Range(0.0, hi, lo_open=True)
+
+
+def _nonneg(hi: float) -> Range:
+    """[0, hi]: a quantity that may be zero (margin, tolerance, distance that disables a feature)."""
+    return Range(0.0, hi)
+
+
+def _count(lo: int = 1, hi: int = 1_000_000) -> Range:
+    """An integer count in [lo, hi]."""
+    return Range(lo, hi)
+
+
+_UNIT = Range(0.0, 1.0)  # probabilities, ratios and fractions
+_FRAC = _pos(1.0)  # fractions that must not be zero (a zero speed fraction would never move)
+_TURN = _pos(2.0 * math.pi)  # an angle magnitude up to a full turn
+_ANGLE = Range(-2.0 * math.pi, 2.0 * math.pi)  # a signed angle
+_LEN = 100.0  # [m] no robot-scale length, gate or tolerance is longer
+_RANGE_M = 1000.0  # [m] no 2D laser reaches further
+_TIME = 60.0  # [s] per-tick budgets and periods
+
+#: (section dataclass, field) -> allowed values; applied by the loader to every resolved config.
+RANGES: dict[tuple[type, str], Range] = {
+    # robot: a footprint of at most 10 m, speeds and accelerations of a ground robot
+    (RobotConfig, "radius_m"): _pos(10.0),
+    (RobotConfig, "width_m"): _pos(10.0),
+    (RobotConfig, "front_m"): _nonneg(10.0),
+    (RobotConfig, "rear_m"): _nonneg(10.0),
+    (RobotConfig, "vmax_mps"): _pos(10.0),
+    (RobotConfig, "wmax_radps"): _pos(20.0),
+    (RobotConfig, "accel_mps2"): _pos(50.0),
+    (RobotConfig, "alpha_radps2"): _pos(100.0),
+    (RobotConfig, "laser_x_m"): Range(-10.0, 10.0),
+    (RobotConfig, "laser_y_m"): Range(-10.0, 10.0),
+    (RobotConfig, "laser_theta_rad"): _ANGLE,
+    (LaserConfig, "beams"): _count(2, 100_000),
+    (LaserConfig, "fov_deg"): _pos(360.0),
+    (LaserConfig, "max_range_m"): _pos(_RANGE_M),
+    (LaserConfig, "noise_std_m"): _nonneg(10.0),
+    (LaserConfig, "period_s"): _pos(_TIME),
+    # grid: 4 to 4000 cells a side (4000^2 cells and the planner's float arrays still fit in memory)
+    (GridParams, "size_cells"): _count(4, 4000),
+    (GridParams, "cell_m"): Range(0.001, 10.0),
+    (GridParams, "control_zone_m"): _nonneg(10_000.0),
+    (GridParams, "free_clip_m"): _nonneg(_RANGE_M),
+    (CspaceConfig, "margin_m"): _nonneg(10.0),
+    (Nf1Params, "lookahead_m"): _pos(_LEN),
+    (Nf1Params, "escape_m"): _nonneg(_LEN),
+    (Nf1Params, "border_search_m"): _nonneg(_LEN),
+    (TunnelParams, "margin_m"): _nonneg(10.0),
+    (TunnelParams, "n_rays"): _count(8, 100_000),
+    (TunnelParams, "jump_m"): _pos(_LEN),
+    (TunnelParams, "advance_m"): _pos(_LEN),
+    (TunnelParams, "passage_max_m"): _pos(_LEN),
+    (TunnelParams, "spacing_m"): _pos(_LEN),
+    (TunnelParams, "max_expansions"): _count(1, 1_000_000),
+    (TunnelParams, "heuristic_weight"): Range(1.0, 100.0),
+    (TunnelParams, "escape_m"): _nonneg(_LEN),
+    (TunnelParams, "border_search_m"): _nonneg(_LEN),
+    (NdParams, "n_sectors"): _count(8, 3600),
+    (NdParams, "security_m"): _pos(10.0),
+    (NdParams, "security_rear_ratio"): _FRAC,
+    (NdParams, "max_range_m"): _pos(_RANGE_M),
+    (NdParams, "smax_rad"): Range(0.0, 2.0 * math.pi, lo_open=True, hi_open=True),
+    (NdParams, "gap_m"): _pos(10.0),
+    (NdParams, "contact_m"): _pos(1.0),
+    (SupervisorParams, "budget_match_s"): _pos(_TIME),
+    (SupervisorParams, "budget_model_s"): _pos(_TIME),
+    (SupervisorParams, "budget_planner_s"): _pos(_TIME),
+    (SupervisorParams, "budget_reactor_s"): _pos(_TIME),
+    (SupervisorParams, "rotate_w_frac"): _FRAC,
+    (SupervisorParams, "goal_tolerance_m"): _pos(_LEN),
+    (SupervisorParams, "stale_scan_s"): _pos(3600.0),
+    (SupervisorParams, "brake_decel_mps2"): _pos(50.0),
+    (SupervisorParams, "reaction_s"): _nonneg(_TIME),
+    (SupervisorParams, "emergency_margin_m"): _nonneg(10.0),
+    (SupervisorParams, "trap_window"): _count(),
+    (SupervisorParams, "trap_count"): _count(),
+    (SupervisorParams, "escape_ticks"): _count(),
+    (SupervisorParams, "escape_v_frac"): _FRAC,
+    (SupervisorParams, "escape_clearance_m"): _nonneg(_LEN),
+    (IdcParams, "min_range_m"): _nonneg(_RANGE_M),
+    (IdcParams, "max_range_m"): _pos(_RANGE_M),
+    (IdcParams, "keyframe_dist_m"): _pos(_LEN),
+    (IdcParams, "keyframe_angle_rad"): _TURN,
+    (IdcParams, "keyframe_pair_ratio"): _UNIT,
+    (IdcParams, "map_keyframes"): _count(1, 10_000),
+    (IdcParams, "map_max_gap_s"): _pos(3600.0),
+    (IdcParams, "n_bins"): _count(8, 100_000),
+    (IdcParams, "blend_m"): _nonneg(_LEN),
+    (IdcParams, "seg_abs_m"): _nonneg(_LEN),
+    (IdcParams, "seg_rel"): _nonneg(10.0),
+    (IdcParams, "gap_bins"): _count(1, 100_000),
+    (IdcParams, "normal_chord_m"): _nonneg(_LEN),
+    (IdcParams, "max_iterations"): _count(1, 10_000),
+    (IdcParams, "win0_rad"): _TURN,
+    (IdcParams, "win_tau"): _pos(10_000.0),
+    (IdcParams, "win_min_rad"): _TURN,
+    (IdcParams, "idc_points"): _count(),
+    (IdcParams, "mrp_points"): _count(),
+    (IdcParams, "gate0_m"): _pos(_LEN),
+    (IdcParams, "gate_min_m"): _pos(_LEN),
+    (IdcParams, "tol_m"): _pos(1.0),
+    (IdcParams, "tol_rad"): _pos(1.0),
+    (IdcParams, "max_cp_bins"): _count(1, 100_000),
+    (IdcParams, "polish_iterations"): _count(0, 10_000),
+    (IdcParams, "pair_sigma_m"): _pos(_LEN),
+    (IdcParams, "prior_sigma_m"): _pos(_LEN),
+    (IdcParams, "prior_sigma_rel"): _nonneg(100.0),
+    (IdcParams, "prior_sigma_rad"): _TURN,
+    (IdcParams, "prior_sigma_rel_rad"): _nonneg(100.0),
+    (IdcParams, "min_pairs"): _count(),
+    (IdcParams, "min_pair_fraction"): _UNIT,
+    (IdcParams, "max_residual_m"): _pos(_LEN),
+    (IdcParams, "degenerate_min_info"): _nonneg(1e9),
+    (IdcParams, "guard_sigmas"): _pos(100.0),
+    (IdcParams, "odo_learn_rate"): _UNIT,
+    (IdcParams, "odo_learn_clip"): _pos(1000.0),
+    (IdcParams, "guard_window_rad"): _TURN,
+    (IdcParams, "guard_gain"): _UNIT,
+    (IdcParams, "guard_agree_m"): _nonneg(_LEN),
+    (IdcParams, "guard_agree_rad"): Range(0.0, 2.0 * math.pi),
+    (IdcParams, "coarse_window_rad"): Range(0.0, 2.0 * math.pi),  # 0: no coarse rotation search
+    (IdcParams, "coarse_step_rad"): _TURN,
+    (IdcParams, "coarse_points"): _count(),
+    (IdcParams, "coarse_tol_m"): _nonneg(_LEN),
+    (IdcParams, "coarse_tol_rel"): _nonneg(10.0),
+    (IdcParams, "coarse_min_gain"): _UNIT,
+    (IdcParams, "stall_min_step_m"): _nonneg(_LEN),
+    (IdcParams, "stall_min_step_rad"): Range(0.0, 2.0 * math.pi),
+    (IdcParams, "still_entry_m"): _nonneg(_LEN),
+    (IdcParams, "still_entry_rad"): Range(0.0, 2.0 * math.pi),
+    (IdcParams, "still_max_m"): _nonneg(_LEN),
+    (IdcParams, "still_max_rad"): Range(0.0, 2.0 * math.pi),
+    (IdcParams, "fallback_priors"): _count(0, 2),  # constant velocity, then no motion
+    (IdcParams, "recheck_pair_ratio"): _UNIT,
+    (IdcParams, "reset_after_failures"): _count(),
+    (KissParams, "voxel_m"): _pos(_LEN),
+    (KissParams, "max_range_m"): _pos(_RANGE_M),
+    (KissParams, "min_range_m"): _nonneg(_RANGE_M),
+    (KissParams, "max_points_per_voxel"): _count(1, 100_000),
+    (KissParams, "initial_threshold_m"): _pos(_LEN),
+    (KissParams, "min_motion_m"): _nonneg(_LEN),
+    (KissParams, "fixed_threshold_m"): _pos(_LEN),
+    (KissParams, "max_num_iterations"): _count(1, 100_000),
+    (KissParams, "convergence"): _pos(1.0),
+    (KissParams, "max_num_threads"): _count(1, 1024),
+}
+
+Check = Callable[[Any], bool]
+
+#: (section dataclass, fields named in the message, predicate, what must hold): constraints between fields.
+CROSS_CHECKS: tuple[tuple[type, str, Check, str], ...] = (
+    (RobotConfig, "front_m, rear_m", lambda r: r.shape != "rectangle" or r.front_m + r.rear_m > 0.0,
+     "a rectangle needs front_m + rear_m > 0"),
+    (IdcParams, "min_range_m, max_range_m", lambda p: p.min_range_m < p.max_range_m,
+     "min_range_m must be below max_range_m"),
+    (IdcParams, "win_min_rad, win0_rad", lambda p: p.win_min_rad <= p.win0_rad,
+     "win_min_rad must not exceed win0_rad"),
+    (IdcParams, "gate_min_m, gate0_m", lambda p: p.gate_min_m <= p.gate0_m,
+     "gate_min_m must not exceed gate0_m"),
+    (KissParams, "min_range_m, max_range_m", lambda p: p.min_range_m < p.max_range_m,
+     "min_range_m must be below max_range_m"),
+    (SupervisorParams, "trap_count, trap_window", lambda s: s.trap_count <= s.trap_window,
+     "trap_count must not exceed trap_window"),
+)
+
+
+def _sections(obj: Any, prefix: str) -> Iterator[tuple[str, Any]]:
+    """(dotted name, dataclass) of ``obj`` and every section below it."""
+    yield prefix, obj
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            yield from _sections(value, f"{prefix}.{f.name}" if prefix else f.name)
+
+
+def numeric_fields(section: type) -> list[str]:
+    """Fields of a section dataclass holding a number (int or float, optional or not; not bool or Literal)."""
+    hints = get_type_hints(section)
+    out = []
+    for f in dataclasses.fields(section):
+        tp = hints[f.name]
+        alts = get_args(tp) if get_origin(tp) in (types.UnionType, Union) else (tp,)
+        if any(a in (int, float) for a in alts):
+            out.append(f.name)
+    return out
+
+
+def range_of(section: type, name: str) -> Range | None:
+    """The range of ``section.name``, inherited from a base section (PlannerConfig from Nf1Params)."""
+    for cls in section.__mro__:
+        if (cls, name) in RANGES:
+            return RANGES[(cls, name)]
+    return None
+
+
+def validate_config(cfg: Config) -> Config:
+    """``cfg`` if every number is in its physical range (:data:`RANGES`) and the cross-field constraints
+    (:data:`CROSS_CHECKS`) hold; else ConfigError naming the first bad key (``robot.vmax_mps``)."""
+    for where, section in _sections(cfg, ""):
+        for name in numeric_fields(type(section)):
+            value = getattr(section, name)
+            allowed = range_of(type(section), name)
+            if value is None or allowed is None:
+                continue
+            if value not in allowed:
+                key = f"{where}.{name}" if where else name
+                raise ConfigError(f"{key} must be in {allowed}, got {value!r}")
+        for cls, keys, holds, what in CROSS_CHECKS:
+            if type(section) is cls and not holds(section):
+                raise ConfigError(f"[{where}] {keys}: {what}")
+    return cfg
 
 
 # --------------------------------------------------------------------------------------------------
@@ -176,7 +457,7 @@ def apply_overrides(base: Config, table: dict[str, Any]) -> Config:
     """``base`` with a nested dict of overrides applied (unknown keys / wrong types: ConfigError)."""
     table = dict(table)
     table.pop("preset", None)
-    return _override(base, table, "")
+    return validate_config(_override(base, table, ""))
 
 
 def load_config(path: Path | None = None, *, preset_name: str | None = None) -> Config:
@@ -194,13 +475,16 @@ def load_config(path: Path | None = None, *, preset_name: str | None = None) -> 
     name = preset_name or table.get("preset") or "wheelchair"
     if not isinstance(name, str):
         raise ConfigError(f"{path}: preset: expected a string, got {name!r}")
-    if preset_name and table.get("preset") not in (None, preset_name):
-        raise ConfigError(f"{path}: preset {table['preset']!r} conflicts with --preset {preset_name}")
+    in_file = table.get("preset")
+    if preset_name and in_file is not None and (
+        not isinstance(in_file, str) or _preset_key(in_file) != _preset_key(preset_name)
+    ):
+        raise ConfigError(f"{path}: preset {in_file!r} conflicts with --preset {preset_name}")
     try:
         cfg = apply_overrides(preset(name), table)
     except ConfigError as err:
         raise ConfigError(f"{path}: {err}" if path else str(err)) from None
-    return dataclasses.replace(cfg, preset=name)
+    return dataclasses.replace(cfg, preset=_preset_key(name))
 
 
 def config_to_dict(cfg: Any) -> dict[str, Any]:

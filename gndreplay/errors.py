@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["ConfigError", "GndReplayError", "LogFormatError", "ScanMatchError"]
+__all__ = ["ConfigError", "GndReplayError", "LogFormatError", "OutputError", "ScanMatchError"]
 
 
 class GndReplayError(Exception):
@@ -22,3 +22,8 @@ class ConfigError(GndReplayError):
 
 class ScanMatchError(GndReplayError):
     """A scan-matching setup error (not a failed match: a failed match is a value, see MatchResult)."""
+
+
+class OutputError(GndReplayError):
+    """An output path is unsafe to write (a file, the current folder, a folder holding inputs or files
+    gndreplay did not write); the message names the path. Raised before any work is done."""

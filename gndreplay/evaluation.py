@@ -26,7 +26,8 @@ from .errors import GndReplayError
 from .fsutil import atomic_write_text
 from .geometry import relative, wrap_angle
 
-__all__ = ["RelationStats", "Relations", "load_relations", "read_tum", "relation_errors", "write_tum"]
+__all__ = ["SPANS", "RelationStats", "Relations", "SpanStats", "load_relations", "read_tum",
+           "relation_errors", "relations_from_trajectory", "write_tum"]
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -51,6 +52,25 @@ class Relations:
 
     def __len__(self) -> int:
         return int(self.t1_ns.shape[0])
+
+
+def relations_from_trajectory(t_ns: ArrayLike, poses: ArrayLike, steps: tuple[int, ...] = (1,)) -> Relations:
+    """Relations taken from a reference trajectory: between each pose and the one ``step`` poses later, for
+    each step (e.g. a full-rate trajectory as the reference of a decimated run).
+
+    Raises:
+        ValueError: shapes disagree, or a step is not positive.
+    """
+    t, p = _trajectory_arrays(t_ns, poses)
+    if any(st < 1 for st in steps):
+        raise ValueError(f"steps must be positive, got {steps}")
+    pairs = [(t[:-st], t[st:], relative(p[:-st], p[st:])) for st in steps if st < t.shape[0]]
+    if not pairs:
+        e = np.zeros(0)
+        return Relations(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), e, e.copy(), e.copy())
+    d = np.concatenate([x[2] for x in pairs])
+    return Relations(np.concatenate([x[0] for x in pairs]), np.concatenate([x[1] for x in pairs]),
+                     d[:, 0].copy(), d[:, 1].copy(), d[:, 2].copy())
 
 
 def _seconds_to_ns(text: str) -> int:
@@ -96,6 +116,38 @@ def load_relations(path: str | os.PathLike[str]) -> Relations:
                      v[:, 1].copy(), v[:, 2].copy())
 
 
+#: relation spans reported apart [s]: below 1 s the error is the matches' own (local accuracy), beyond 10 s
+#: mostly drift (loop-closing relations)
+SPANS: tuple[tuple[str, float, float], ...] = (
+    ("<1 s", 0.0, 1.0), ("1-10 s", 1.0, 10.0), (">10 s", 10.0, math.inf))
+
+
+@dataclass(frozen=True)
+class SpanStats:
+    """Errors of the matched relations whose span |t2 - t1| lies in [lo_s, hi_s).
+
+    Attributes:
+        label: e.g. "<1 s".
+        count: relations in the span.
+        trans_mean_m, trans_max_m: translational error [m] (nan when count is 0).
+        rot_mean_deg, rot_max_deg: rotational error [deg].
+    """
+
+    label: str
+    lo_s: float
+    hi_s: float
+    count: int
+    trans_mean_m: float
+    trans_max_m: float
+    rot_mean_deg: float
+    rot_max_deg: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"label": self.label, "count": self.count, "trans_mean_m": self.trans_mean_m,
+                "trans_max_m": self.trans_max_m, "rot_mean_deg": self.rot_mean_deg,
+                "rot_max_deg": self.rot_max_deg}
+
+
 @dataclass(frozen=True, eq=False)
 class RelationStats:
     """Relation errors of one trajectory.
@@ -107,6 +159,7 @@ class RelationStats:
         index: (matched,) indices into the relations of the matched ones.
         trans_err_m: (matched,) translational error per matched relation [m].
         rot_err_deg: (matched,) rotational error per matched relation [deg].
+        by_span: the same errors split by relation span (:data:`SPANS`).
     """
 
     matched: int
@@ -120,6 +173,14 @@ class RelationStats:
     index: I64
     trans_err_m: F64
     rot_err_deg: F64
+    by_span: tuple[SpanStats, ...] = ()
+
+    def span(self, label: str) -> SpanStats:
+        """The span statistics labelled ``label`` (one of :data:`SPANS`)."""
+        for s in self.by_span:
+            if s.label == label:
+                return s
+        raise KeyError(label)
 
     def to_dict(self) -> dict[str, Any]:
         """Summary numbers (no per-relation arrays), JSON-ready."""
@@ -128,6 +189,7 @@ class RelationStats:
             "trans_mean_m": self.trans_mean_m, "trans_std_m": self.trans_std_m,
             "trans_max_m": self.trans_max_m, "rot_mean_deg": self.rot_mean_deg,
             "rot_std_deg": self.rot_std_deg, "rot_max_deg": self.rot_max_deg,
+            "by_span": [s.to_dict() for s in self.by_span],
         }
 
 
@@ -145,6 +207,16 @@ def _stats(x: F64) -> tuple[float, float, float]:
     if x.size == 0:
         return math.nan, math.nan, math.nan
     return float(np.mean(x)), float(np.std(x)), float(np.max(x))
+
+
+def _span_stats(span_s: F64, e_t: F64, e_r: F64) -> tuple[SpanStats, ...]:
+    out = []
+    for label, lo, hi in SPANS:
+        m = (span_s >= lo) & (span_s < hi)
+        t_mean, _, t_max = _stats(e_t[m])
+        r_mean, _, r_max = _stats(e_r[m])
+        out.append(SpanStats(label, lo, hi, int(m.sum()), t_mean, t_max, r_mean, r_max))
+    return tuple(out)
 
 
 def relation_errors(t_ns: ArrayLike, poses: ArrayLike, relations: Relations, *,
@@ -165,7 +237,7 @@ def relation_errors(t_ns: ArrayLike, poses: ArrayLike, relations: Relations, *,
     empty = np.zeros(0)
     if t.size == 0 or m == 0:
         return RelationStats(0, m, math.nan, math.nan, math.nan, math.nan, math.nan, math.nan,
-                             np.zeros(0, dtype=np.int64), empty, empty)
+                             np.zeros(0, dtype=np.int64), empty, empty, _span_stats(empty, empty, empty))
     order = np.argsort(t, kind="stable")
     ts, ps = t[order], p[order]
     tol_ns = round(tol_s * NS_PER_S)
@@ -179,7 +251,9 @@ def relation_errors(t_ns: ArrayLike, poses: ArrayLike, relations: Relations, *,
     rm, rs, rx = _stats(e_r)
     n_ok = int(ok.sum())
     index = np.flatnonzero(ok).astype(np.int64)
-    return RelationStats(n_ok, m - n_ok, tm, ts_, tx, rm, rs, rx, index, e_t, e_r)
+    span_s = np.abs(relations.t2_ns[ok] - relations.t1_ns[ok]) / NS_PER_S
+    return RelationStats(n_ok, m - n_ok, tm, ts_, tx, rm, rs, rx, index, e_t, e_r,
+                         _span_stats(span_s, e_t, e_r))
 
 
 def _trajectory_arrays(t_ns: ArrayLike, poses: ArrayLike) -> tuple[I64, F64]:

@@ -359,6 +359,7 @@ class _StampStats:
 
 def _ros_info(path: Path, fmt: str, size: int, opts: dict[str, Any], *, sample: int, gap_ns: int) -> LogInfo:
     from .errors import LogFormatError
+    from .io.base import check_time
     from .io.mcap import mcap_files, read_mcap_summary
     from .io.rosbag import ODOMETRY, RosbagReader, rosbags_errors
 
@@ -388,7 +389,7 @@ def _ros_info(path: Path, fmt: str, size: int, opts: dict[str, Any], *, sample: 
             stamps: list[int] = []
             for i, (_, raw) in enumerate(log.raw_messages(log.odom_topic), start=1):
                 try:
-                    s = log.header_stamp(raw)
+                    s = check_time(log.header_stamp(raw))
                 except errors as err:
                     bad(i, log.odom_topic, err)
                     continue
@@ -398,7 +399,7 @@ def _ros_info(path: Path, fmt: str, size: int, opts: dict[str, Any], *, sample: 
         beams, times = _BeamStats(), _StampStats(gap_ns, odom_span)
         for i, (t_log, raw) in enumerate(log.raw_messages(log.scan_topic)):
             try:
-                times.add(log.header_stamp(raw) or t_log)
+                times.add(check_time(log.header_stamp(raw) or t_log))
                 if i % every == 0:
                     beams.add(log.decode_scan(raw, t_log))
             except errors as err:

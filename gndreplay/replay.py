@@ -2,7 +2,13 @@
 
 Data flows one way: io yields Ticks, the matcher corrects each pose, a bounded lookahead buffer assigns
 each tick its goal (D metres further along the corrected trajectory, or a fixed goal), the stack decides,
-and rows are streamed to files in a temporary directory that is renamed into place only on success.
+and rows are streamed to files in a staging directory that is renamed into place only when complete
+(``gndreplay.fsutil.staging_dir``: nothing the user owns is ever deleted or overwritten).
+
+Records are a pure function of log + config: commands.csv, the trajectories and maps never carry wall-clock
+facts (the ``*_OVER_BUDGET`` flags live in timing.csv unless ``enforce_budgets`` let them change a
+command), every file prints a tick's time with ``fsutil.format_stamp``, and ``until_s`` does not change
+earlier ticks (the goal lookahead reads past it).
 """
 
 from __future__ import annotations
@@ -10,15 +16,12 @@ from __future__ import annotations
 import itertools
 import json
 import math
-import os
-import shutil
-import tempfile
 import time
 from collections import Counter, deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,7 +29,7 @@ from numpy.typing import NDArray
 from . import __version__
 from .config import Config, config_to_dict, config_to_toml
 from .evaluation import write_tum
-from .fsutil import umask_mode
+from .fsutil import check_output_dir, format_stamp, resolve_output_dir, staging_dir
 from .geometry import relative, wrap_angle
 from .pipeline.model import RobotCentredGrid
 from .pipeline.stack import MODULES, NavigationStack, TickResult, warm_up
@@ -34,20 +37,32 @@ from .scanmatch import Matcher, make_matcher
 from .types import Flag, Pose2D, Scan, Tick
 
 __all__ = [
+    "BUDGET_FLAGS",
+    "STAGES",
     "RunOptions",
     "RunSink",
     "RunSummary",
+    "StagedSink",
     "assign_goals",
     "corrected_stream",
+    "recorded_flags",
     "run_replay",
     "summarise",
+    "warm_up_all",
 ]
+
+#: Flags that depend on wall-clock time: recorded in timing.csv, not in commands.csv (unless enforced).
+BUDGET_FLAGS = (
+    Flag.MATCH_OVER_BUDGET | Flag.MODEL_OVER_BUDGET | Flag.PLANNER_OVER_BUDGET | Flag.REACTOR_OVER_BUDGET
+)
 
 
 class RunSink(Protocol):
     """Something that consumes the replay as it streams and writes its own files into the run directory
-    (figures' map rasters, the results MCAP, ...). ``finish`` receives the temporary run directory; it is
-    called once, only when the replay completed."""
+    (figures' map rasters, the results MCAP, the report). ``finish`` receives the staging directory (the
+    run directory before it is published); it is called once, only when the replay completed, in the
+    order the sinks were given, after commands.csv, timing.csv, the trajectories, summary.json and
+    config.toml were written there."""
 
     def add_scan(self, tick: Tick, pose_corrected: Pose2D) -> None:
         """Every scan of the log (also those skipped by ``every``), at its corrected pose."""
@@ -62,6 +77,15 @@ class RunSink(Protocol):
         """The replay failed: release whatever the sink holds (temporary files, writers)."""
 
 
+@runtime_checkable
+class StagedSink(Protocol):
+    """Optional extra of a ``RunSink``: ``start`` receives the staging directory before the first tick, so
+    the sink can keep its temporary files there (removed with it on any failure, never in $TMPDIR)."""
+
+    def start(self, staging: Path, target: Path) -> None:
+        """The replay is about to start; ``staging`` becomes the run directory ``target`` when complete."""
+
+
 @dataclass(frozen=True, slots=True)
 class RunOptions:
     """How to drive a replay.
@@ -69,7 +93,8 @@ class RunOptions:
     Attributes:
         goal_xy: a fixed goal in the corrected odometry frame, or None for goal_ahead_m.
         goal_ahead_m: the goal is the pose this far further along the log's corrected trajectory.
-        until_s: stop after this much log time (from the first scan).
+        until_s: stop after this much log time (from the first scan). Ticks before it are the same as
+            without it: the goal lookahead still reads the log beyond ``until_s``.
         every: run the stack on every N-th tick (the matcher still sees every scan).
         max_lookahead_ticks: bound of the goal lookahead buffer (memory stays constant when the robot
             stands still; the goal is then the newest known pose).
@@ -91,6 +116,7 @@ class Matched:
     match_ms: float
     failed: bool
     s_m: float  # path length along the corrected trajectory since the first scan
+    in_range: bool = True  # within until_s (later ticks are read only for the goal lookahead)
 
 
 def _make_matcher(cfg: Config) -> Matcher:
@@ -113,22 +139,29 @@ def _warm_up_matcher(cfg: Config) -> None:
 
 
 def corrected_stream(ticks: Iterable[Tick], cfg: Config, options: RunOptions) -> Iterator[Matched]:
-    """Run the configured matcher over the ticks (all of them, in time order) within ``until_s``."""
+    """Run the configured matcher over the ticks (all of them, in time order), lazily.
+
+    Ticks after ``until_s`` are yielded with ``in_range`` False when a goal lookahead needs them (goal
+    ahead); with a fixed goal the stream stops at the first one.
+    """
     matcher = _make_matcher(cfg)
     t_first: int | None = None
     s, prev = 0.0, None
+    in_range = True
     for tick in ticks:
         if t_first is None:
             t_first = tick.t_ns
-        if options.until_s is not None and (tick.t_ns - t_first) / 1e9 > options.until_s:
-            break
+        if in_range and options.until_s is not None and (tick.t_ns - t_first) / 1e9 > options.until_s:
+            in_range = False
+            if options.goal_xy is not None:
+                break
         t0 = time.perf_counter_ns()
         res = matcher.update(tick.scan, tick.odom)
         ms = (time.perf_counter_ns() - t0) / 1e6
         if prev is not None:
             s += math.hypot(res.pose.x - prev.x, res.pose.y - prev.y)
         prev = res.pose
-        yield Matched(tick, res.pose, ms, not res.ok, s)
+        yield Matched(tick, res.pose, ms, not res.ok, s, in_range)
 
 
 def assign_goals(
@@ -139,16 +172,21 @@ def assign_goals(
     With a fixed goal this is a pass-through. With goal_ahead_m the goal of tick i is the point of the
     corrected trajectory goal_ahead_m further along it (interpolated between the two poses bracketing
     that arc length), which needs a bounded buffer of future ticks; at the end of the log the goal is
-    the final pose.
+    the final pose. Only ticks ``in_range`` are yielded; later ones are read only as long as an earlier
+    tick still waits for its goal, so a run cut by ``until_s`` gives its ticks the same goals as a full run.
     """
     if options.goal_xy is not None:
         for m in matched:
+            if not m.in_range:
+                return
             yield m, options.goal_xy
         return
     d = options.goal_ahead_m
     buf: deque[Matched] = deque()
     prev: Matched | None = None
     for m in matched:
+        if not m.in_range and not (buf and buf[0].in_range):
+            return  # every tick within until_s has its goal
         buf.append(m)
         while buf and (buf[0].s_m + d <= m.s_m or len(buf) > options.max_lookahead_ticks):
             head = buf.popleft()
@@ -159,11 +197,13 @@ def assign_goals(
                 gy = prev.pose.y + f * (m.pose.y - prev.pose.y)
             else:
                 gx, gy = m.pose.x, m.pose.y
-            yield head, (gx, gy)
+            if head.in_range:
+                yield head, (gx, gy)
         prev = m
     if prev is not None:
         for head in buf:
-            yield head, (prev.pose.x, prev.pose.y)
+            if head.in_range:
+                yield head, (prev.pose.x, prev.pose.y)
 
 
 @dataclass(frozen=True, slots=True)
@@ -176,20 +216,28 @@ class RunSummary:
 
 
 _COMMAND_HEADER = "t,v,vy,w,mode,situation,flags\n"
-_TIMING_HEADER = "t," + ",".join(f"{m}_ms" for m in MODULES) + ",total_ms\n"
+_TIMING_HEADER = "t," + ",".join(f"{m}_ms" for m in MODULES) + ",total_ms,planner_nodes,path_m,flags\n"
 
 
-def _command_row(r: TickResult) -> str:
-    flags = "|".join(r.flags.names())
+def recorded_flags(flags: Flag, *, enforce_budgets: bool) -> Flag:
+    """The flags commands.csv records: all of them when budgets are enforced (they then change commands),
+    otherwise all but the wall-clock ``BUDGET_FLAGS`` (which timing.csv records)."""
+    return flags if enforce_budgets else flags & ~BUDGET_FLAGS
+
+
+def _command_row(r: TickResult, enforce_budgets: bool) -> str:
+    flags = "|".join(recorded_flags(r.flags, enforce_budgets=enforce_budgets).names())
     return (
-        f"{r.t_ns / 1e9:.9f},{r.v_mps:.6f},{r.vy_mps:.6f},{r.w_radps:.6f},"
+        f"{format_stamp(r.t_ns)},{r.v_mps:.6f},{r.vy_mps:.6f},{r.w_radps:.6f},"
         f"{r.mode.value},{r.situation.name},{flags}\n"
     )
 
 
 def _timing_row(r: TickResult) -> str:
     ms = [r.timings_ms.get(m, 0.0) for m in MODULES]
-    return f"{r.t_ns / 1e9:.9f}," + ",".join(f"{x:.4f}" for x in ms) + f",{sum(ms):.4f}\n"
+    over = "|".join((r.flags & BUDGET_FLAGS).names())
+    stats = f"{r.planner_nodes},{r.planner_length_m:.3f}"
+    return f"{format_stamp(r.t_ns)}," + ",".join(f"{x:.4f}" for x in ms) + f",{sum(ms):.4f},{stats},{over}\n"
 
 
 class _Trajectories:
@@ -217,7 +265,8 @@ class _Trajectories:
 class _Recorder:
     """Accumulates the per-tick numbers the summary needs (a few floats per tick)."""
 
-    def __init__(self) -> None:
+    def __init__(self, *, enforce_budgets: bool = False) -> None:
+        self.enforce_budgets = enforce_budgets
         self.t_s: list[float] = []
         self.pose: list[tuple[float, float, float]] = []
         self.cmd: list[tuple[float, float, float]] = []  # v, w, direction
@@ -225,6 +274,8 @@ class _Recorder:
         self.modes: Counter[str] = Counter()
         self.situations: Counter[str] = Counter()
         self.flags: Counter[str] = Counter()
+        self.over_budget: Counter[str] = Counter()
+        self.planner: list[tuple[float, float]] = []  # nodes expanded (cells for NF1), path length [m]
 
     def add(self, r: TickResult) -> None:
         self.t_s.append(r.t_ns / 1e9)
@@ -234,8 +285,11 @@ class _Recorder:
         self.timing.append([r.timings_ms.get(m, 0.0) for m in MODULES])
         self.modes[r.mode.value] += 1
         self.situations[r.situation.name] += 1
-        for name in r.flags.names():
+        for name in recorded_flags(r.flags, enforce_budgets=self.enforce_budgets).names():
             self.flags[name] += 1
+        for name in (r.flags & BUDGET_FLAGS).names():
+            self.over_budget[name] += 1
+        self.planner.append((float(r.planner_nodes), r.planner_length_m))
 
 
 def motion_agreement(
@@ -292,10 +346,24 @@ def _latency(values: NDArray[np.float64]) -> dict[str, float]:
     return {"median": float(q[0]), "p90": float(q[1]), "p99": float(q[2]), "max": float(values.max())}
 
 
+def _planner_stats(rec: _Recorder, cfg: Config) -> dict[str, Any]:
+    """Which planner ran and its work per tick: nodes expanded (NF1: cells the wave labelled; tunnel: nodes
+    expanded) and the length of the path or tunnel chain it returned, over the ticks where it found one."""
+    stats = np.asarray(rec.planner, dtype=np.float64).reshape(-1, 2)
+    out: dict[str, Any] = {"kind": cfg.planner.kind}
+    for k, name in enumerate(("nodes", "path_m")):
+        col = stats[np.isfinite(stats[:, k]), k]
+        if col.size:
+            q = np.percentile(col, [50, 99])
+            out[name] = {"median": float(q[0]), "p99": float(q[1]), "max": float(col.max())}
+    return out
+
+
 def summarise(
     rec: _Recorder, cfg: Config, log: Path, options: RunOptions, read_report: Any
 ) -> dict[str, Any]:
-    """summary.json: counts, histograms, agreement and (last, the only non-deterministic part) latency."""
+    """summary.json: counts, histograms, agreement and (last, the only non-deterministic part) latency and
+    the ticks over each module's time budget. ``flags`` counts what commands.csv records."""
     n = len(rec.t_s)
     timing = np.asarray(rec.timing, dtype=np.float64).reshape(n, len(MODULES))
     latency = {m: _latency(timing[:, k]) for k, m in enumerate(MODULES)}
@@ -310,7 +378,11 @@ def summarise(
         "duration_s": float(t[-1] - t[0]) if n else 0.0,
         "modes": dict(sorted(rec.modes.items())),
         "situations": dict(sorted(rec.situations.items())),
-        "flags": {name: rec.flags.get(name, 0) for name in (f.name for f in Flag if f.value and f.name)},
+        "flags": {
+            name: rec.flags.get(name, 0)
+            for name in (f.name for f in Flag if f.value and f.name)
+            if rec.enforce_budgets or not Flag[name] & BUDGET_FLAGS
+        },
         "agreement": agreement,
         "read_report": read_report,
         "options": {
@@ -320,8 +392,54 @@ def summarise(
             "every": options.every,
         },
         "config": config_to_dict(cfg),
+        "planner": _planner_stats(rec, cfg),
         "latency_ms": latency,
+        "over_budget": {name: rec.over_budget.get(name, 0) for name in BUDGET_FLAGS.names()},
     }
+
+
+class _CompileListener:
+    """Reports each gndreplay numba kernel compiled (a disk-cache miss) while active."""
+
+    def __init__(self, callback: Callable[[str], None]) -> None:
+        from numba.core import event
+
+        class Listener(event.Listener):
+            def on_start(self, ev: Any) -> None:
+                disp = ev.data.get("dispatcher") if isinstance(ev.data, dict) else None
+                func = getattr(disp, "py_func", None)
+                module = str(getattr(func, "__module__", ""))
+                if module.startswith("gndreplay."):  # not numba's own helpers compiled along
+                    callback(f"{module.rsplit('.', 1)[-1]}.{getattr(func, '__qualname__', '?')}")
+
+            def on_end(self, ev: Any) -> None:
+                pass
+
+        self._event = event
+        self._listener = Listener()
+
+    def __enter__(self) -> None:
+        self._event.register("numba:compile", self._listener)
+
+    def __exit__(self, *exc: object) -> None:
+        self._event.unregister("numba:compile", self._listener)
+
+
+def warm_up_all(cfg: Config, on_compile: Callable[[str], None] | None = None) -> None:
+    """Compile (or load from numba's disk cache) every kernel a replay with ``cfg`` uses, before the
+    first timed tick. ``on_compile(name)`` is called for each kernel actually compiled (a cold cache:
+    the first run after installing), so a caller can say so."""
+    if on_compile is None:
+        warm_up(cfg.stack_params())
+        _warm_up_matcher(cfg)
+        return
+    with _CompileListener(on_compile):
+        warm_up(cfg.stack_params())
+        _warm_up_matcher(cfg)
+
+
+#: Stages ``run_replay`` reports through ``on_stage``, in order.
+STAGES = ("warm-up", "replay", "write")
 
 
 def run_replay(
@@ -334,58 +452,77 @@ def run_replay(
     read_report: Callable[[], Any] = lambda: None,
     on_tick: Callable[[TickResult], None] | None = None,
     sinks: Iterable[RunSink] = (),
+    overwrite: bool = False,
+    on_stage: Callable[[str], None] | None = None,
+    on_compile: Callable[[str], None] | None = None,
 ) -> RunSummary:
     """Replay ``ticks`` through the stack and write the run directory ``out_dir``.
 
-    Files are written into a sibling temporary directory and moved into place only when the run
-    finished, so an error (bad log record, interrupt) never leaves a half-written run directory.
+    ``ticks`` is consumed lazily, one tick per stack step: with a fixed goal (``options.goal_xy``) tick
+    k+1 is pulled only after ``on_tick`` was called for tick k (with a goal ahead the lookahead reads up
+    to ``goal_ahead_m`` of trajectory further). Kernels are compiled before the first tick
+    (``warm_up_all``; ``on_compile`` hears each cold compile); ``on_stage`` hears each of ``STAGES``.
+
+    ``out_dir`` is checked before any work (``fsutil.check_output_dir``: never a file, the current folder,
+    a folder holding the log or files gndreplay did not write). An existing run directory there is
+    replaced only with ``overwrite``; otherwise the run is written beside it as ``out_dir-2``, ... (the
+    returned summary says where). Everything, the sinks' files included, is written into a staging
+    directory beside it that is published only when complete and removed on any failure.
+
+    Raises:
+        OutputError: ``out_dir`` is unsafe to write.
     """
     out_dir = Path(out_dir)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    log_path = Path(log)
+    check_output_dir(out_dir, inputs=(log_path,) if log_path.exists() else (), overwrite=overwrite)
+    target = resolve_output_dir(out_dir, overwrite=overwrite)
+    stage = on_stage if on_stage is not None else (lambda name: None)
     sinks = list(sinks)
-    try:
-        warm_up(cfg.stack_params())
-        _warm_up_matcher(cfg)
-        rec = _Recorder()
-        traj = _Trajectories()
-        stack = NavigationStack(cfg.stack_params())
-        with (
-            open(tmp / "commands.csv", "w", newline="") as f_cmd,
-            open(tmp / "timing.csv", "w", newline="") as f_tim,
-        ):
-            f_cmd.write(_COMMAND_HEADER)
-            f_tim.write(_TIMING_HEADER)
-            for k, (m, goal) in enumerate(assign_goals(corrected_stream(ticks, cfg, options), options)):
-                traj.add(m)
-                for sink in sinks:
-                    sink.add_scan(m.tick, m.pose)
-                if k % options.every:
-                    continue
-                r = stack.step(m.tick, m.pose, goal, match_ms=m.match_ms, match_failed=m.failed)
-                for sink in sinks:
-                    sink.add_result(m.tick, r, stack.grid)
-                f_cmd.write(_command_row(r))
-                f_tim.write(_timing_row(r))
-                rec.add(r)
-                if on_tick is not None:
-                    on_tick(r)
-        traj.write(tmp)
-        summary = summarise(rec, cfg, log, options, read_report())
-        (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=True) + "\n")
-        (tmp / "config.toml").write_text(config_to_toml(cfg))
-        for sink in sinks:
-            sink.finish(tmp)
-        os.chmod(tmp, umask_mode(0o777))
-        if out_dir.exists():
-            shutil.rmtree(out_dir)
-        tmp.rename(out_dir)
-    except BaseException:
-        for sink in sinks:
-            sink.abort()
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return RunSummary(out_dir=out_dir, ticks=len(rec.t_s), data=summary)
+    enforce = cfg.supervisor.enforce_budgets
+    with staging_dir(target, overwrite=overwrite) as tmp:
+        try:
+            for sink in sinks:
+                if isinstance(sink, StagedSink):
+                    sink.start(tmp, target)
+            stage("warm-up")
+            warm_up_all(cfg, on_compile)
+            stage("replay")
+            rec = _Recorder(enforce_budgets=enforce)
+            traj = _Trajectories()
+            stack = NavigationStack(cfg.stack_params())
+            with (
+                open(tmp / "commands.csv", "w", newline="") as f_cmd,
+                open(tmp / "timing.csv", "w", newline="") as f_tim,
+            ):
+                f_cmd.write(_COMMAND_HEADER)
+                f_tim.write(_TIMING_HEADER)
+                pairs = assign_goals(corrected_stream(ticks, cfg, options), options)
+                for k, (m, goal) in enumerate(pairs):
+                    traj.add(m)
+                    for sink in sinks:
+                        sink.add_scan(m.tick, m.pose)
+                    if k % options.every:
+                        continue
+                    r = stack.step(m.tick, m.pose, goal, match_ms=m.match_ms, match_failed=m.failed)
+                    for sink in sinks:
+                        sink.add_result(m.tick, r, stack.grid)
+                    f_cmd.write(_command_row(r, enforce))
+                    f_tim.write(_timing_row(r))
+                    rec.add(r)
+                    if on_tick is not None:
+                        on_tick(r)
+            stage("write")
+            traj.write(tmp)
+            summary = summarise(rec, cfg, log_path, options, read_report())
+            (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=True) + "\n")
+            (tmp / "config.toml").write_text(config_to_toml(cfg))
+            for sink in sinks:
+                sink.finish(tmp)
+        except BaseException:  # abort before the staging directory (holding the sinks' files) goes
+            for sink in sinks:
+                sink.abort()
+            raise
+    return RunSummary(out_dir=target, ticks=len(rec.t_s), data=summary)
 
 
 @dataclass(frozen=True, slots=True)
@@ -409,10 +546,23 @@ def run_log(
     read: ReadOptions = ReadOptions(),
     sinks: Iterable[RunSink] = (),
     on_tick: Callable[[TickResult], None] | None = None,
+    overwrite: bool = False,
+    on_open: Callable[[Any], None] | None = None,
+    on_stage: Callable[[str], None] | None = None,
+    on_compile: Callable[[str], None] | None = None,
 ) -> RunSummary:
-    """Open ``log``, replay it and write ``out_dir`` (the whole of ``gndreplay run`` minus the terminal)."""
+    """Open ``log``, replay it and write ``out_dir`` (the whole of ``gndreplay run`` minus the terminal).
+
+    ``out_dir`` is checked before the log is opened; ``on_open`` receives the reader's ``LogDescription``
+    (stream counts, start and end when the format knows them, e.g. for a progress total).
+
+    Raises:
+        OutputError: ``out_dir`` is unsafe to write (see ``run_replay``).
+        LogFormatError: the log cannot be read.
+    """
     from .io import open_log
 
+    check_output_dir(Path(out_dir), inputs=(Path(log),), overwrite=overwrite)
     with open_log(
         Path(log),
         fmt=read.fmt,
@@ -422,6 +572,8 @@ def run_log(
         truth_topic=read.truth_topic,
         strict=read.strict,
     ) as reader:
+        if on_open is not None:
+            on_open(reader.describe())
         return run_replay(
             reader.ticks(),
             cfg,
@@ -431,4 +583,7 @@ def run_log(
             read_report=lambda: reader.report.to_dict(),
             on_tick=on_tick,
             sinks=sinks,
+            overwrite=overwrite,
+            on_stage=on_stage,
+            on_compile=on_compile,
         )

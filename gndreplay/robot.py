@@ -25,6 +25,9 @@ class RobotConfig:
         accel_mps2, alpha_radps2: acceleration limits (linear, angular); they set the braking horizon and
             bound the simulated motion.
         laser_x_m, laser_y_m, laser_theta_rad: laser pose in the robot frame (used when the log gives none).
+
+    The allowed range of every field (and ``front_m + rear_m > 0`` for a rectangle) is checked when a
+    configuration is loaded: ``gndreplay.config.RANGES`` and ``CROSS_CHECKS``.
     """
 
     shape: Literal["circle", "rectangle"] = "rectangle"
@@ -77,6 +80,8 @@ class LaserConfig:
         max_range_m: readings at or beyond this are no-returns [m].
         noise_std_m: standard deviation of the Gaussian range noise [m].
         period_s: time between scans [s].
+
+    Allowed ranges: ``gndreplay.config.RANGES``.
     """
 
     beams: int = 361

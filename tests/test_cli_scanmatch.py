@@ -59,3 +59,15 @@ def test_scanmatch_table_and_bad_inputs(tmp_path: Path) -> None:
     junk = runner.invoke(app, ["scanmatch", str(garbage), "--out", str(tmp_path / "j")])
     assert junk.exit_code == 2 and "junk.clf" in junk.stderr
     assert not (tmp_path / "j").exists()
+
+
+def test_scanmatch_relations_that_match_no_scan_are_an_error(tmp_path: Path) -> None:
+    """Relations of another log: exit 2 with one line naming the file, and no output written."""
+    rel = tmp_path / "other.relations"
+    rel.write_text("1000.000000 1000.500000 0.1 0 0 0 0 0\n2000.000000 2000.500000 0.1 0 0 0 0 0\n")
+    out = tmp_path / "sm"
+    result = CliRunner().invoke(app, ["scanmatch", str(SAMPLE), "--matcher", "odom", "--relations", str(rel),
+                                      "--out", str(out)])
+    assert result.exit_code == 2, result.output
+    assert "other.relations: none of its 2 relations matches" in result.stderr
+    assert "Traceback" not in result.output and not out.exists()

@@ -2,12 +2,27 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import pickle
+import typing
 from pathlib import Path
 
 import pytest
 
-from gndreplay.config import PRESETS, Config, config_to_toml, load_config, preset
+from gndreplay.config import (
+    CROSS_CHECKS,
+    PRESETS,
+    RANGES,
+    Config,
+    Range,
+    config_to_toml,
+    load_config,
+    numeric_fields,
+    preset,
+    range_of,
+    validate_config,
+)
 from gndreplay.errors import ConfigError
 
 
@@ -28,6 +43,14 @@ def test_presets_match_the_papers() -> None:
 def test_unknown_preset() -> None:
     with pytest.raises(ConfigError, match="unknown preset 'tank'; known: wheelchair, xr4000"):
         preset("tank")
+
+
+def test_presets_are_case_insensitive(tmp_path: Path) -> None:
+    assert preset("XR4000") is PRESETS["xr4000"] and preset("Wheelchair") is PRESETS["wheelchair"]
+    assert load_config(None, preset_name="XR4000").preset == "xr4000"
+    # the file's preset and --preset agree whatever their case
+    cfg = load_config(write(tmp_path, 'preset = "Xr4000"\n'), preset_name="XR4000")
+    assert cfg.preset == "xr4000" and cfg.robot.shape == "circle"
 
 
 def write(tmp_path: Path, text: str) -> Path:
@@ -93,3 +116,90 @@ def test_config_pickles_for_batch_workers() -> None:
     cfg = PRESETS["xr4000"]
     assert pickle.loads(pickle.dumps(cfg)) == cfg
     assert isinstance(cfg, Config)
+
+
+# ---------------------------------------------------------------- physical ranges
+
+
+def _sections(cls: type) -> list[type]:
+    """Every section dataclass reachable from ``cls`` (itself included)."""
+    out = [cls]
+    for tp in typing.get_type_hints(cls).values():
+        if dataclasses.is_dataclass(tp) and isinstance(tp, type):
+            out += _sections(tp)
+    return out
+
+
+def test_every_numeric_field_of_every_section_has_a_range() -> None:
+    missing = [
+        f"{cls.__name__}.{name}" for cls in _sections(Config) for name in numeric_fields(cls)
+        if range_of(cls, name) is None
+    ]
+    assert not missing, f"add these to config.RANGES: {missing}"
+    # and the table names no field that does not exist (a renamed field would leave a dead entry);
+    # a section may inherit its fields' ranges from a base section (PlannerConfig from Nf1Params)
+    known = {
+        (base, name) for cls in _sections(Config) for base in cls.__mro__ for name in numeric_fields(cls)
+    }
+    assert set(RANGES) <= known
+    assert all(math.isfinite(r.lo) and math.isfinite(r.hi) and r.lo < r.hi for r in RANGES.values())
+
+
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_presets_are_in_range(name: str) -> None:
+    assert validate_config(PRESETS[name]) is PRESETS[name]
+
+
+def test_range_ends_and_text() -> None:
+    r = Range(0.0, 10.0, lo_open=True)
+    assert 0.0 not in r and 1e-9 in r and 10.0 in r and 10.0001 not in r
+    assert math.nan not in r and math.inf not in r
+    assert str(r) == "(0, 10]" and str(Range(-1.0, 1.0, hi_open=True)) == "[-1, 1)"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[robot]\nvmax_mps = -1\n", r"cfg.toml: robot.vmax_mps must be in \(0, 10\], got -1.0"),
+        ("[robot]\nwmax_radps = 0\n", r"cfg.toml: robot.wmax_radps must be in \(0, 20\], got 0.0"),
+        ("[robot]\naccel_mps2 = nan\n", r"robot.accel_mps2 must be in \(0, 50\], got nan"),
+        ("[robot]\nwidth_m = 0.0\n", r"robot.width_m must be in \(0, 10\]"),
+        ("[laser]\nbeams = 0\n", r"laser.beams must be in \[2, 100000\], got 0"),
+        ("[laser]\nnoise_std_m = -0.1\n", r"laser.noise_std_m must be in \[0, 10\]"),
+        ("[laser]\nperiod_s = inf\n", r"laser.period_s must be in \(0, 60\], got inf"),
+        ("[grid]\nsize_cells = 100000\n", r"grid.size_cells must be in \[4, 4000\], got 100000"),
+        ("[supervisor]\nbudget_planner_s = -0.08\n", r"supervisor.budget_planner_s must be in \(0, 60\]"),
+        ("[supervisor]\nrotate_w_frac = 1.5\n", r"supervisor.rotate_w_frac must be in \(0, 1\]"),
+        ("[supervisor]\ntrap_window = 0\n", r"supervisor.trap_window must be in \[1, 1000000\]"),
+        ("[scanmatch.idc]\nmin_pair_fraction = 2\n", r"scanmatch.idc.min_pair_fraction must be in \[0, 1\]"),
+        ("[scanmatch.kiss]\nfixed_threshold_m = -1\n", r"scanmatch.kiss.fixed_threshold_m must be in"),
+        ("[reactor]\ngap_m = 0.0\n", r"reactor.gap_m"),
+        # cross-field constraints
+        ("[robot]\nfront_m = 0.0\nrear_m = 0.0\n", r"cfg.toml: \[robot\] front_m, rear_m: a rectangle needs"),
+        ("[scanmatch.idc]\nmin_range_m = 50.0\n", r"\[scanmatch.idc\] min_range_m, max_range_m"),
+        ("[supervisor]\ntrap_count = 50\n", r"\[supervisor\] trap_count, trap_window"),
+    ],
+)
+def test_out_of_range_values_name_the_file_and_key(tmp_path: Path, text: str, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        load_config(write(tmp_path, text))
+
+
+def test_edges_of_the_ranges_are_accepted(tmp_path: Path) -> None:
+    text = "[robot]\nvmax_mps = 10\nlaser_theta_rad = -3.14\n[laser]\nnoise_std_m = 0\n[scanmatch.idc]\n"
+    cfg = load_config(write(tmp_path, text + "polish_iterations = 0\nfallback_priors = 0\n"))
+    assert (cfg.robot.vmax_mps, cfg.laser.noise_std_m, cfg.scanmatch.idc.polish_iterations) == (10.0, 0.0, 0)
+    # a circle ignores the rectangle's front / rear
+    circle = load_config(write(tmp_path, "[robot]\nshape = 'circle'\nfront_m = 0.0\nrear_m = 0.0\n"))
+    assert circle.robot.shape == "circle"
+
+
+def test_cross_checks_refer_to_sections_of_the_config() -> None:
+    sections = set(_sections(Config))
+    assert all(cls in sections for cls, *_ in CROSS_CHECKS)
+    # every preset satisfies every cross-field constraint, checked on the section itself
+    for cfg in PRESETS.values():
+        for cls, _, holds, _ in CROSS_CHECKS:
+            found = [s for s in (cfg.robot, cfg.scanmatch.idc, cfg.scanmatch.kiss, cfg.supervisor)
+                     if type(s) is cls]
+            assert len(found) == 1 and holds(found[0])

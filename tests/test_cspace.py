@@ -71,10 +71,11 @@ def test_door_of_90_cm_passes_a_wheelchair_half_width_and_blocks_a_wider_disc() 
     assert passable(free_cspace(cells, cell_m=0.05, inflate_m=0.35 + 0.05))
     assert passable(free_cspace(cells, cell_m=0.05, inflate_m=0.35))
     assert not passable(free_cspace(cells, cell_m=0.05, inflate_m=0.5))
-    # the wall itself is never free, and free space keeps its distance from the wall
+    # the wall itself is never free, and free space keeps its distance from the wall: blocked within
+    # 0.4 - 0.025 m = 7.5 cells of the wall's centre row 40
     free = free_cspace(cells, cell_m=0.05, inflate_m=0.4)
-    assert not free[32:49, :10].any()
-    assert free[31, :10].all() and free[49, :10].all()
+    assert not free[33:48, :10].any()
+    assert free[32, :10].all() and free[48, :10].all()
     assert not passable(free_cspace(door_grid(0.7), cell_m=0.05, inflate_m=0.4))
 
 
@@ -85,7 +86,8 @@ def test_free_cspace_agrees_with_thresholded_distance() -> None:
         for unknown_is_free in [True, False]:
             obstacle = (cells == OCCUPIED) | (~np.bool_(unknown_is_free) & (cells == UNKNOWN))
             d = brute_force_distance(obstacle, 0.05)
-            expected = d > inflate + 1e-9  # exactly at the radius counts as blocked
+            # sub-cell rule: half a cell of the robot's freedom in its cell; exactly at it counts as blocked
+            expected = d > max(inflate - 0.025, 0.0) + 1e-9
             got = free_cspace(cells, cell_m=0.05, inflate_m=inflate, unknown_is_free=unknown_is_free)
             np.testing.assert_array_equal(got, expected)
 
@@ -96,9 +98,9 @@ def test_unknown_handling() -> None:
     cells[10:31, 10:31] = FREE
     assert free_cspace(cells, cell_m=0.05, inflate_m=0.2).all()
     free = free_cspace(cells, cell_m=0.05, inflate_m=0.2, unknown_is_free=False)
-    # unknown is an obstacle: only cells more than 4 cells (0.2 m) from any unknown cell remain
+    # unknown is an obstacle: only cells more than 3.5 cells (0.2 m - half a cell) from any unknown cell
     expected = np.zeros_like(free)
-    expected[14:27, 14:27] = True
+    expected[13:28, 13:28] = True
     np.testing.assert_array_equal(free, expected)
 
 
@@ -116,3 +118,62 @@ def test_argument_errors_name_the_argument() -> None:
         obstacle_distance_m(np.zeros((5, 5), dtype=bool), cell_m=0.0)
     with pytest.raises(ValueError, match="obstacle must be a bool array"):
         squared_distance_cells(np.zeros((5, 5), dtype=np.uint8))
+
+
+def rasterised_door(door_m: float, angle_rad: float, offset: tuple[float, float], *, n: int = 80,
+                    cell_m: float = 0.05, wall_m: float = 0.1) -> np.ndarray:
+    """An n x n grid whose OCCUPIED cells hold a point of the surface of a wall 0.1 m thick with a door of
+    ``door_m`` at the grid centre (shifted by ``offset`` [m], turned by ``angle_rad``): what head-on
+    laser hits mark. The wall runs past the grid's edges, so the door is the only way across."""
+    pieces = []
+    for side in (-1.0, 1.0):
+        xs = np.arange(door_m / 2.0, 2.0 * n * cell_m, 0.002) * side
+        ys = np.arange(-wall_m / 2.0, wall_m / 2.0, 0.002)
+        pieces += [np.column_stack([xs, np.full_like(xs, -wall_m / 2.0)]),
+                   np.column_stack([xs, np.full_like(xs, wall_m / 2.0)]),
+                   np.column_stack([np.full_like(ys, side * door_m / 2.0), ys])]
+    pts = np.vstack(pieces)
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    world = pts @ np.array([[c, s], [-s, c]]) + (n * cell_m / 2.0 + np.asarray(offset))
+    rc = np.floor(world[:, ::-1] / cell_m).astype(np.int64)
+    rc = rc[((rc >= 0) & (rc < n)).all(axis=1)]
+    cells = np.full((n, n), FREE, dtype=np.uint8)
+    cells[rc[:, 0], rc[:, 1]] = OCCUPIED
+    return cells
+
+
+def crosses_door(free: np.ndarray, angle_rad: float) -> bool:
+    """True when the free C-space cells 1 m before and 1 m behind the door (along its normal) connect."""
+    labels, _ = ndi.label(free, structure=np.ones((3, 3)))
+    centre = np.array(free.shape) / 2.0
+    normal = np.array([np.cos(angle_rad), -np.sin(angle_rad)]) * 20.0  # (row, col), 20 cells = 1 m
+    a, b = (centre + normal).astype(int), (centre - normal).astype(int)
+    return bool(labels[a[0], a[1]] != 0 and labels[a[0], a[1]] == labels[b[0], b[1]])
+
+
+PLACEMENTS = [(dx, dy, a) for dx in (0.0, 0.013, 0.026, 0.049) for dy in (0.0, 0.021, 0.037)
+              for a in (0.0, 0.1, 0.39, 0.7854, 1.2, 1.5708)]
+
+
+@pytest.mark.parametrize(("half_width_m", "margin_m"), [(0.35, 0.05), (0.3, 0.05)], ids=["chair", "xr4000"])
+def test_door_of_robot_width_plus_margins_is_open_at_any_offset_and_rotation(
+    half_width_m: float, margin_m: float
+) -> None:
+    """Issue 10: a door 0.05 m wider than the robot's width plus twice the margin stays open (0.85 m for
+    the 0.7 m chair), one 0.05 m narrower than that is closed (0.75 m), wherever the grid lines fall."""
+    need = 2.0 * (half_width_m + margin_m)
+    for dx, dy, angle in PLACEMENTS:
+        wide = rasterised_door(need + 0.05, angle, (dx, dy))
+        narrow = rasterised_door(need - 0.05, angle, (dx, dy))
+        inflate = half_width_m + margin_m
+        assert crosses_door(free_cspace(wide, cell_m=0.05, inflate_m=inflate), angle), (dx, dy, angle)
+        assert not crosses_door(free_cspace(narrow, cell_m=0.05, inflate_m=inflate), angle), (dx, dy, angle)
+
+
+def test_obstacle_cells_are_never_free() -> None:
+    cells = np.full((9, 9), FREE, dtype=np.uint8)
+    cells[4, 4] = OCCUPIED
+    free = free_cspace(cells, cell_m=0.05, inflate_m=0.0)
+    assert not free[4, 4] and free.sum() == 80
+    free = free_cspace(cells, cell_m=0.05, inflate_m=0.02)  # below half a cell: only the cell itself
+    assert not free[4, 4] and free.sum() == 80

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from gndreplay.errors import GndReplayError
-from gndreplay.evaluation import load_relations, relation_errors, write_tum
+from gndreplay.evaluation import load_relations, relation_errors, relations_from_trajectory, write_tum
 from gndreplay.geometry import relative
 
 T0 = 1_134_864_629_895_182_000  # a CSAIL-like stamp (ns): floats would lose the last digits
@@ -100,6 +100,43 @@ def test_relation_errors_nothing_matched(tmp_path: Path) -> None:
     s = relation_errors(np.array([5], dtype=np.int64), np.zeros((1, 3)), rel)
     assert (s.matched, s.unmatched) == (0, 1) and math.isnan(s.trans_mean_m)
     assert s.to_dict()["unmatched"] == 1
+
+
+def test_relation_errors_split_by_span(tmp_path: Path) -> None:
+    """Local accuracy and drift read apart: each relation counts in the span of |t2 - t1|."""
+    t = T0 + np.array([0, 5 * 10**8, 3 * 10**9, 30 * 10**9], dtype=np.int64)
+    poses = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
+    rows = [(int(t[0]), int(t[1]), 0.9, 0.0, 0.0),  # 0.5 s: 0.1 m off
+            (int(t[1]), int(t[0]), -1.0, 0.0, math.radians(4.0)),  # -0.5 s (any order): 4 deg off
+            (int(t[0]), int(t[2]), 2.0, 0.3, 0.0),  # 3 s: 0.3 m off
+            (int(t[0]), int(t[3]), 3.0, 0.0, math.radians(-1.0))]  # 30 s: 1 deg off
+    s = relation_errors(t, poses, load_relations(_relations_file(tmp_path, rows)))
+    near, mid, far = s.by_span
+    assert [x.label for x in s.by_span] == ["<1 s", "1-10 s", ">10 s"] and s.span("1-10 s") is mid
+    assert (near.count, mid.count, far.count) == (2, 1, 1)
+    assert near.trans_mean_m == pytest.approx(0.05) and near.rot_max_deg == pytest.approx(4.0)
+    assert mid.trans_mean_m == pytest.approx(0.3) and far.rot_mean_deg == pytest.approx(1.0)
+    assert [d["count"] for d in s.to_dict()["by_span"]] == [2, 1, 1]
+    none = relation_errors(t[:2], poses[:2], load_relations(_relations_file(tmp_path, rows[:2])))
+    assert none.span(">10 s").count == 0 and math.isnan(none.span(">10 s").trans_mean_m)
+    with pytest.raises(KeyError):
+        s.span("2 s")
+
+
+def test_relations_from_a_reference_trajectory() -> None:
+    """A decimated run scored against the full-rate trajectory: relations between poses 1 and 2 apart; the
+    reference trajectory itself scores zero."""
+    t = T0 + np.arange(4, dtype=np.int64) * 10**8
+    poses = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.5], [2.0, 1.0, 1.0], [2.0, 3.0, 2.5]])
+    rel = relations_from_trajectory(t, poses, (1, 2))
+    assert len(rel) == 3 + 2
+    assert rel.t1_ns.tolist() == [*t[:3].tolist(), *t[:2].tolist()]
+    np.testing.assert_allclose([rel.dx[0], rel.dy[0], rel.dyaw[0]], relative(poses[0], poses[1]))
+    s = relation_errors(t, poses, rel)
+    assert s.matched == 5 and s.trans_max_m < 1e-12
+    assert len(relations_from_trajectory(t, poses, (10,))) == 0
+    with pytest.raises(ValueError, match="steps must be positive"):
+        relations_from_trajectory(t, poses, (0,))
 
 
 def test_relation_errors_shape_error(tmp_path: Path) -> None:

@@ -215,17 +215,21 @@ def test_truepos_is_the_truth(tmp_path: Path) -> None:
     assert tick.truth == Pose2D(0.0, 0.0, 0.0)
 
 
-def test_trailer_variants(tmp_path: Path) -> None:
-    text = (
-        flaser("", [1, 1, 1], trailer="host 5.5")
-        + flaser("", [1, 1, 1], trailer="6.25")
-        + flaser("", [1, 1, 1], trailer="7.0 0 laserazos")
-    )
-    assert [t.t_ns for t in read_ticks(log_file(tmp_path, text))] == [
-        5_500_000_000,
-        6_250_000_000,
-        7 * NS_PER_S,
-    ]
+@pytest.mark.parametrize(
+    ("trailer", "t_ns"),
+    [("host 5.5", 5_500_000_000), ("6.25", 6_250_000_000), ("7.0 0 laserazos", 7 * NS_PER_S)],
+)
+def test_trailer_variants(tmp_path: Path, trailer: str, t_ns: int) -> None:
+    text = flaser("", [1, 1, 1], trailer=trailer) * 2
+    assert [t.t_ns for t in read_ticks(log_file(tmp_path, text))] == [t_ns, t_ns]
+
+
+def test_a_trailer_unlike_the_other_lines_is_malformed(tmp_path: Path) -> None:
+    text = flaser("1.0", [1, 1, 1]) + flaser("", [1, 1, 1], trailer="host 2.5") + flaser("3.0", [1, 1, 1])
+    with open_log(log_file(tmp_path, text)) as log:
+        assert [t.t_ns for t in log.ticks()] == [NS_PER_S, 3 * NS_PER_S]
+        assert log.report.malformed == 1
+        assert "line 2: FLASER declares 3 ranges: 1 field too few" in log.report.malformed_examples[0]
 
 
 def test_saturation_value_becomes_no_return(tmp_path: Path) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -188,3 +189,16 @@ def test_empty_run_writes_a_readable_file(tmp_path: Path) -> None:
     McapSink().finish(tmp_path)
     with AnyReader([tmp_path / "results.mcap"]) as reader:
         assert sum(c.msgcount for c in reader.connections) == 0
+
+
+def test_started_sink_stages_inside_the_run_staging_dir(tmp_path: Path) -> None:
+    """run_replay calls start(staging, target): the bag folder lives there (nothing in $TMPDIR), and an
+    abort after the staging directory is gone does not raise."""
+    staging = tmp_path / "staging"
+    staging.mkdir()
+    sink = McapSink()
+    sink.start(staging, tmp_path / "run")
+    sink.add_result(tick(0), result(0), grid_at(0))
+    assert [p.name.startswith("gndreplay-mcap-") for p in staging.iterdir()] == [True]
+    shutil.rmtree(staging)
+    sink.abort()

@@ -9,6 +9,7 @@ import pytest
 
 from gndreplay.errors import ConfigError
 from gndreplay.pipeline.model import (
+    DROPOUT_MAX_BEAMS,
     FREE,
     GRID_200,
     GRID_400,
@@ -279,3 +280,96 @@ def test_presets_and_validation() -> None:
         GridParams(size_cells=100, cell_m=0.05, control_zone_m=6.0)
     with pytest.raises(ConfigError, match=r"grid\.free_clip_m"):
         GridParams(free_clip_m=-1.0)
+
+
+# ---- dropouts and grazing rays ------------------------------------------------------------------
+
+
+def raycast(origin: tuple[float, float], angles: np.ndarray, segs: np.ndarray) -> np.ndarray:
+    """(N,) ranges from ``origin`` along ``angles`` to the nearest of the (S, 4) segments, inf if none."""
+    d = np.stack([np.cos(angles), np.sin(angles)], axis=1)[:, None, :]
+    p, e = segs[None, :, :2], (segs[:, 2:] - segs[:, :2])[None]
+    w = p - np.asarray(origin)
+    den = d[..., 0] * e[..., 1] - d[..., 1] * e[..., 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (w[..., 0] * e[..., 1] - w[..., 1] * e[..., 0]) / den
+        u = (w[..., 0] * d[..., 1] - w[..., 1] * d[..., 0]) / den
+    hit = (den != 0) & (t > 0) & (u >= 0) & (u <= 1)
+    return np.where(hit, t, np.inf).min(axis=1)
+
+
+GRID_5CM = GridParams(size_cells=200, cell_m=0.05, control_zone_m=10.0)  # 10 x 10 m, never re-centred
+BEAMS = np.linspace(-math.pi / 2, math.pi / 2, 361)  # 0.5 deg
+
+
+def scan_of(pose: Pose2D, segs: np.ndarray, beams: np.ndarray = BEAMS) -> Scan:
+    return make_scan(raycast((pose.x, pose.y), beams + pose.theta, segs), beams, max_range_m=30.0)
+
+
+def test_isolated_dropouts_do_not_clear_through_a_wall() -> None:
+    wall = np.array([[2.013, -5.0, 2.013, 5.0]])  # seen head-on, in the cells of x in [2.0, 2.05)
+    pose = Pose2D(0.01, 0.02, 0.0)
+    scan = scan_of(pose, wall)
+    ranges = scan.ranges_m.copy()
+    ranges[[60, 150, 151, 240, 242, 300, 301]] = np.inf  # single and double dropouts
+    grid = RobotCentredGrid(GRID_5CM)
+    grid.integrate(make_scan(ranges, BEAMS, max_range_m=30.0), pose)
+    x_cells = grid.cells_to_world(np.argwhere(grid.cells == FREE))[:, 0]
+    assert x_cells.size and x_cells.max() < 2.05  # no cell wholly behind the wall is cleared
+    # the dropouts' own bearings still clear up to the wall (at x = 1.8 m, before it)
+    for k in (60, 150, 240, 300):
+        near = grid.world_to_cell([[1.8, 0.02 + 1.8 * math.tan(BEAMS[k])]])[0]
+        assert grid.cells[near[0], near[1]] == FREE
+
+
+def test_a_real_opening_still_clears() -> None:
+    # the same wall with a 1 m gap: 12+ consecutive no-returns, the space behind the gap is seen free
+    walls = np.array([[2.0, -5.0, 2.0, -0.5], [2.0, 0.5, 2.0, 5.0]])
+    pose = Pose2D(0.01, 0.02, 0.0)
+    grid = RobotCentredGrid(GRID_5CM)
+    scan = scan_of(pose, walls)
+    assert int(np.isinf(scan.ranges_m).sum()) > DROPOUT_MAX_BEAMS
+    grid.integrate(scan, pose)
+    assert grid.cells[grid.world_to_cell([[4.0, 0.0]])[0, 0], grid.world_to_cell([[4.0, 0.0]])[0, 1]] == FREE
+    # ... and so does a run one beam longer than a dropout
+    wall = np.array([[2.0, -5.0, 2.0, 5.0]])
+    ranges = scan_of(pose, wall).ranges_m.copy()
+    ranges[180 : 181 + DROPOUT_MAX_BEAMS] = np.inf
+    grid = RobotCentredGrid(GRID_5CM)
+    grid.integrate(make_scan(ranges, BEAMS, max_range_m=30.0), pose)
+    behind = grid.world_to_cell([[3.0, 0.02]])[0]
+    assert grid.cells[behind[0], behind[1]] == FREE
+
+
+@pytest.mark.parametrize("wall_y", [0.6, 0.612, 0.637])  # the surface at 0, 1/4 and 3/4 of a cell
+def test_grazing_rays_do_not_erase_a_wall_seen_head_on(wall_y: float) -> None:
+    # a corridor wall, seen head-on while driving beside it, then along it from its end
+    walls = np.array([[-5.0, wall_y, 5.0, wall_y], [4.5, -5.0, 4.5, 5.0]])
+    grid = RobotCentredGrid(GRID_5CM)
+    for x in np.arange(-1.5, 3.01, 0.25):
+        pose = Pose2D(float(x), 0.013, math.pi / 2)
+        grid.integrate(scan_of(pose, walls, np.linspace(-0.5, 0.5, 121)), pose)
+    wall_cells = np.argwhere(grid.cells == OCCUPIED)
+    wall_cells = wall_cells[np.abs(grid.cells_to_world(wall_cells)[:, 0] - 0.75) < 2.0]  # x in [-1.25, 2.75]
+    assert len(wall_cells) >= 80
+    for x in np.arange(-2.0, -0.99, 0.1):  # driving along the corridor, 0.25 to 0.6 m from the wall
+        pose = Pose2D(float(x), 0.35 - 0.2 * (x + 2.0), 0.02 * (x + 2.0))
+        grid.integrate(scan_of(pose, walls), pose)
+    kept = grid.cells[wall_cells[:, 0], wall_cells[:, 1]] == OCCUPIED
+    assert kept.mean() >= 0.95, kept.mean()
+    # the wall still has no hole a robot could notice: no two consecutive columns without an obstacle
+    cols = np.unique(wall_cells[kept, 1])
+    assert np.diff(cols).max() <= 1, np.diff(cols).max()
+
+
+def test_an_obstacle_that_left_is_still_cleared_by_rays_through_it() -> None:
+    # a person 1.5 m ahead, seen by a fan of beams, walks away; the wall at 3 m is then seen through
+    person = np.array([[1.5, -0.2, 1.5, 0.2]])
+    wall = np.array([[3.0, -5.0, 3.0, 5.0]])
+    pose = Pose2D(0.01, 0.02, 0.0)
+    grid = RobotCentredGrid(GRID_5CM)
+    grid.integrate(scan_of(pose, np.vstack([person, wall])), pose)
+    person_cells = grid.world_to_cell([[1.5 + 0.001, y] for y in np.linspace(-0.15, 0.15, 7)])
+    assert (grid.cells[person_cells[:, 0], person_cells[:, 1]] == OCCUPIED).all()
+    grid.integrate(scan_of(pose, wall), pose)
+    assert (grid.cells[person_cells[:, 0], person_cells[:, 1]] == FREE).all()

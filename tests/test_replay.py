@@ -86,6 +86,7 @@ def test_same_log_and_config_give_byte_identical_outputs(two_runs: tuple[Path, P
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
     sa, sb = (json.loads((d / "summary.json").read_text()) for d in two_runs)
     assert sa.pop("latency_ms") and sb.pop("latency_ms")
+    assert sa.pop("over_budget").keys() == sb.pop("over_budget").keys()  # wall-clock: counts may differ
     sa.pop("log"), sb.pop("log")
     assert sa == sb
 
@@ -177,6 +178,17 @@ def test_cli_run_bad_inputs_exit_2_with_one_line(tmp_path: Path) -> None:
     assert not (tmp_path / "o").exists()
 
 
+def test_cli_goal_and_goal_ahead_exclude_each_other_and_presets_ignore_case(tmp_path: Path) -> None:
+    runner = CliRunner()
+    both = runner.invoke(app, ["run", str(SAMPLE), "--goal", "1,2", "--goal-ahead", "3", "--out",
+                               str(tmp_path / "o")])
+    assert both.exit_code == 2 and "--goal-ahead" in both.output and not (tmp_path / "o").exists()
+    upper = runner.invoke(app, ["run", str(SAMPLE), "--preset", "XR4000", "--until", "1", "--no-figures",
+                                "--json", "--out", str(tmp_path / "x")])
+    assert upper.exit_code == 0, upper.output
+    assert json.loads(upper.stdout)["config"]["preset"] == "xr4000"
+
+
 def test_cli_run_writes_the_run_directory_and_json(tmp_path: Path) -> None:
     result = CliRunner().invoke(
         app, ["run", str(SAMPLE), "--until", "8", "--out", str(tmp_path / "r"), "--json", "--no-figures"]
@@ -250,3 +262,43 @@ raise SystemExit(0 if after == before else 1)
 """
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_cli_shows_a_python_warning_as_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    """A numpy RuntimeWarning reaching the CLI is one ``gndreplay: warning:`` line, no source line."""
+    import warnings
+
+    from gndreplay.cli import cli_errors
+
+    @cli_errors
+    def command() -> float:
+        return float(np.mean(np.zeros(0)))
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        assert math.isnan(command())
+    err = capsys.readouterr().err.splitlines()
+    assert err and all(line.startswith("gndreplay: warning: RuntimeWarning: ") for line in err)
+
+
+def test_run_progress_says_compiling_once_and_takes_its_total_from_the_log(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Off a terminal the progress is silent but for one compile notice (cold numba cache); --quiet and
+    --json silence it too. The bar's total is --until, or the log's duration when its format knows it."""
+    from types import SimpleNamespace
+
+    from gndreplay.cli import _RunProgress
+
+    with _RunProgress(enabled=True, label="log", until_s=None) as p:
+        p.on_stage("warm-up")
+        p.on_compile("plan")
+        p.on_compile("nd_step")
+        p.on_open(SimpleNamespace(start_ns=0, end_ns=90 * 10**9, streams=(), scan_stream="x"))
+        assert p.total == 90.0 and p.compiled == 2
+    assert capsys.readouterr().err.splitlines() == ["gndreplay: compiling (first run only)..."]
+    with _RunProgress(enabled=False, label="log", until_s=30.0) as p:
+        p.on_compile("plan")
+        p.on_open(SimpleNamespace(start_ns=0, end_ns=90 * 10**9, streams=(), scan_stream="x"))
+        assert p.total == 30.0
+    assert capsys.readouterr().err == ""

@@ -383,12 +383,14 @@ SAMPLE_LOG = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.b
 def _replay_with_sinks(log: Path, out: Path, until_s: float) -> int:
     from gndreplay.config import Config
     from gndreplay.replay import RunOptions, run_log
-    from gndreplay.report import McapSink
+    from gndreplay.report import McapSink, ReportSink
 
-    with McapSink() as mcap:
+    drawn: list[bool] = []
+    with McapSink() as mcap:  # ReportSink draws inside the staging directory: the run appears complete
         summary = run_log(log, Config(), out, options=RunOptions(until_s=until_s),
-                          sinks=[MapSink(), mcap])
-    build_report(out)
+                          sinks=[MapSink(), mcap, ReportSink(on_draw=lambda: drawn.append(True))])
+    assert drawn == [True] and summary.out_dir == out
+    assert (out / "report.md").read_text().startswith(f"# gndreplay run: {out.name}\n")
     return summary.ticks
 
 

@@ -22,6 +22,7 @@ from gndreplay.scanmatch import (
     run_scanmatch,
 )
 from gndreplay.scanmatch import _idc_kernels as kern
+from gndreplay.scanmatch.idc import _compose as idc_compose
 from gndreplay.types import Pose2D, Scan, Tick
 
 WHEELCHAIR_LASER = Pose2D(0.72, 0.0, 0.0)
@@ -123,10 +124,10 @@ def test_idc_honours_laser_mounting() -> None:
 
 
 def test_idc_finds_20_deg_from_no_odometry() -> None:
-    """IDC's widening window: from a prior that says "no motion" it still finds a 20 deg turn."""
+    """IDC's widening window: from a prior that says "no motion" it still finds a 20 deg turn (6 sigmas of
+    the odometry's error model: the guard's second opinion near the odometry fits worse, so it is believed)."""
     move = motion(0.1, 0.05, 20.0)
-    params = IdcParams(max_correction_rad=math.radians(30.0))
-    res, truth = two_scan_match(room(), move, np.zeros(3), noise_m=0.01, params=params)
+    res, truth = two_scan_match(room(), move, np.zeros(3), noise_m=0.01)
     assert res.ok, res.reason
     et, er = pose_error(res.pose, truth)
     assert et < 0.01 and er < 0.2, (et, er)
@@ -395,3 +396,128 @@ def test_odometry_frozen_while_moving_is_not_taken_for_a_standstill() -> None:
         et, er = pose_error(res.pose, compose(ODOM0, relative(START, tp)))
         worst = (max(worst[0], et), max(worst[1], er))
     assert worst[0] < 0.01 and worst[1] < 0.3, worst
+
+
+def symmetric_corridor() -> np.ndarray:
+    """A corridor 2.4 m wide and 16 m long, mirror-symmetric about its axis, with a door recess every 3 m on
+    both sides: turned in place, its scans look alike at many headings."""
+    segs: list[tuple[tuple[float, float], tuple[float, float]]] = []
+    for side in (-1.0, 1.0):
+        y, x0 = 1.2 * side, -8.0
+        for xd in (-5.0, -2.0, 1.0, 4.0, 7.0):
+            segs += [((x0, y), (xd - 0.45, y)), ((xd - 0.45, y), (xd - 0.45, y + 0.3 * side)),
+                     ((xd - 0.45, y + 0.3 * side), (xd + 0.45, y + 0.3 * side)),
+                     ((xd + 0.45, y + 0.3 * side), (xd + 0.45, y))]
+            x0 = xd + 0.45
+        segs.append(((x0, y), (8.0, y)))
+    segs += [((-8.0, -1.2), (-8.0, 1.2)), ((8.0, -1.2), (8.0, 1.2))]
+    return np.array(segs)
+
+
+def _run(segs: np.ndarray, steps: list[np.ndarray], odo_steps: list[np.ndarray], params: IdcParams | None = None,
+         start: np.ndarray = START, dt_ns: int = 10**8) -> list[tuple[bool, float, float, str]]:
+    """Drive ``steps`` (odometry reporting ``odo_steps``) and return per scan (ok, translational error [m],
+    rotational error [deg], reason) of the corrected pose against the truth."""
+    m = IdcMatcher(params)
+    truth, odo = [start], [ODOM0]
+    for st, so in zip(steps, odo_steps, strict=True):
+        truth.append(compose(truth[-1], st))
+        odo.append(compose(odo[-1], so))
+    out = []
+    for i, (tp, op) in enumerate(zip(truth, odo, strict=True)):
+        res = m.update(cast(segs, tp, t_ns=i * dt_ns), Pose2D.from_array(op))
+        et, er = pose_error(res.pose, compose(ODOM0, relative(start, tp)))
+        out.append((res.ok, et, er, res.reason))
+    return out
+
+
+def test_fast_turn_in_a_symmetric_corridor_lands_in_the_right_basin() -> None:
+    """Odometry that misses a 42 deg turn entirely (stale, as on Intel) puts IDC's start outside its 20 deg
+    bearing window; the correlative rotation search over +-45 deg finds the basin first. Without it (the
+    cause) the turn is lost and every later scan inherits 42-84 deg of error."""
+    steps = [motion(0.2, 0, 0), motion(0.2, 0, 0), motion(0.05, 0, 42), motion(0.05, 0, 42), motion(0.2, 0, 0)]
+    stale = [motion(0.2, 0, 0), motion(0.2, 0, 0), motion(0.05, 0, 0), motion(0.05, 0, 0), motion(0.2, 0, 0)]
+    start = np.array([0.5, 0.1, 0.0])
+    fixed = _run(symmetric_corridor(), steps, stale, start=start)
+    assert all(ok for ok, *_ in fixed), fixed
+    assert max(et for _, et, _, _ in fixed) < 0.01 and max(er for _, _, er, _ in fixed) < 0.5, fixed
+    lost = _run(symmetric_corridor(), steps, stale, IdcParams(coarse_window_rad=0.0), start=start)
+    assert lost[-1][2] > 30.0, lost
+
+
+def test_sparse_scans_025_m_20_deg_apart_are_matched() -> None:
+    """A log sampled by distance: 0.25 m and 20 deg between scans, odometry 20 % short and turning half as
+    much; every scan is matched, none refused, and the pose stays within 2 cm / 0.3 deg."""
+    steps = [motion(0.25, 0.0, 20.0 if i % 3 else -20.0) for i in range(12)]
+    out = _run(room(), steps, [bad_odometry(s) for s in steps], start=np.array([1.0, 0.5, 0.0]), dt_ns=10**9)
+    assert all(ok for ok, *_ in out), [r for r in out if not r[0]]
+    assert max(et for _, et, _, _ in out) < 0.02 and max(er for _, _, er, _ in out) < 0.3, out
+
+
+def _wrong_first_match(m: IdcMatcher, shift: tuple[float, float, float], worse_by: float) -> None:
+    """Make the matcher's first match of each scan land ``shift`` (laser frame) off the true pose, with a
+    quality (pairs, mean pair distance) equal to the true match's, or worse by ``worse_by`` m per pair: a
+    wrong basin that the scan alone cannot tell from the right one. The second opinion (narrow window from
+    the odometry's prediction) is left as it is."""
+    real = m._match
+
+    def match(px, py, pr, pa, laser_prior, incr, win0_rad=None, coarse=True):  # type: ignore[no-untyped-def]
+        out = real(px, py, pr, pa, laser_prior, incr, win0_rad, coarse)
+        if win0_rad is not None or out.reason:
+            return out
+        wrong = idc_compose(out.laser, shift)
+        return out._replace(laser=wrong, residual_m=out.residual_m + worse_by)
+
+    m._match = match  # type: ignore[method-assign]
+
+
+@pytest.mark.parametrize("worse_by", [0.0, 0.02])
+def test_guard_refuses_a_wrong_match_that_odometry_contradicts(worse_by: float) -> None:
+    """A match 0.6 m / 25 deg from good odometry is suspicious; the second opinion near the odometry fits as
+    well (refused: MATCH_FAILED, odometry increment kept) or better (that match is taken)."""
+    m = IdcMatcher()
+    m.update(cast(room(), START), Pose2D.from_array(ODOM0))
+    _wrong_first_match(m, (0.6, 0.0, math.radians(25.0)), worse_by)
+    move = motion(0.2, 0.0, 5.0)
+    odom = compose(ODOM0, move)  # exact odometry
+    res = m.update(cast(room(), compose(START, move), t_ns=10**8), Pose2D.from_array(odom))
+    et, er = pose_error(res.pose, odom)
+    if worse_by == 0.0:
+        assert not res.ok and res.reason.startswith("unconfirmed match"), res.reason
+        np.testing.assert_allclose(res.pose.as_array(), odom, atol=1e-12)
+    else:
+        assert res.ok, res.reason
+        assert et < 0.01 and er < 0.2, (et, er)
+
+
+def test_guard_believes_a_far_match_the_map_confirms() -> None:
+    """Odometry that reports no motion while the robot turned 20 deg (6 sigmas of the error model): the
+    second opinion from the odometry's prediction fits worse, so the match is taken, and the learnt scale of
+    the odometry's error model grows."""
+    m = IdcMatcher()
+    m.update(cast(room(), START), Pose2D.from_array(ODOM0))
+    move = motion(0.1, 0.0, 20.0)
+    res = m.update(cast(room(), compose(START, move), t_ns=10**8), Pose2D.from_array(ODOM0))
+    assert res.ok, res.reason
+    et, er = pose_error(res.pose, compose(ODOM0, move))
+    assert et < 0.01 and er < 0.2
+    assert m._odo_scale[1] > 1.0
+
+
+def test_long_gap_restarts_the_map_when_it_no_longer_fits() -> None:
+    """After a gap longer than the map's validity a scan that does not fit the map (the robot was carried
+    elsewhere) restarts the map at once, and the next scans match against the new one; a gap where the
+    robot stood still keeps the map (a log sampled by distance)."""
+    m = IdcMatcher()
+    m.update(cast(room(), START, t_ns=0), Pose2D.from_array(ODOM0))
+    still = m.update(cast(room(), START, t_ns=30 * 10**9), Pose2D.from_array(ODOM0))
+    assert still.ok, still.reason
+    hall = symmetric_corridor()
+    elsewhere = np.array([0.5, 0.1, 0.0])
+    res = m.update(cast(hall, elsewhere, t_ns=60 * 10**9), Pose2D.from_array(ODOM0))
+    assert not res.ok and res.reason.endswith("map restarted") and "gap of 30.0 s" in res.reason
+    nxt = m.update(cast(hall, compose(elsewhere, motion(0.2, 0.0, 3.0)), t_ns=60 * 10**9 + 10**8),
+                   Pose2D.from_array(compose(ODOM0, motion(0.22, 0.0, 2.0))))
+    assert nxt.ok, nxt.reason
+    et, er = pose_error(nxt.pose, compose(ODOM0, motion(0.2, 0.0, 3.0)))
+    assert et < 0.01 and er < 0.2

@@ -10,7 +10,7 @@ import pytest
 from gndreplay.config import PRESETS, Config
 from gndreplay.geometry import compose
 from gndreplay.pipeline.nd import Situation
-from gndreplay.pipeline.stack import NavigationStack, TickResult
+from gndreplay.pipeline.stack import NavigationStack, StackParams, TickResult, make_planner
 from gndreplay.pipeline.supervisor import Mode
 from gndreplay.sim.world import box, cast_rays, polygon, regular_polygon, wall
 from gndreplay.types import Flag, Pose2D, Scan, Tick
@@ -35,9 +35,10 @@ def run(
     n: int = 3,
     dt_s: float = 0.2,
     beams: np.ndarray = FRONT,
+    params: StackParams | None = None,
 ) -> list[TickResult]:
     """n ticks of a robot standing at ``pose`` (the grid fills up, the reactor sees the model)."""
-    stack = NavigationStack(cfg.stack_params())
+    stack = NavigationStack(params or cfg.stack_params())
     sensor = Pose2D(cfg.robot.laser_x_m, cfg.robot.laser_y_m, cfg.robot.laser_theta_rad)
     out = []
     for i in range(n):
@@ -195,3 +196,101 @@ def test_warm_up_compiles_what_real_ticks_need() -> None:
     for tick, _ in zip(read_ticks(sample), range(5), strict=False):
         stack.step(tick, tick.odom, (tick.odom.x + 3.0, tick.odom.y))
     assert _numba_signatures() == before
+
+
+def tunnel_params(cfg: Config) -> StackParams:
+    import dataclasses
+
+    return dataclasses.replace(cfg.stack_params(), planner_kind="tunnel")
+
+
+def test_make_planner_builds_the_kind_named() -> None:
+    import dataclasses
+
+    from gndreplay.pipeline.nf1 import Nf1Planner
+    from gndreplay.pipeline.tunnel import TunnelPlanner
+
+    base = PRESETS["wheelchair"].stack_params()
+    assert isinstance(make_planner(base), Nf1Planner)  # the default
+    assert isinstance(make_planner(dataclasses.replace(base, planner_kind="tunnel")), TunnelPlanner)
+    with pytest.raises(ValueError, match="unknown planner kind 'rrt'"):
+        make_planner(dataclasses.replace(base, planner_kind="rrt"))  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_planner_statistics_per_tick(name: str) -> None:
+    cfg = PRESETS[name]
+    nf1 = run(cfg, ROOM, Pose2D(0, 0, 0), (4.0, 0.0))[-1]
+    tunnel = run(cfg, ROOM, Pose2D(0, 0, 0), (4.0, 0.0), params=tunnel_params(cfg))[-1]
+    assert nf1.planner_nodes > 4.0 / cfg.grid.cell_m  # the wave labelled at least the cells on the way
+    assert math.isnan(nf1.tunnel_width_m)
+    assert tunnel.planner_nodes == 1  # the goal is in sight of the robot's own node
+    assert tunnel.tunnel_width_m == pytest.approx(2 * (cfg.robot.inner_radius_m + 0.025))
+    for r in (nf1, tunnel):
+        assert r.planner_length_m == pytest.approx(4.0, abs=0.1)
+        assert r.mode is Mode.MPND and r.situation is Situation.HSGR
+        assert np.allclose(r.path_xy[-1], (4.0, 0.0), atol=0.06)
+    assert tunnel.path_xy.shape == (2, 2)  # one straight tunnel
+    assert (tunnel.v_mps, tunnel.w_radps) == pytest.approx((nf1.v_mps, nf1.w_radps), abs=1e-6)
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_tunnel_planner_enclosed_goal_goes_to_mnd(name: str) -> None:
+    """The goal inside a closed 2 m box the robot has seen from every side: no tunnel reaches it, the
+    supervisor runs mND (the reactor still has free space around the robot)."""
+    cfg = PRESETS[name]
+    world = np.vstack([ROOM, box(4.0, 0.0, 2.0, 2.0)])
+    stack = NavigationStack(tunnel_params(cfg))
+    sensor = Pose2D(cfg.robot.laser_x_m, cfg.robot.laser_y_m, cfg.robot.laser_theta_rad)
+    results = []
+    for i, a in enumerate(np.linspace(-math.pi, math.pi, 9)):  # look at the box from all around it
+        pose = Pose2D(4.0 + 3.0 * math.cos(a), 3.0 * math.sin(a), a + math.pi / 2)
+        t = 1_000_000_000 + i * 100_000_000
+        tick = Tick(index=i, t_ns=t, scan=scan_of(world, pose, sensor, t, AROUND), odom=pose)
+        results.append(stack.step(tick, pose, (4.0, 0.0)))
+    r = results[-1]
+    assert r.flags & Flag.PLANNER_NO_PATH and not r.flags & Flag.GOAL_IN_OBSTACLE
+    assert r.mode is Mode.MND
+    assert r.path_xy.shape == (0, 2) and math.isnan(r.planner_length_m)
+    assert r.planner_nodes > 1
+
+
+def test_tunnel_course_steers_the_reactor_out_of_a_u() -> None:
+    """Fig. 3b in the stack: inside a U whose bottom faces the goal, the tunnel's course makes mpND head
+    back out of the U's mouth."""
+    cfg = PRESETS["xr4000"]
+    u = np.vstack([wall(1.2, -1.5, 1.2, 1.5), wall(-1.5, -1.5, 1.2, -1.5), wall(-1.5, 1.5, 1.2, 1.5)])
+    world = np.vstack([ROOM, u])
+    r = run(cfg, world, Pose2D(0, 0, 0), (3.5, 0.0), beams=AROUND, params=tunnel_params(cfg))[-1]
+    assert r.mode is Mode.MPND and not r.flags & Flag.PLANNER_NO_PATH
+    assert r.path_xy[1, 0] < -1.5  # the first tunnel ends outside the U's mouth
+    assert abs(r.direction_rad) > math.pi / 2  # ND+ drives backwards, towards the mouth
+
+
+def test_warm_up_compiles_what_the_tunnel_planner_needs() -> None:
+    """After warm_up (NF1 chosen) and warm_up_planners, a stack running the tunnel planner on real ticks
+    compiles nothing new: warm_up_planners alone covers the tunnel planner's kernels."""
+    from pathlib import Path
+
+    from gndreplay.io import read_ticks
+    from gndreplay.pipeline import cspace, nf1, tunnel
+    from gndreplay.pipeline.stack import warm_up
+
+    def signatures() -> dict[str, int]:
+        return {
+            f"{mod.__name__}.{name}": len(obj.signatures)
+            for mod in (cspace, nf1, tunnel)
+            for name, obj in vars(mod).items()
+            if hasattr(obj, "signatures")
+        }
+
+    params = tunnel_params(PRESETS["wheelchair"])
+    warm_up(PRESETS["wheelchair"].stack_params())
+    tunnel.warm_up_planners(params.tunnel)
+    before = signatures()
+    stack = NavigationStack(params)
+    sample = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
+    for i, (tick, _) in enumerate(zip(read_ticks(sample), range(40), strict=False)):
+        goal = (tick.odom.x + 3.0, tick.odom.y) if i % 2 else (tick.odom.x - 4.0, tick.odom.y + 6.0)
+        stack.step(tick, tick.odom, goal)
+    assert signatures() == before

@@ -5,19 +5,25 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gndreplay.pipeline.model import FREE, OCCUPIED, UNKNOWN, GridParams, RobotCentredGrid
 from gndreplay.pipeline.supervisor import (
     Mode,
+    SafeCommand,
     SupervisorParams,
     TrapDetector,
+    braking_time_s,
     budget_flags,
     escape_command,
     footprint_contains,
+    footprint_signed_distance,
     gnd_mode,
     rotate_command,
+    safe_command,
+    safety_reach_m,
     swept_collision,
 )
-from gndreplay.robot import WHEELCHAIR_ROBOT, XR4000_ROBOT
-from gndreplay.types import Flag
+from gndreplay.robot import WHEELCHAIR_ROBOT, XR4000_ROBOT, RobotConfig
+from gndreplay.types import Flag, Pose2D
 
 P = SupervisorParams()
 
@@ -48,9 +54,10 @@ def test_footprint_rectangle_and_circle() -> None:
 
 
 def test_swept_collision_straight_ahead() -> None:
-    # horizon at 0.3 m/s: 0.3 s + 0.6 s = 0.9 s -> 0.27 m of travel; front edge at 0.8 m (+ 0.02 margin)
-    near = np.array([[1.0, 0.0]])
-    far = np.array([[1.2, 0.0]])
+    # at 0.3 m/s: 0.3 s held, then 0.6 s of braking at 0.5 m/s^2 -> 0.09 + 0.09 = 0.18 m of travel;
+    # front edge at 0.8 m (+ 0.02 margin)
+    near = np.array([[0.97, 0.0]])
+    far = np.array([[1.03, 0.0]])
     assert swept_collision(near, 0.3, 0.0, WHEELCHAIR_ROBOT, P)
     assert not swept_collision(far, 0.3, 0.0, WHEELCHAIR_ROBOT, P)
     assert not swept_collision(near, 0.0, 0.0, WHEELCHAIR_ROBOT, P)  # standing still sweeps nothing new
@@ -67,7 +74,7 @@ def test_swept_collision_rotation_sweeps_the_rectangle_corners() -> None:
 
 
 def test_swept_collision_holonomic_sideways() -> None:
-    left = np.array([[0.0, 0.45]])
+    left = np.array([[0.0, 0.4]])  # 0.1 m from the disc; 0.3 m/s sideways sweeps 0.3 * 0.4 = 0.12 m
     assert swept_collision(left, 0.0, 0.0, XR4000_ROBOT, P, vy_mps=0.3)
     assert not swept_collision(left, 0.0, 0.0, XR4000_ROBOT, P, vy_mps=-0.3)
 
@@ -100,3 +107,148 @@ def test_budget_flags() -> None:
     flags = budget_flags({"match": 0.001, "model": 0.06, "planner": 0.01, "reactor": 0.03}, P)
     assert flags == Flag.MODEL_OVER_BUDGET | Flag.REACTOR_OVER_BUDGET
     assert budget_flags({}, P) == Flag.NONE
+
+
+# ---- shape- and kinematics-aware safety (issue 10) -------------------------------------------------
+
+CHAIR = WHEELCHAIR_ROBOT  # 0.8 m ahead of the axle, 0.4 m behind, 0.7 m wide; laser 0.72 m ahead
+CELL = 0.05
+NO_SCAN = np.zeros((0, 2))
+
+
+def test_footprint_signed_distance() -> None:
+    pts = np.array([[1.0, 0.0], [0.0, 0.45], [-0.5, 0.0], [0.9, 0.45], [0.0, 0.0], [0.7, 0.3]])
+    np.testing.assert_allclose(footprint_signed_distance(pts, CHAIR),
+                               [0.2, 0.1, 0.1, np.hypot(0.1, 0.1), -0.35, -0.05])
+    np.testing.assert_allclose(footprint_signed_distance(np.array([[0.5, 0.0]]), XR4000_ROBOT), [0.2])
+
+
+def test_braking_time_uses_the_robots_limits() -> None:
+    assert braking_time_s(0.3, 0.0, 0.0, CHAIR, P) == pytest.approx(0.3 + 0.5 * 0.3 / 0.5)
+    assert braking_time_s(0.0, 0.0, 0.5, CHAIR, P) == pytest.approx(0.3 + 0.5 * 0.5 / 1.0)
+    assert braking_time_s(0.3, 0.4, 0.0, XR4000_ROBOT, P) == pytest.approx(0.3 + 0.5 * 0.5 / 1.5)
+
+
+def grid_with_wall(pose: Pose2D, x0: float, y0: float, x1: float, y1: float) -> RobotCentredGrid:
+    """A 10 x 10 m grid, FREE around ``pose`` (it drove there), with the wall from (x0, y0) to (x1, y1)
+    [world m] OCCUPIED: the cells a head-on view of it would mark."""
+    grid = RobotCentredGrid(GridParams(200, CELL), centre_xy=(pose.x, pose.y))
+    grid.cells[:] = FREE
+    t = np.linspace(0.0, 1.0, 400)[:, None]
+    rc = grid.world_to_cell(np.hstack([x0 + t * (x1 - x0), y0 + t * (y1 - y0)]))
+    grid.cells[rc[:, 0], rc[:, 1]] = OCCUPIED
+    return grid
+
+
+def wall_points(pose: Pose2D, x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
+    """Dense points of the true wall in the robot frame of ``pose``."""
+    t = np.linspace(0.0, 1.0, 2000)
+    dx, dy = x0 + t * (x1 - x0) - pose.x, y0 + t * (y1 - y0) - pose.y
+    c, s = np.cos(pose.theta), np.sin(pose.theta)
+    return np.column_stack([c * dx + s * dy, -s * dx + c * dy])
+
+
+def check(grid: RobotCentredGrid, pose: Pose2D, v: float, w: float, robot: RobotConfig = CHAIR,
+          scan: np.ndarray = NO_SCAN, vy: float = 0.0) -> SafeCommand:
+    reach = safety_reach_m(robot, P, CELL)
+    return safe_command(v, vy, w, scan, grid.occupied_points(pose, reach), robot, P, cell_m=CELL,
+                        unknown_xy=lambda: grid.cell_points(pose, reach, UNKNOWN))
+
+
+def drive(pose: Pose2D, v: float, w: float, dt: float) -> Pose2D:
+    """Exact constant-twist motion of a differential-drive robot."""
+    if abs(w) < 1e-12:
+        return Pose2D(pose.x + v * dt * np.cos(pose.theta), pose.y + v * dt * np.sin(pose.theta), pose.theta)
+    th = pose.theta + w * dt
+    return Pose2D(pose.x + v / w * (np.sin(th) - np.sin(pose.theta)),
+                  pose.y - v / w * (np.cos(th) - np.cos(pose.theta)), th)
+
+
+def touches_wall(pose: Pose2D, wall: tuple[float, float, float, float]) -> bool:
+    return bool((footprint_signed_distance(wall_points(pose, *wall), CHAIR) <= 0.0).any())
+
+
+def test_chair_turning_in_place_beside_a_wall_behind_the_laser_does_not_touch_it() -> None:
+    # a wall 4 cm from the chair's left side, beside its rear half: behind the laser (0.72 m ahead, 180 deg
+    # field of view), so only the grid holds it. Turning right in place swings the rear-left corner into it.
+    pose = Pose2D(0.013, 0.021, 0.0)
+    wall = (-1.5, 0.411, -0.05, 0.411)
+    grid = grid_with_wall(pose, *wall)
+    p = pose
+    for _ in range(20):  # 4 s of turning right at 0.25 rad/s would turn the chair into the wall
+        p = drive(p, 0.0, -0.25, 0.2)
+    assert touches_wall(p, wall)
+    safe = check(grid, pose, 0.0, -0.25)
+    assert safe.rule is Mode.SAFE_SLOW and safe.w_radps == pytest.approx(-0.0625)
+    # closed loop: keep asking for the right turn, apply what the check allows: slower, then the other way
+    p, rules = pose, []
+    for _ in range(40):
+        cmd = check(grid_with_wall(p, *wall), p, 0.0, -0.25)
+        rules.append(cmd.rule)
+        p = drive(p, cmd.v_mps, cmd.w_radps, 0.2)
+        assert not touches_wall(p, wall)
+    assert Mode.SAFE_TURN in rules
+
+
+def test_turning_towards_the_free_side_is_not_altered() -> None:
+    pose = Pose2D(0.013, 0.021, 0.0)
+    grid = grid_with_wall(pose, -1.5, 0.411, -0.05, 0.411)
+    assert check(grid, pose, 0.0, 0.25).rule is None
+
+
+def test_a_command_towards_a_wall_seen_only_in_the_grid_is_replaced_before_contact() -> None:
+    wall = (1.5, -3.0, 1.5, 3.0)  # 0.7 m ahead of the chair's front edge, not in the scan
+    pose = Pose2D(0.013, 0.021, 0.0)
+    rules = []
+    for _ in range(60):
+        cmd = check(grid_with_wall(pose, *wall), pose, 0.3, 0.0)
+        rules.append(cmd.rule)
+        pose = drive(pose, cmd.v_mps, cmd.w_radps, 0.2)
+        assert not touches_wall(pose, wall)
+    assert rules[0] is None  # far enough at first
+    assert Mode.SAFE_SLOW in rules and rules[-1] is Mode.EMERGENCY  # slowed, then stopped short
+    front_gap = 1.5 - pose.x - CHAIR.front_m
+    assert 0.0 < front_gap < 0.1
+
+
+def test_a_command_parallel_to_a_wall_is_not_altered() -> None:
+    # driving along a wall 5 cm beside the chair, in the grid and in the scan
+    pose = Pose2D(0.013, 0.021, 0.0)
+    wall = (-3.0, 0.421, 3.0, 0.421)
+    grid = grid_with_wall(pose, *wall)
+    scan = wall_points(pose, *wall)
+    scan = scan[scan[:, 0] > 0.72]  # what the laser sees of it
+    for v, w in ((0.3, 0.0), (0.15, 0.0), (0.3, -0.05)):  # straight, slower, veering away
+        cmd = check(grid, pose, v, w, scan=scan)
+        assert cmd.rule is None and (cmd.v_mps, cmd.w_radps) == (v, w)
+
+
+def test_slower_arc_when_only_the_full_speed_arc_touches() -> None:
+    pose = Pose2D(0.013, 0.021, 0.0)
+    grid = grid_with_wall(pose, 0.97, -3.0, 0.97, 3.0)  # 0.16 m ahead of the front edge
+    cmd = check(grid, pose, 0.3, 0.1)
+    assert cmd.rule is Mode.SAFE_SLOW
+    assert (cmd.v_mps, cmd.w_radps) == pytest.approx((0.15, 0.05))
+
+
+def test_short_reverse_only_through_known_free_cells() -> None:
+    # a dead end: walls ahead and 3 cm from both sides; every forward motion and turn touches
+    pose = Pose2D(0.013, 0.021, 0.0)
+    grid = grid_with_wall(pose, 0.85, -3.0, 0.85, 3.0)
+    for y in (0.401, -0.401):
+        rc = grid.world_to_cell(np.column_stack([np.linspace(-2.0, 0.9, 300), np.full(300, y)]))
+        grid.cells[rc[:, 0], rc[:, 1]] = OCCUPIED
+    cmd = check(grid, pose, 0.3, 0.2)
+    assert cmd.rule is Mode.SAFE_REVERSE and cmd.v_mps == pytest.approx(-0.3 * 0.3) and cmd.w_radps == 0.0
+    # the same dead end, never seen behind: stop
+    rc = grid.world_to_cell([[-0.6, 0.0]])[0]
+    grid.cells[rc[0] - 3 : rc[0] + 4, rc[1] - 3 : rc[1] + 4] = UNKNOWN
+    cmd = check(grid, pose, 0.3, 0.2)
+    assert cmd.rule is Mode.EMERGENCY and (cmd.v_mps, cmd.vy_mps, cmd.w_radps) == (0.0, 0.0, 0.0)
+
+
+def test_raw_scan_points_count_as_well() -> None:
+    grid = grid_with_wall(Pose2D(0.0, 0.0, 0.0), 4.0, -1.0, 4.0, 1.0)
+    scan = np.array([[0.95, 0.0]])
+    assert check(grid, Pose2D(0.0, 0.0, 0.0), 0.3, 0.0, scan=scan).rule is not None
+    assert check(grid, Pose2D(0.0, 0.0, 0.0), 0.0, 0.0, scan=scan).rule is None  # standing still

@@ -10,10 +10,20 @@ Importing this package is cheap (no numpy / numba / replay code): worker process
 the numeric libraries to one thread before the replay code is loaded.
 """
 
-from .jobs import LOG_SUFFIXES, Job, JobKind, expand_inputs, find_logs, input_stem, unique_names
+from .jobs import (
+    LOG_SUFFIXES,
+    Job,
+    JobKind,
+    expand_inputs,
+    find_logs,
+    input_stem,
+    safe_name,
+    special_file_kind,
+    unique_names,
+)
 from .metrics import COUNT_METRICS, LATENCY_METRICS, RELATION_METRICS, metrics_from_summary
 from .report import CSV_COLUMNS, junit_xml, summary_csv, summary_md
-from .run import DASK_EXTRA_HINT, BatchResult, make_tasks, run_batch, run_tasks
+from .run import DASK_EXTRA_HINT, DEFAULT_TIMEOUT_S, BatchResult, make_tasks, run_batch, run_tasks
 from .thresholds import DEFAULT_LIMITS, THRESHOLD_KEYS, InputRule, Thresholds, check_limits, load_thresholds
 from .worker import InputResult, Runner, RunOutcome, Status, Task, execute, pin_threads, run_input
 
@@ -22,6 +32,7 @@ __all__ = [
     "CSV_COLUMNS",
     "DASK_EXTRA_HINT",
     "DEFAULT_LIMITS",
+    "DEFAULT_TIMEOUT_S",
     "LATENCY_METRICS",
     "LOG_SUFFIXES",
     "RELATION_METRICS",
@@ -49,6 +60,8 @@ __all__ = [
     "run_batch",
     "run_input",
     "run_tasks",
+    "safe_name",
+    "special_file_kind",
     "summary_csv",
     "summary_md",
     "unique_names",

@@ -8,24 +8,31 @@ pool, the thresholds or the reports.
 
 from __future__ import annotations
 
+import os
 import re
+import stat
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+from .. import fsutil
 from ..errors import ConfigError
 
 __all__ = [
     "COMPRESSED_SUFFIXES",
     "LOG_SUFFIXES",
+    "RESERVED_NAMES",
     "Job",
     "JobKind",
     "expand_inputs",
     "find_logs",
     "input_stem",
     "is_log",
+    "safe_name",
+    "special_file_kind",
+    "special_files",
     "unique_names",
 ]
 
@@ -37,6 +44,8 @@ LOG_SUFFIXES: tuple[str, ...] = (".clf", ".log", ".carmen", ".bag", ".mcap")
 COMPRESSED_SUFFIXES: tuple[str, ...] = (".gz", ".bz2")
 _TEXT_LOG_SUFFIXES = (".clf", ".log", ".carmen")
 _UNSAFE = re.compile(r"[^A-Za-z0-9._+-]+")
+#: Names of the batch folder's own files, never given to an input's run directory.
+RESERVED_NAMES: tuple[str, ...] = ("summary.csv", "summary.md", "junit.xml")
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,11 +90,12 @@ def is_log(path: Path) -> bool:
 def find_logs(folder: Path) -> list[Path]:
     """Logs inside ``folder``, recursively, in sorted path order.
 
-    Hidden entries (``.name``) are skipped and a ROS2 bag folder is one log (its files are not searched).
+    Hidden entries (``.name``) and gndreplay's own output folders (run directories, batch folders: their
+    results.mcap is not a log) are skipped; a ROS2 bag folder is one log (its files are not searched).
     """
     found: list[Path] = []
     for entry in sorted(folder.iterdir()):
-        if entry.name.startswith("."):
+        if entry.name.startswith(".") or fsutil.is_output_dir(entry):
             continue
         if is_log(entry):
             found.append(entry)
@@ -94,11 +104,18 @@ def find_logs(folder: Path) -> list[Path]:
     return found
 
 
+def safe_name(name: str) -> str:
+    """``name`` usable as a run-directory name: characters outside ``[A-Za-z0-9._+-]`` become ``_``, then
+    ``fsutil.safe_name`` (never hidden, ``.`` or ``..``); ``"input"`` if nothing is left."""
+    return fsutil.safe_name(_UNSAFE.sub("_", name), "input")
+
+
 def input_stem(path: Path) -> str:
-    """A log name without its log suffix (``mit-csail.clf.bz2`` -> ``mit-csail``; a bag folder: its name)."""
+    """A log name without its log suffix (``mit-csail.clf.bz2`` -> ``mit-csail``; a bag folder: its name),
+    made safe for a folder name (``.hidden.clf`` -> ``hidden``)."""
     suffix = None if path.is_dir() else _log_suffix(path)
     name = path.name[: -len(suffix)] if suffix and len(path.name) > len(suffix) else path.name
-    return _UNSAFE.sub("_", name) or "input"
+    return safe_name(name)
 
 
 def unique_names(paths: Sequence[Path]) -> list[str]:
@@ -107,10 +124,10 @@ def unique_names(paths: Sequence[Path]) -> list[str]:
     stems = [input_stem(p) for p in paths]
     counts = Counter(stems)
     wanted = [
-        f"{_UNSAFE.sub('_', p.parent.name)}-{s}" if counts[s] > 1 and p.parent.name else s
+        safe_name(f"{p.parent.name}-{s}") if counts[s] > 1 and p.parent.name else s
         for p, s in zip(paths, stems, strict=True)
     ]
-    used: set[str] = set()
+    used: set[str] = set(RESERVED_NAMES)
     names: list[str] = []
     for name in wanted:
         candidate, k = name, 1
@@ -120,6 +137,39 @@ def unique_names(paths: Sequence[Path]) -> list[str]:
         used.add(candidate)
         names.append(candidate)
     return names
+
+
+_SPECIAL_KINDS = (
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def special_file_kind(path: Path) -> str | None:
+    """``"a FIFO"``, ``"a socket"``, ... for a path that is neither a regular file nor a folder (reading it
+    could block forever or never end); None otherwise, and for a missing path. Never opens the path."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None
+    return next((what for test, what in _SPECIAL_KINDS if test(mode)), None)
+
+
+def special_files(path: Path) -> list[str]:
+    """``"<path> (a FIFO)"`` for ``path`` if it is a FIFO, device or socket, or for each such file
+    directly inside it when it is a folder (a ROS2 bag folder's storage files); never opens any of them."""
+    kind = special_file_kind(path)
+    if kind is not None:
+        return [f"{path} ({kind})"]
+    if not path.is_dir():
+        return []
+    try:
+        entries = sorted(path.iterdir())
+    except OSError:
+        return []
+    return [f"{e} ({k})" for e in entries if (k := special_file_kind(e)) is not None]
 
 
 def _expand_one(path: Path) -> list[Path]:
@@ -138,7 +188,8 @@ def expand_inputs(inputs: Iterable[str | Path]) -> list[Job]:
     """Jobs for command-line inputs, in the order given (folders expanded in sorted order).
 
     A file is taken as given whatever its suffix (a file that cannot be read becomes that input's error);
-    a path given twice (also through a folder) runs once.
+    a path given twice (also through a folder) runs once. Names are safe folder names (see ``safe_name``).
+    Nothing is opened here (FIFOs, devices and sockets are refused by ``make_tasks``).
 
     Raises:
         ConfigError: no inputs, or a folder without any log in it.

@@ -1,46 +1,47 @@
 """Run many inputs, each in its own worker process (or on a dask.distributed cluster), then write the
 summary files.
 
-Process pool: ``ProcessPoolExecutor`` with the spawn start method and one numeric thread per worker, one
-future per input. A Python exception inside an input is already a value (see :func:`execute`). A worker
-that dies outright (segfault, ``os._exit``, out of memory) breaks the whole pool and fails every input in
-flight, so those inputs are run again each in a process of its own: the one that dies again is reported
-with its exit status, the others get their real result.
+Process pool (:mod:`.pool`): spawned worker processes with one numeric thread each, one input at a time
+per worker. A Python exception inside an input is already a value (see :func:`execute`); a worker that dies
+outright (segfault, ``os._exit``, out of memory) fails the one input it held; an input running longer than
+the timeout is reported "timed out after N s" and its worker is killed. The batch always goes on and
+writes its summary.
 """
 
 from __future__ import annotations
 
 import logging
-import multiprocessing as mp
+import math
 import os
-import shutil
-import signal
 import time
 import uuid
 from collections.abc import Callable, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor, as_completed
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, replace
-from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..errors import ConfigError
-from .jobs import Job
-from .report import atomic_write_text, junit_xml, summary_csv, summary_md
+from .. import fsutil
+from ..errors import ConfigError, OutputError
+from ..fsutil import atomic_write_text
+from .jobs import Job, special_files
+from .pool import Emit, run_pool, timeout_result
+from .report import junit_xml, summary_csv, summary_md
 from .thresholds import Thresholds
-from .worker import InputResult, Runner, Task, crash_message, error_result, execute, pin_threads, run_input
+from .worker import InputResult, Runner, Task, crash_message, error_result, execute, run_input
 
 if TYPE_CHECKING:
     from ..config import Config
     from ..replay import ReadOptions, RunOptions
 
-__all__ = ["DASK_EXTRA_HINT", "BatchResult", "make_tasks", "run_batch", "run_tasks"]
+__all__ = ["DASK_EXTRA_HINT", "DEFAULT_TIMEOUT_S", "BatchResult", "make_tasks", "run_batch", "run_tasks"]
 
 log = logging.getLogger(__name__)
 
 DASK_EXTRA_HINT = 'dask.distributed is not installed: pip install "gndreplay[dask]"'
 ProgressFn = Callable[[InputResult], None]
+#: Default per-input time limit [s]: generous (the longest dev log replays in minutes on one core).
+DEFAULT_TIMEOUT_S = 3600.0
+_DASK_POLL_S = 0.2
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,7 +93,8 @@ def make_tasks(
     elsewhere), run directory ``out_dir / job.name``, and the job's goal folded into the options.
 
     Raises:
-        ConfigError: duplicate or empty job names, or no jobs.
+        ConfigError: duplicate or empty job names, no jobs, or inputs that are FIFOs, devices or sockets
+            (reading one could block the batch forever; they are named, never opened).
     """
     if not jobs:
         raise ConfigError("no inputs: give log files or folders of logs")
@@ -101,6 +103,9 @@ def make_tasks(
         if not job.name or job.name in seen or "/" in job.name or job.name.startswith("."):
             raise ConfigError(f"input name {job.name!r} is empty, repeated, hidden or contains '/'")
         seen.add(job.name)
+    special = [entry for job in jobs for entry in special_files(job.path)]
+    if special:
+        raise ConfigError(f"not a log file or folder (never opened): {', '.join(special)}")
     out_dir = _absolute(out_dir)
     tasks = []
     for job in jobs:
@@ -124,51 +129,6 @@ def make_tasks(
     return tasks
 
 
-def _crash_result(task: Task, exitcode: int | None) -> InputResult:
-    if exitcode is not None and exitcode < 0:
-        try:
-            how = f"killed by {signal.Signals(-exitcode).name}"
-        except ValueError:
-            how = f"killed by signal {-exitcode}"
-    else:
-        how = f"exit code {exitcode}"
-    return error_result(task.job, f"crashed: worker process died ({how})", error_type="WorkerDied")
-
-
-def _child(task: Task, runner: Runner, conn: Connection) -> None:
-    """Entry point of an isolated worker process: run the task, send the result back."""
-    pin_threads()
-    conn.send(execute(task, runner))
-    conn.close()
-
-
-def _run_alone(task: Task, runner: Runner) -> InputResult:
-    """Run one task in a fresh process of its own; a process that dies is reported with its exit status."""
-    ctx = mp.get_context("spawn")
-    recv, send = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(task, runner, send), name=f"gndreplay-batch:{task.job.name}")
-    proc.start()
-    send.close()
-    try:
-        result: InputResult | None = recv.recv()
-    except EOFError:
-        result = None
-    finally:
-        recv.close()
-        proc.join()
-    return result if result is not None else _crash_result(task, proc.exitcode)
-
-
-def _remove_stale_temp_dirs(task: Task) -> None:
-    """Remove the temporary run directories a killed worker left (``run_log`` writes into
-    ``.<name>.<random>`` next to the run directory and renames it when done)."""
-    parent = task.run_dir.parent
-    if parent.is_dir():
-        for entry in parent.glob(f".{task.run_dir.name}.*"):
-            if entry.is_dir():
-                shutil.rmtree(entry, ignore_errors=True)
-
-
 def _input_bytes(task: Task) -> int:
     """Size of an input on disk (a ROS2 bag folder: its files), a cheap proxy for its replay time."""
     path = Path(task.job.path)
@@ -186,44 +146,6 @@ def largest_first(tasks: Sequence[Task]) -> list[int]:
     return sorted(range(len(tasks)), key=lambda i: (-_input_bytes(tasks[i]), i))
 
 
-def _pool_run(
-    tasks: Sequence[Task], runner: Runner, workers: int, emit: Callable[[int, InputResult], None]
-) -> None:
-    ctx = mp.get_context("spawn")
-    broken: list[int] = []
-    with ProcessPoolExecutor(
-        max_workers=min(workers, len(tasks)), mp_context=ctx, initializer=pin_threads
-    ) as pool:
-        futures: dict[Future[InputResult], int] = {}
-        for i in largest_first(tasks):
-            try:
-                futures[pool.submit(execute, tasks[i], runner)] = i
-            except BrokenProcessPool:
-                broken.append(i)
-        try:
-            for fut in as_completed(futures):
-                i = futures[fut]
-                try:
-                    result = fut.result()
-                except BrokenProcessPool:
-                    broken.append(i)
-                    continue
-                except Exception as err:  # the task or its result could not be sent (pickling)
-                    result = error_result(tasks[i].job, crash_message(err), error_type=type(err).__name__)
-                emit(i, result)
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
-    if broken:
-        log.warning("a worker process died; running the %d inputs it took down one per process", len(broken))
-        for i in broken:
-            _remove_stale_temp_dirs(tasks[i])
-        with ThreadPoolExecutor(max_workers=min(workers, len(broken))) as threads:
-            alone = {threads.submit(_run_alone, tasks[i], runner): i for i in sorted(broken)}
-            for fut in as_completed(alone):
-                emit(alone[fut], fut.result())
-
-
 def _import_distributed() -> Any:
     try:
         import distributed
@@ -233,7 +155,7 @@ def _import_distributed() -> Any:
 
 
 def _dask_run(
-    tasks: Sequence[Task], runner: Runner, address: str, emit: Callable[[int, InputResult], None]
+    tasks: Sequence[Task], runner: Runner, address: str, emit: Emit, timeout_s: float | None
 ) -> None:
     distributed = _import_distributed()
     batch_id = uuid.uuid4().hex[:8]
@@ -242,23 +164,70 @@ def _dask_run(
     except (OSError, TimeoutError, ValueError) as err:
         raise ConfigError(f"cannot connect to the dask scheduler at {address!r}: {err}") from err
     with client:
-        futures = {
+        pending = {
             client.submit(execute, tasks[i], runner, key=f"gndreplay-batch-{batch_id}-{i}", pure=False): i
             for i in largest_first(tasks)
         }
-        pending = set(futures)
+        started: dict[str, tuple[float, str]] = {}  # task key -> (first seen processing, worker address)
         try:
-            for fut in distributed.as_completed(list(futures), loop=client.loop):
-                pending.discard(fut)
-                i = futures[fut]
-                try:
-                    result = fut.result()
-                except Exception as err:  # KilledWorker (the input killed its workers), lost data, ...
-                    result = error_result(tasks[i].job, crash_message(err), error_type=type(err).__name__)
-                emit(i, result)
+            while pending:
+                for fut in [f for f in pending if f.done()]:
+                    i = pending.pop(fut)
+                    try:
+                        result = fut.result()
+                    except Exception as err:  # KilledWorker (the input killed its workers), lost data, ...
+                        result = error_result(tasks[i].job, crash_message(err), error_type=type(err).__name__)
+                    emit(i, result)
+                if pending and timeout_s is not None:
+                    _dask_timeouts(client, tasks, pending, started, timeout_s, emit)
+                if pending:
+                    time.sleep(_DASK_POLL_S)
         finally:
             if pending:
                 client.cancel(list(pending))
+
+
+def _dask_timeouts(
+    client: Any,
+    tasks: Sequence[Task],
+    pending: dict[Any, int],
+    started: dict[str, tuple[float, str]],
+    timeout_s: float,
+    emit: Emit,
+) -> None:
+    """Report the inputs a dask worker has held for ``timeout_s`` as timed out, cancel them and restart
+    their worker (dask cannot interrupt a running task: restarting its process is the only way to stop it;
+    the other tasks of that worker are rescheduled by dask).
+
+    The clock starts when the scheduler hands the input to a worker (``Client.processing``), which may hold
+    it a little while behind the task it is running: keep the timeout well above one input's run time.
+    """
+    now = time.monotonic()
+    where = {key: addr for addr, keys in client.processing().items() for key in keys}
+    for fut, i in list(pending.items()):
+        addr = where.get(fut.key)
+        if addr is None:  # queued on the scheduler, or finished since the last look
+            continue
+        t_start, seen_on = started.get(fut.key, (now, addr))
+        if seen_on != addr:  # rescheduled after its worker was lost: its clock starts again
+            t_start = now
+        started[fut.key] = (t_start, addr)
+        if now - t_start >= timeout_s:
+            del pending[fut]
+            client.cancel([fut])
+            try:
+                client.restart_workers([addr], raise_for_error=False)
+            except Exception as err:  # a worker without a nanny cannot be restarted
+                log.warning("input %s timed out; its dask worker %s could not be restarted: %s",
+                            tasks[i].job.name, addr, err)
+            emit(i, timeout_result(tasks[i], timeout_s))
+
+
+def _check_run_args(workers: int, timeout_s: float | None) -> None:
+    if workers < 1:
+        raise ConfigError(f"workers must be >= 1, got {workers}")
+    if timeout_s is not None and not 0.0 < timeout_s < math.inf:
+        raise ConfigError(f"the per-input timeout must be a positive number of seconds, got {timeout_s}")
 
 
 def run_tasks(
@@ -268,18 +237,23 @@ def run_tasks(
     dask_address: str | None = None,
     runner: Runner = run_input,
     progress: ProgressFn | None = None,
+    timeout_s: float | None = DEFAULT_TIMEOUT_S,
 ) -> tuple[InputResult, ...]:
     """Run the tasks in worker processes (or on the dask scheduler at ``dask_address``).
+
+    Args:
+        timeout_s: an input running longer is stopped (its worker killed) and reported "timed out after
+            N s"; None: no limit.
 
     Returns:
         one result per task, in task order (whatever the completion order); ``progress`` is called with
         each result as it completes.
 
     Raises:
-        ConfigError: ``workers`` < 1, dask not installed, or the scheduler cannot be reached.
+        ConfigError: ``workers`` < 1, ``timeout_s`` <= 0, dask not installed, or the scheduler cannot be
+            reached.
     """
-    if workers < 1:
-        raise ConfigError(f"workers must be >= 1, got {workers}")
+    _check_run_args(workers, timeout_s)
     results: dict[int, InputResult] = {}
 
     def emit(i: int, result: InputResult) -> None:
@@ -290,9 +264,12 @@ def run_tasks(
     if not tasks:
         return ()
     if dask_address is not None:
-        _dask_run(tasks, runner, dask_address, emit)
+        _dask_run(tasks, runner, dask_address, emit, timeout_s)
     else:
-        _pool_run(tasks, runner, workers, emit)
+        run_pool(
+            tasks, largest_first(tasks), runner, workers, emit, timeout_s=timeout_s,
+            on_killed=lambda task: fsutil.remove_stale_staging(task.run_dir.parent),
+        )
     return tuple(results[i] for i in range(len(tasks)))
 
 
@@ -309,8 +286,17 @@ def run_batch(
     junit: Path | None = None,
     read: ReadOptions | None = None,
     runner: Runner = run_input,
+    timeout_s: float | None = DEFAULT_TIMEOUT_S,
+    overwrite: bool = False,
 ) -> BatchResult:
-    """Run every job in its own worker process and write ``summary.csv``, ``summary.md`` (and ``junit``).
+    """Run every job in its own worker process and write the batch folder: one run directory per input,
+    ``summary.csv``, ``summary.md`` (and ``junit``).
+
+    The batch folder gets the protections of a run directory (``gndreplay.fsutil``), checked before any
+    work: never a file, the current folder, a folder holding an input, or a non-empty folder gndreplay did
+    not write. It is built in a staging directory beside it and appears, marked, only when complete; an
+    earlier batch folder there is replaced only with ``overwrite``, otherwise the batch is written beside
+    it as ``out_dir-2``, ... (``BatchResult.out_dir`` says where).
 
     Args:
         jobs: the inputs (``expand_inputs`` makes them from paths); names must be unique.
@@ -321,23 +307,68 @@ def run_batch(
         dask_address: send the inputs to this dask.distributed scheduler instead (``gndreplay[dask]``);
             paths must be visible to its workers.
         progress: called in this process with each input's result as it completes.
-        junit: write JUnit XML here (one test case per input).
+        junit: write JUnit XML here (one test case per input); inside ``out_dir`` it moves with the folder.
         runner: what a worker does with a task (tests inject fakes; a picklable module-level function).
+        timeout_s: per-input time limit [s] (None: none); an input over it is an "error" row
+            "timed out after N s" and its worker process is killed.
+        overwrite: replace an earlier batch folder at ``out_dir``.
 
     Raises:
-        ConfigError: no jobs, bad names, ``workers`` < 1, dask missing or unreachable.
+        ConfigError: no jobs, bad names, FIFO / device inputs, ``workers`` < 1, bad timeout, dask missing
+            or unreachable.
+        OutputError: ``out_dir`` (or ``junit``) is unsafe to write.
     """
     t0 = time.perf_counter()
     thresholds = thresholds if thresholds is not None else Thresholds()
-    out_dir = Path(out_dir)
+    out_dir = _absolute(Path(out_dir))
     tasks = make_tasks(jobs, cfg=cfg, options=options, thresholds=thresholds, out_dir=out_dir, read=read)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    results = run_tasks(tasks, workers=workers, dask_address=dask_address, runner=runner, progress=progress)
-    csv_path, md_path = out_dir / "summary.csv", out_dir / "summary.md"
-    atomic_write_text(csv_path, summary_csv(results))
-    atomic_write_text(md_path, summary_md(results))
-    if junit is not None:
-        atomic_write_text(Path(junit), junit_xml(results))
+    _check_run_args(workers, timeout_s)
+    fsutil.check_output_dir(out_dir, inputs=[t.job.path for t in tasks], overwrite=overwrite)
+    junit_rel, junit_out = _junit_place(junit, out_dir)
+    target = fsutil.resolve_output_dir(out_dir, overwrite=overwrite)
+
+    def final(r: InputResult, tmp: Path) -> InputResult:
+        """The result with its run directory where it will be once the batch folder is published."""
+        if r.run_dir is None or not Path(r.run_dir).is_relative_to(tmp):
+            return r
+        return replace(r, run_dir=target / Path(r.run_dir).relative_to(tmp))
+
+    with fsutil.staging_dir(target, overwrite=overwrite) as tmp:
+        staged = [replace(t, run_dir=tmp / t.run_dir.name) for t in tasks]
+        shown = None if progress is None else (lambda r: progress(final(r, tmp)))
+        results = tuple(
+            final(r, tmp)
+            for r in run_tasks(
+                staged, workers=workers, dask_address=dask_address, runner=runner, progress=shown,
+                timeout_s=timeout_s,
+            )
+        )
+        fsutil.remove_stale_staging(tmp)  # left by an input whose worker was killed
+        atomic_write_text(tmp / "summary.csv", summary_csv(results))
+        atomic_write_text(tmp / "summary.md", summary_md(results))
+        if junit_rel is not None:
+            (tmp / junit_rel).parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(tmp / junit_rel, junit_xml(results))
+    if junit_out is not None:
+        junit_out.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(junit_out, junit_xml(results))
+    junit_path = target / junit_rel if junit_rel is not None else junit_out
     return BatchResult(
-        results, out_dir, csv_path, md_path, None if junit is None else Path(junit), time.perf_counter() - t0
+        results, target, target / "summary.csv", target / "summary.md", junit_path, time.perf_counter() - t0
     )
+
+
+def _junit_place(junit: Path | None, out_dir: Path) -> tuple[Path | None, Path | None]:
+    """(path inside the batch folder, or None; path outside it, or None) of the JUnit file.
+
+    Raises:
+        OutputError: ``junit`` is an existing folder.
+    """
+    if junit is None:
+        return None, None
+    path = _absolute(Path(junit))
+    if path.is_dir():
+        raise OutputError(f"{junit}: is a folder; --junit must name a file")
+    if path.is_relative_to(out_dir):
+        return path.relative_to(out_dir), None
+    return None, path

@@ -7,25 +7,99 @@ the stream is exhausted ``report`` tells what was skipped, reordered, held or dr
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from types import TracebackType
 from typing import Any, Literal, Protocol, Self
 
-from ..types import Tick
+from ..types import NS_PER_S, Pose2D, Tick
 
 __all__ = [
     "INDEX_CLOCK_PERIOD_NS",
+    "MAX_ABS_BEARING_RAD",
+    "MAX_ABS_POSITION_M",
+    "MAX_ABS_TIME_NS",
+    "MAX_RANGE_LIMIT_M",
+    "MAX_SPEED",
     "LogDescription",
     "LogReader",
     "ReadReport",
     "StreamInfo",
     "StreamRole",
+    "check_bearings",
+    "check_pose",
+    "check_speed",
+    "check_time",
 ]
 
 #: Period of the index clock given to logs whose timestamps are all zero (10 Hz, a typical laser rate).
 INDEX_CLOCK_PERIOD_NS = 100_000_000
+
+# Bounds of what a reader hands downstream: a value outside them comes from a corrupt record, not a robot,
+# and could overflow int64 arithmetic or allocate absurd grids later. Readers raise ValueError (a malformed
+# record, skipped and counted) through the checks below.
+#: |stamp| bound (about year 2112): the difference of two stamps still fits in int64 ns.
+MAX_ABS_TIME_NS = 4_500_000_000 * NS_PER_S
+#: |x|, |y| bound of poses [m] (1000 km).
+MAX_ABS_POSITION_M = 1e6
+#: |theta| bound before wrapping [rad] (unwrapped odometry headings stay far below it).
+MAX_ABS_HEADING_RAD = 1e6
+#: |bearing| bound of laser beams [rad].
+MAX_ABS_BEARING_RAD = 4.0 * math.pi
+#: largest maximum range a laser may declare [m].
+MAX_RANGE_LIMIT_M = 1e5
+#: |speed| bound of recorded commands and odometry twists [m/s, rad/s].
+MAX_SPEED = 1e3
+
+
+def check_time(t_ns: int) -> int:
+    """``t_ns`` if within ``MAX_ABS_TIME_NS``.
+
+    Raises:
+        ValueError: out of range.
+    """
+    if not -MAX_ABS_TIME_NS <= t_ns <= MAX_ABS_TIME_NS:
+        raise ValueError(f"timestamp {t_ns / NS_PER_S:.6g} s out of range")
+    return t_ns
+
+
+def check_pose(x: float, y: float, theta: float, what: str = "pose") -> Pose2D:
+    """A Pose2D (theta wrapped to (-pi, pi]) from finite values within the bounds.
+
+    Raises:
+        ValueError: a non-finite or absurd value (NaN, inf, 1e308 m).
+    """
+    if not (abs(x) < MAX_ABS_POSITION_M and abs(y) < MAX_ABS_POSITION_M and abs(theta) < MAX_ABS_HEADING_RAD):
+        raise ValueError(f"{what} ({x:.6g}, {y:.6g}, {theta:.6g}) is not finite or out of range")
+    if -math.pi < theta <= math.pi:
+        return Pose2D(x, y, theta)
+    w = math.pi - (math.pi - theta) % (2.0 * math.pi)
+    return Pose2D(x, y, w if w > -math.pi else math.pi)
+
+
+def check_speed(v: float, what: str, *, allow_nan: bool = False) -> float:
+    """``v`` if finite (or NaN when ``allow_nan``: unknown) and within ``MAX_SPEED``.
+
+    Raises:
+        ValueError: infinite, NaN (unless allowed) or absurd.
+    """
+    if abs(v) <= MAX_SPEED or (allow_nan and math.isnan(v)):
+        return v
+    raise ValueError(f"{what} {v:.6g} is not finite or out of range")
+
+
+def check_bearings(first: float, step: float, n: int) -> None:
+    """Check that the n bearings ``first + i * step`` are finite and within ``MAX_ABS_BEARING_RAD``.
+
+    Raises:
+        ValueError: a non-finite or absurd bearing.
+    """
+    last = first + step * (n - 1) if n > 1 else first
+    if not (abs(first) <= MAX_ABS_BEARING_RAD and abs(last) <= MAX_ABS_BEARING_RAD):
+        raise ValueError(f"beam bearings from {first:.6g} to {last:.6g} rad are not finite or out of range")
+
 
 StreamRole = Literal["scan", "odom", "cmd", "truth", "tf", "tf_static", "param", "other"]
 

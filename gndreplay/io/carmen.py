@@ -24,7 +24,13 @@ Reader decisions (see also ECOSYSTEM.md §3 and the datasets README):
   ``_angular_offset``), the rear laser facing backwards; ROBOTLASER lines give it per line.
 - File order is not time order: records go through the bounded reorder heap of :mod:`.sync`.
 - Malformed lines are skipped and counted (``strict`` makes them an error); all-zero stamps get an index
-  clock.
+  clock. A line is malformed when its fields do not add up: the trailer of each message must have as many
+  fields as it has in the head of the log, so a FLASER with one range too many or too few is not read with
+  every field shifted; when a value is out of the bounds of :mod:`.base` (stamps beyond
+  ~2112, poses beyond 1000 km, NaN / inf poses, absurd bearings or max range); or when it is longer than
+  4 MB (skipped unread in bounded chunks: a decompression bomb of zeros costs one chunk of memory). The
+  head scan keeps at most 16 MB of text. Every decompression error (zlib.error, EOFError, OSError) is a
+  LogFormatError naming the last line read.
 """
 
 from __future__ import annotations
@@ -36,6 +42,7 @@ import itertools
 import logging
 import math
 import re
+import zlib
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
@@ -49,7 +56,20 @@ from numpy.typing import NDArray
 from ..errors import LogFormatError
 from ..fsutil import atomic_path
 from ..types import NS_PER_S, Odometry, Pose2D, Scan, Tick
-from .base import INDEX_CLOCK_PERIOD_NS, LogDescription, ReadReport, StreamInfo, StreamRole
+from .base import (
+    INDEX_CLOCK_PERIOD_NS,
+    MAX_ABS_POSITION_M,
+    MAX_ABS_TIME_NS,
+    MAX_RANGE_LIMIT_M,
+    LogDescription,
+    ReadReport,
+    StreamInfo,
+    StreamRole,
+    check_bearings,
+    check_pose,
+    check_speed,
+    check_time,
+)
 from .sync import (
     DEFAULT_SYNC,
     Event,
@@ -95,6 +115,9 @@ _HEAD_LINES = 5000
 _HEAD_SCANS = 50
 _MAX_BEAMS = 100_000
 _MAX_LINE = 4 << 20  # bytes; a 100k-beam line is ~1 MB
+_HEAD_BYTES = 16 << 20  # the head keeps at most this much text (a log of huge lines still opens cheaply)
+#: What ``_lines`` yields in place of a line longer than ``_MAX_LINE`` (the rest is skipped unread).
+_TOO_LONG = b"\0too long\0"
 _MAX_TRAILER = 3
 _SATURATION_MIN_COUNT = 5
 _SATURATION_MIN_SCANS = 3
@@ -126,18 +149,20 @@ def parse_time_ns(token: bytes | str) -> int:
     """Seconds as decimal text -> int ns, exact for plain decimals (``"1134864629.895182"``).
 
     Raises:
-        ValueError: not a finite number.
+        ValueError: not a finite number, or beyond ``MAX_ABS_TIME_NS`` (about year 2112).
     """
     tok = token.encode() if isinstance(token, str) else token
     m = _DEC_RE.match(tok)
     if m is not None:
         sign, sec, frac = m.groups()
+        if len(sec.lstrip(b"0")) > 12:
+            raise ValueError(f"timestamp {tok[:30]!r} out of range")
         ns = int(sec) * NS_PER_S + (int(frac[:9].ljust(9, b"0")) if frac else 0)
-        return -ns if sign == b"-" else ns
+        return check_time(-ns if sign == b"-" else ns)
     value = float(tok)
-    if not math.isfinite(value):
-        raise ValueError(f"timestamp {tok!r} is not finite")
-    return round(value * NS_PER_S)
+    if not abs(value) <= MAX_ABS_TIME_NS / NS_PER_S:
+        raise ValueError(f"timestamp {tok[:30]!r} is not finite or out of range")
+    return check_time(round(value * NS_PER_S))
 
 
 def format_time_s(t_ns: int) -> str:
@@ -207,11 +232,22 @@ def _need(tok: list[bytes], n_fields: int, what: str) -> None:
         raise _Bad(f"{what}: {extra - _MAX_TRAILER} unexpected extra fields")
 
 
+def _is_number(t: bytes) -> bool:
+    try:
+        float(t)
+    except ValueError:
+        return False
+    return True
+
+
 def _trailer_time(tok: list[bytes], start: int) -> int:
     """First numeric field of the trailer, in ns."""
     for t in tok[start:]:
-        with contextlib.suppress(ValueError):
-            return parse_time_ns(t)
+        if _is_number(t):
+            try:
+                return parse_time_ns(t)
+            except ValueError as err:
+                raise _Bad(str(err)) from None
     raise _Bad("no timestamp")
 
 
@@ -222,8 +258,8 @@ def _ranges(tok: list[bytes], a: int, n: int) -> F64:
         raise _Bad("ranges are not numeric") from None
 
 
-def _pose(v: list[float]) -> Pose2D:
-    return Pose2D(v[0], v[1], wrap(v[2]))
+def _pose(v: list[float], what: str = "pose") -> Pose2D:
+    return check_pose(v[0], v[1], v[2], what)
 
 
 def _relative(a: Pose2D, b: Pose2D) -> Pose2D:
@@ -252,22 +288,36 @@ def _open_binary(path: Path) -> IO[bytes]:
     return open(path, "rb")
 
 
+#: What reading plain / gzip / bz2 data raises on damaged input (zlib.error is not an OSError).
+_READ_ERRORS = (OSError, EOFError, ValueError, zlib.error, MemoryError)
+
+
 def _lines(path: Path, fh: IO[bytes], lineno: int = 0) -> Iterator[tuple[int, bytes]]:
-    """Numbered lines after line ``lineno`` (at most ``_MAX_LINE`` bytes each: a binary file cannot fill
-    memory).
+    """Numbered lines after line ``lineno``. A line longer than ``_MAX_LINE`` bytes is yielded as
+    ``_TOO_LONG`` and its rest skipped in bounded chunks (once the consumer asks for the next line), so a
+    binary or decompression-bomb file never holds more than one chunk in memory.
 
     Raises:
         LogFormatError: decompression or I/O error, naming the last line read.
     """
     readline = fh.readline
+    skipping = False
     while True:
         try:
             line = readline(_MAX_LINE)
-        except (OSError, EOFError, ValueError) as err:  # gzip/bz2 raise all three on bad data
-            raise LogFormatError(f"{path}: truncated or corrupt data after line {lineno}: {err}") from err
+        except _READ_ERRORS as err:  # gzip/bz2 raise all of these on bad data
+            what = type(err).__name__ if isinstance(err, MemoryError) else str(err)
+            raise LogFormatError(f"{path}: truncated or corrupt data after line {lineno}: {what}") from err
         if not line:
             return
+        if skipping:
+            skipping = not line.endswith(b"\n")
+            continue
         lineno += 1
+        if len(line) == _MAX_LINE and not line.endswith(b"\n"):
+            skipping = True
+            yield lineno, _TOO_LONG
+            continue
         yield lineno, line
 
 
@@ -283,14 +333,17 @@ class _Head:
     any_stamp: bool
     all_zero: bool
     first_name: str | None
+    trailers: dict[bytes, int]  # per message: the usual number of trailer fields
 
 
 @dataclass(slots=True)
 class _Opened:
-    """A file handle positioned after ``lines`` (kept so the first pass does not decompress them again)."""
+    """A file handle positioned after ``lines`` (kept so the first pass does not decompress them again);
+    ``resumable`` is False when the head stopped inside an over-long line (the pass then reopens the file)."""
 
     fh: IO[bytes]
     lines: list[tuple[int, bytes]]
+    resumable: bool = True
 
 
 def _peek(path: Path) -> tuple[_Head, _Opened]:
@@ -317,10 +370,15 @@ def _read_head(path: Path, opened: _Opened) -> _Head:
     samples: dict[str, list[F64]] = {}
     any_stamp, all_zero = False, True
     first_name: str | None = None
-    scans = 0
+    trailer_sizes: dict[bytes, Counter[int]] = {}
+    scans = kept = 0
     for lineno, line in _lines(path, opened.fh):
+        if line is _TOO_LONG:
+            opened.resumable = False
+            break
         opened.lines.append((lineno, line))
-        if lineno > _HEAD_LINES or scans >= _HEAD_SCANS:
+        kept += len(line)
+        if lineno > _HEAD_LINES or scans >= _HEAD_SCANS or kept > _HEAD_BYTES:
             break
         tok = line.split()
         if not tok or tok[0].startswith(b"#"):
@@ -337,7 +395,8 @@ def _read_head(path: Path, opened: _Opened) -> _Head:
         if name not in KNOWN_MESSAGES or name == "PARAM":
             continue
         with contextlib.suppress(_Bad, ValueError, IndexError):
-            raw, t_ns = _peek_record(name, tok)
+            raw, t_ns, start = _peek_record(name, tok)
+            trailer_sizes.setdefault(tok[0], Counter())[len(tok) - start] += 1
             any_stamp = True
             all_zero = all_zero and t_ns == 0
             if raw is not None:
@@ -345,24 +404,28 @@ def _read_head(path: Path, opened: _Opened) -> _Head:
                 samples.setdefault(name, []).append(raw)
     if not any(n in KNOWN_MESSAGES for n in names):
         what = f"first record starts with {first_name!r}" if first_name else "no records"
+        if not opened.resumable:
+            what += f", then a line longer than {_MAX_LINE >> 20} MB: binary data?"
         raise LogFormatError(f"{path}: not a CARMEN log (no CARMEN message in the first lines; {what})")
-    return _Head(names, params, samples, any_stamp, any_stamp and all_zero, first_name)
+    trailers = {k: c.most_common(1)[0][0] for k, c in trailer_sizes.items()}
+    return _Head(names, params, samples, any_stamp, any_stamp and all_zero, first_name, trailers)
 
 
-def _peek_record(name: str, tok: list[bytes]) -> tuple[F64 | None, int]:
-    """Raw ranges (scan lines) and the stamp of one record, for the head sample."""
+def _peek_record(name: str, tok: list[bytes]) -> tuple[F64 | None, int, int]:
+    """Raw ranges (scan lines), the stamp and the trailer start of one record, for the head sample."""
     if name in ("FLASER", "RLASER"):
         n = _count(tok, 1, name)
-        return _ranges(tok, 2, n), _trailer_time(tok, 2 + n + 6)
+        _need(tok, 2 + n + 6, name)
+        return _ranges(tok, 2, n), _trailer_time(tok, 2 + n + 6), 2 + n + 6
     if name.startswith("RAWLASER") or name.startswith("ROBOTLASER"):
         n = _count(tok, 8, name)
         m = int(tok[9 + n])
         tail = 11 if name.startswith("ROBOTLASER") else 0
-        return _ranges(tok, 9, n), _trailer_time(tok, 10 + n + m + tail)
-    if name == "ODOM":
-        return None, _trailer_time(tok, 7)
-    if name == "TRUEPOS":
-        return None, _trailer_time(tok, 7)
+        _need(tok, 10 + n + m + tail, name)
+        return _ranges(tok, 9, n), _trailer_time(tok, 10 + n + m + tail), 10 + n + m + tail
+    if name in ("ODOM", "TRUEPOS"):
+        _need(tok, 7, name)
+        return None, _trailer_time(tok, 7), 7
     raise _Bad("not sampled")
 
 
@@ -403,7 +466,8 @@ class _Laser:
     resolution_rad: float | None
 
 
-def _param_float(params: Mapping[str, str], key: str) -> float | None:
+def _param_float(params: Mapping[str, str], key: str, limit: float = MAX_ABS_POSITION_M) -> float | None:
+    """A numeric PARAM, or None when missing, not a number, or not below ``limit`` in magnitude."""
     v = params.get(key)
     if v is None:
         return None
@@ -411,7 +475,7 @@ def _param_float(params: Mapping[str, str], key: str) -> float | None:
         f = float(v)
     except ValueError:
         return None
-    return f if math.isfinite(f) else None
+    return f if abs(f) < limit else None
 
 
 def _laser_config(side: str | None, params: Mapping[str, str], saturation: float | None) -> _Laser:
@@ -423,7 +487,7 @@ def _laser_config(side: str | None, params: Mapping[str, str], saturation: float
     pose = Pose2D(x, y, wrap(th + (math.pi if side == _REAR else 0.0)))
     max_r, source = DEFAULT_MAX_RANGE_M, "readlog.c default"
     for key in _MAX_RANGE_PARAMS:
-        v = _param_float(params, key.format(s=side))
+        v = _param_float(params, key.format(s=side), MAX_RANGE_LIMIT_M)
         if v is not None and v > 0:
             max_r, source = v, f"PARAM {key.format(s=side)}"
             break
@@ -431,8 +495,10 @@ def _laser_config(side: str | None, params: Mapping[str, str], saturation: float
         if saturation is not None:
             max_r, source = saturation, f"no-return marker {saturation:g} m"
     min_r = _param_float(params, f"laser_{side}_laser_min_range") or 0.0
-    fov = _param_float(params, f"laser_{side}_laser_fov")
-    res = _param_float(params, f"laser_{side}_laser_resolution")
+    if not 0.0 <= min_r < max_r:
+        min_r = 0.0
+    fov = _param_float(params, f"laser_{side}_laser_fov", 720.0)
+    res = _param_float(params, f"laser_{side}_laser_resolution", 720.0)
     return _Laser(
         pose, max_r, source, min_r, math.radians(fov) if fov else None, math.radians(res) if res else None
     )
@@ -489,6 +555,7 @@ class CarmenReader:
         self._laser = _laser_config(_SIDE[self.scan_stream], self._params, self._saturation)
         self._angles: dict[tuple[int, float, float], F64] = {}
         self._stats_counts: dict[str, int] = {}
+        self._trailers: dict[bytes, int] = {}
 
     def _choose(
         self, scan_topic: str | None, odom_topic: str | None, cmd_topic: str | None, truth_topic: str | None
@@ -652,6 +719,10 @@ class CarmenReader:
         n_scans = 0
         scan_name = self.scan_stream.encode()
         self._close_pass()
+        self._trailers = dict(self._head.trailers)
+        if self._opened is not None and not self._opened.resumable:
+            self._opened.fh.close()
+            self._opened = None
         if self._opened is not None:  # the first pass continues from the head that was read to open
             opened, self._opened = self._opened, None
             self._fh = opened.fh
@@ -665,6 +736,9 @@ class CarmenReader:
                 raise LogFormatError(f"{self.path}: cannot open: {err.strerror or err}") from err
             lines = _lines(self.path, self._fh)
         for lineno, line in lines:
+            if line is _TOO_LONG:
+                self._malformed(stats, lineno, f"line longer than {_MAX_LINE >> 20} MB", None)
+                continue
             tok = line.split()
             if not tok or tok[0].startswith(b"#"):
                 continue
@@ -735,7 +809,9 @@ class CarmenReader:
         if a is None:
             if start is None:
                 a = flaser_angles(n, fov_rad=self._laser.fov_rad, resolution_rad=self._laser.resolution_rad)
+                check_bearings(float(a[0]), float(a[-1] - a[0]) / max(n - 1, 1), n)
             else:
+                check_bearings(start, res or 0.0, n)
                 a = start + (res or 0.0) * np.arange(n, dtype=np.float64)
             a.flags.writeable = False
             if len(self._angles) > 64:
@@ -743,12 +819,26 @@ class CarmenReader:
             self._angles[key] = a
         return a
 
+    def _time(self, tok: list[bytes], start: int, what: str) -> int:
+        """The stamp of a line whose payload ends at ``start``, after checking that its trailer has as many
+        fields as this message's lines have in the head of the log (the trailer variants have 1, 2 or 3): a
+        line with a field too many or too few (one range more than declared) shifts the trailer and is
+        malformed, not read with every field shifted."""
+        n = len(tok) - start
+        extra = n - self._trailers.setdefault(tok[0], n)
+        if extra:
+            if not any(_is_number(t) for t in tok[start:]):
+                raise _Bad("no timestamp")
+            many = f"field{'s' if abs(extra) > 1 else ''} too {'many' if extra > 0 else 'few'}"
+            raise _Bad(f"{what}: {abs(extra)} {many}")
+        return _trailer_time(tok, start)
+
     def _on_flaser(self, tok: list[bytes]) -> ScanEvent:
         n = _count(tok, 1, "range")
         _need(tok, 2 + n + 6, f"declares {n} ranges")
+        t = self._time(tok, 2 + n + 6, f"declares {n} ranges")
         raw = _ranges(tok, 2, n)
         v = _floats(tok[2 + n : 2 + n + 6], "pose")
-        t = _trailer_time(tok, 2 + n + 6)
         las = self._laser
         scan = Scan(
             t,
@@ -758,8 +848,11 @@ class CarmenReader:
             las.min_range_m,
             las.sensor_pose,
         )
-        odom = _pose(v[3:6])
-        truth = _compose(_pose(v[0:3]), las.sensor_pose.inverse()) if self._truth_mode == "embedded" else None
+        odom = _pose(v[3:6], "odometry")
+        truth = None
+        if self._truth_mode == "embedded":
+            tp = _compose(_pose(v[0:3]), las.sensor_pose.inverse())
+            truth = check_pose(tp.x, tp.y, tp.theta, "laser pose")
         return ScanEvent(t, scan, odom, truth)
 
     def _new_style(self, tok: list[bytes], robot: bool) -> tuple[int, Scan, list[float] | None]:
@@ -772,20 +865,25 @@ class CarmenReader:
         if not 0 <= m <= _MAX_BEAMS:
             raise _Bad(f"remission count {m} out of range")
         tail = 11 if robot else 0
-        _need(tok, 10 + n + m + tail, f"declares {n} ranges and {m} remissions")
+        what = f"declares {n} ranges and {m} remissions"
+        _need(tok, 10 + n + m + tail, what)
+        t = self._time(tok, 10 + n + m + tail, what)
         raw = _ranges(tok, 9, n)
         poses = _floats(tok[10 + n + m : 10 + n + m + 6], "pose") if robot else None
-        t = _trailer_time(tok, 10 + n + m + tail)
+        if max_r > MAX_RANGE_LIMIT_M:
+            raise _Bad(f"max range {max_r:.6g} m out of range")
         max_range = max_r if max_r > 0 else self._laser.max_range_m
+        min_range = self._laser.min_range_m if self._laser.min_range_m < max_range else 0.0
         sensor_pose = self._laser.sensor_pose
         if poses is not None:
-            sensor_pose = _relative(_pose(poses[3:6]), _pose(poses[0:3]))
+            sp = _relative(_pose(poses[3:6], "robot pose"), _pose(poses[0:3], "laser pose"))
+            sensor_pose = check_pose(sp.x, sp.y, sp.theta, "laser mounting")
         scan = Scan(
             t,
-            clean_ranges(raw, max_range, self._laser.min_range_m),
+            clean_ranges(raw, max_range, min_range),
             self._angles_for(n, start, res),
             max_range,
-            self._laser.min_range_m,
+            min_range,
             sensor_pose,
         )
         return t, scan, poses
@@ -797,20 +895,21 @@ class CarmenReader:
     def _on_robotlaser(self, tok: list[bytes]) -> ScanEvent:
         t, scan, poses = self._new_style(tok, robot=True)
         assert poses is not None
-        truth = _pose(poses[3:6]) if self._truth_mode == "embedded" else None
-        return ScanEvent(t, scan, _pose(poses[3:6]), truth)
+        odom = _pose(poses[3:6], "robot pose")
+        return ScanEvent(t, scan, odom, odom if self._truth_mode == "embedded" else None)
 
     def _on_odom(self, tok: list[bytes]) -> OdomEvent:
         _need(tok, 7, "x y theta tv rv accel")
+        t = self._time(tok, 7, "x y theta tv rv accel")
         v = _floats(tok[1:7], "odometry")
-        t = _trailer_time(tok, 7)
-        return OdomEvent(t, Odometry(t, _pose(v), v[3], v[4]))
+        tv, rv = check_speed(v[3], "velocity"), check_speed(v[4], "turn rate")
+        return OdomEvent(t, Odometry(t, _pose(v, "odometry"), tv, rv))
 
     def _on_truepos(self, tok: list[bytes]) -> TruthEvent:
         _need(tok, 7, "true pose and odometry")
+        t = self._time(tok, 7, "true pose and odometry")
         v = _floats(tok[1:7], "pose")
-        t = _trailer_time(tok, 7)
-        return TruthEvent(t, _pose(v))
+        return TruthEvent(t, _pose(v, "true pose"))
 
 
 # ---------------------------------------------------------------------------------------------------------

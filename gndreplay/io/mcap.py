@@ -7,7 +7,6 @@ not decode every message of a large recording, and raw stamp access (header stam
 
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -54,9 +53,13 @@ def mcap_files(path: Path) -> list[Path]:
 
 
 def _errors() -> tuple[type[BaseException], ...]:
+    """What the mcap library raises on corrupt bytes (the one place that lists them): its own errors, and
+    what a damaged record length or compressed block makes the parsing and decompression below it raise."""
     from mcap.exceptions import McapError
 
-    return (McapError, struct.error, EOFError, OSError, ValueError, KeyError, IndexError, UnicodeError)
+    from .rosbag import rosbags_errors
+
+    return (McapError, *rosbags_errors())
 
 
 def read_mcap_summary(path: Path) -> McapSummary:

@@ -13,6 +13,10 @@
   ``/cmd_vel``) if present; otherwise, or for a topic that is not in the bag, a LogFormatError lists the
   candidates.
 
+- Values: stamps, poses, twists, bearings and range_max outside the bounds of :mod:`.base` make a message
+  malformed (skipped and counted; an error with ``strict``); a ROS2 bag's ``metadata.yaml`` is type-checked
+  before rosbags (which trusts it) opens the bag.
+
 rosbags' storage readers (the ones AnyReader wraps) give the raw messages; the few fields used are decoded
 directly by :mod:`.rosraw` (about 4x faster than rosbags' generic deserialiser, no per-bag code generation,
 and no need for message definitions in the bag). Big-endian CDR, which no decoder here reads, goes through
@@ -40,7 +44,17 @@ from numpy.typing import NDArray
 from ..errors import LogFormatError
 from ..types import NS_PER_S, Command, Odometry, Pose2D, Scan, Tick
 from . import rosraw
-from .base import LogDescription, ReadReport, StreamInfo, StreamRole
+from .base import (
+    MAX_RANGE_LIMIT_M,
+    LogDescription,
+    ReadReport,
+    StreamInfo,
+    StreamRole,
+    check_bearings,
+    check_pose,
+    check_speed,
+    check_time,
+)
 from .sync import (
     DEFAULT_SYNC,
     CmdEvent,
@@ -98,7 +112,8 @@ def clean_ros_ranges(ranges: NDArray[Any], range_min: float, range_max: float) -
 
     ``range_min`` must be >= 0 (so negative ranges are below it).
     """
-    r = np.array(ranges, dtype=np.float64)
+    with np.errstate(invalid="ignore"):  # a float32 signalling NaN (corrupt bytes) is "invalid" to widen
+        r = np.array(ranges, dtype=np.float64)
     valid = r >= range_min  # False for nan
     np.putmask(r, r >= range_max, np.inf)
     np.putmask(r, ~valid, np.nan)
@@ -160,14 +175,28 @@ _ROSBAGS_ERRORS: tuple[type[BaseException], ...] | None = None
 
 
 def rosbags_errors() -> tuple[type[BaseException], ...]:
-    """Exception types the reader library (and the raw decoders) raise on bad input (imported lazily)."""
+    """Exception types the reader library (and the raw decoders) raise on bad input (imported lazily).
+
+    rosbags parses bag, sqlite (apsw) and MCAP records and decompresses bz2 / lz4 / zstd chunks without
+    converting what those raise on corrupt bytes: a record length read from a damaged file makes it allocate
+    petabytes (MemoryError, OverflowError), lz4 raises RuntimeError, zstd its ZstdError, apsw CorruptError.
+    This tuple is the one place that lists them; the callers below turn them into LogFormatError.
+    """
     global _ROSBAGS_ERRORS
     if _ROSBAGS_ERRORS is None:
+        import sqlite3
+
+        import apsw
         from rosbags.highlevel import AnyReaderError
         from rosbags.rosbag1 import ReaderError as ReaderError1
         from rosbags.rosbag2 import ReaderError as ReaderError2
         from rosbags.serde import SerdeError
         from rosbags.typesys import TypesysError
+
+        try:
+            from compression.zstd import ZstdError  # type: ignore[import-not-found,unused-ignore]
+        except ImportError:
+            from backports.zstd import ZstdError
 
         _ROSBAGS_ERRORS = (
             AnyReaderError,
@@ -175,16 +204,92 @@ def rosbags_errors() -> tuple[type[BaseException], ...]:
             ReaderError2,
             SerdeError,
             TypesysError,
+            ZstdError,
+            apsw.Error,
+            sqlite3.Error,
             struct.error,
             EOFError,
             OSError,
             ValueError,
             KeyError,
             IndexError,
+            TypeError,
             AssertionError,
             UnicodeError,
+            MemoryError,
+            OverflowError,
+            RuntimeError,
         )
     return _ROSBAGS_ERRORS
+
+
+_METADATA_TYPES: dict[str, tuple[type, ...]] = {
+    "version": (int,),
+    "storage_identifier": (str,),
+    "relative_file_paths": (list,),
+    "duration": (dict,),
+    "starting_time": (dict,),
+    "message_count": (int,),
+    "topics_with_message_count": (list,),
+    "compression_format": (str, type(None)),
+    "compression_mode": (str, type(None)),
+    "files": (list, type(None)),
+}
+_TOPIC_TYPES: dict[str, tuple[type, ...]] = {"name": (str,), "type": (str,), "serialization_format": (str,)}
+
+
+def check_metadata(folder: Path) -> None:
+    """Check the types and ranges of the ``metadata.yaml`` values rosbags relies on (it trusts them).
+
+    Raises:
+        LogFormatError: unreadable YAML, or a key of the wrong type / out of range (the message names it).
+    """
+    from ruamel.yaml import YAML
+    from ruamel.yaml.error import YAMLError
+
+    path = folder / "metadata.yaml"
+    try:
+        doc = YAML(typ="safe").load(path.read_bytes())
+    except (YAMLError, OSError, ValueError, TypeError, RecursionError) as err:
+        raise LogFormatError(f"{path}: not readable YAML: {_describe_error(err)}") from err
+
+    def bad(key: str, why: str) -> LogFormatError:
+        return LogFormatError(f"{path}: key {key}: {why}")
+
+    def kind(v: object) -> str:
+        return "a list" if isinstance(v, list) else ("a mapping" if isinstance(v, dict) else repr(v)[:40])
+
+    info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
+    if not isinstance(info, dict):
+        raise bad("rosbag2_bagfile_information", "missing or not a mapping")
+    for key, types in _METADATA_TYPES.items():
+        if key in info and (not isinstance(info[key], types) or isinstance(info[key], bool)):
+            raise bad(key, f"expected {' or '.join(t.__name__ for t in types)}, got {kind(info[key])}")
+    ints = {
+        "message_count": info.get("message_count", 0),
+        "duration.nanoseconds": (info.get("duration") or {}).get("nanoseconds", 0),
+        "starting_time.nanoseconds_since_epoch": (info.get("starting_time") or {}).get(
+            "nanoseconds_since_epoch", 0
+        ),
+    }
+    for i, t in enumerate(info.get("topics_with_message_count") or []):
+        meta = t.get("topic_metadata") if isinstance(t, dict) else None
+        if not isinstance(meta, dict):
+            raise bad(f"topics_with_message_count[{i}]", "expected a mapping with topic_metadata")
+        where = f"topics_with_message_count[{i}].topic_metadata"
+        for key, types in _TOPIC_TYPES.items():
+            if key in meta and not isinstance(meta[key], types):
+                raise bad(f"{where}.{key}", f"got {kind(meta[key])}")
+        qos = meta.get("offered_qos_profiles", [])
+        if not isinstance(qos, (str, list)):
+            raise bad(f"{where}.offered_qos_profiles", f"got {kind(qos)}")
+        ints[f"topics_with_message_count[{i}].message_count"] = t.get("message_count", 0)
+    for i, f in enumerate(info.get("relative_file_paths") or []):
+        if not isinstance(f, str):
+            raise bad(f"relative_file_paths[{i}]", f"expected a file name, got {kind(f)}")
+    for key, v in ints.items():
+        if not isinstance(v, int) or isinstance(v, bool) or not 0 <= v < 2**63:
+            raise bad(key, f"expected a count or time in ns, got {kind(v)}")
 
 
 class RosbagReader:
@@ -234,6 +339,8 @@ class RosbagReader:
             else:
                 from rosbags.rosbag2 import Reader as Reader2
 
+                if self.path.is_dir():
+                    check_metadata(self.path)
                 self._reader = Reader2(self.path)
             self._reader.open()
         except rosbags_errors() as err:
@@ -339,7 +446,8 @@ class RosbagReader:
                     for tr in self._tf(raw):
                         parent, child = _frame(tr.parent), _frame(tr.child)
                         if parent.split("/")[-1] != "odom" and child not in edges:
-                            edges[child] = (parent, Pose2D(tr.x, tr.y, rosraw.yaw_of(tr.q)))
+                            pose = check_pose(tr.x, tr.y, rosraw.yaw_of(tr.q), "transform")
+                            edges[child] = (parent, pose)
         base = base or "base_link"
         if laser == base or not laser:
             return identity, "identity (the scan frame is the base frame)"
@@ -349,7 +457,8 @@ class RosbagReader:
             parent, p = edges[frame]
             pose = _compose(p, pose)
             if parent == base:
-                return pose, f"tf {base} -> {laser}"
+                with _translate(self.path, f"the transform {base} -> {laser}"):
+                    return check_pose(pose.x, pose.y, pose.theta, "laser mounting"), f"tf {base} -> {laser}"
             frame = parent
         return identity, f"identity (no transform {base} -> {laser} in the bag)"
 
@@ -471,6 +580,10 @@ class RosbagReader:
             for t in sorted(self.topics.values(), key=lambda t: t.name)
         )
         start, end = self._reader.start_time, self._reader.end_time
+        try:
+            start, end = check_time(start), check_time(max(start, end - 1))
+        except (ValueError, TypeError):  # an empty or damaged index: the span is unknown
+            start = end = None
         return LogDescription(
             path=self.path,
             format=self.format_name,
@@ -480,7 +593,7 @@ class RosbagReader:
             cmd_stream=self.cmd_topic,
             truth_stream=self.truth_topic,
             start_ns=start,
-            end_ns=max(start, end - 1),
+            end_ns=end,
             notes=(f"laser mounting: {self._pose_note}",),
         )
 
@@ -503,34 +616,45 @@ class RosbagReader:
                 yield t, raw
 
     def header_stamp(self, raw: bytes | memoryview) -> int:
-        """``header.stamp`` [ns] of a raw message that starts with a std_msgs/Header (no decoding)."""
+        """``header.stamp`` [ns] of a raw message that starts with a std_msgs/Header (no decoding).
+
+        Raises:
+            ValueError, struct.error: bytes too short.
+        """
         return rosraw.header_stamp(raw, not self._ros1)
 
     def decode_scan(self, raw: bytes | memoryview, t_log: int) -> Scan:
         """A raw LaserScan -> Scan (see ``clean_ros_ranges``; a zero stamp becomes ``t_log``).
 
+        A non-finite or non-positive ``range_max`` means the default 80 m, a bad ``range_min`` 0.
+
         Raises:
-            ValueError, struct.error: bytes that are not a LaserScan.
+            ValueError, struct.error: bytes that are not a LaserScan, or values out of range (stamp,
+                bearings, a range_max above ``MAX_RANGE_LIMIT_M``).
         """
         f = self._scan_fields(raw)
+        t = check_time(f.stamp_ns or t_log)
         rmax = float(f.range_max)
         if not (math.isfinite(rmax) and rmax > 0.0):
             rmax = _DEFAULT_MAX_RANGE_M
+        elif rmax > MAX_RANGE_LIMIT_M:
+            raise ValueError(f"range_max {rmax:.6g} m out of range")
         rmin = float(f.range_min)
-        if not (math.isfinite(rmin) and rmin >= 0.0):
+        if not (math.isfinite(rmin) and 0.0 <= rmin < rmax):
             rmin = 0.0
         n = len(f.ranges)
+        if n == 0:
+            raise ValueError("LaserScan without ranges")
         key = (n, float(f.angle_min), float(f.angle_increment))
         angles = self._angles.get(key)
         if angles is None:
+            check_bearings(key[1], key[2], n)
             angles = key[1] + key[2] * np.arange(n, dtype=np.float64)
             angles.flags.writeable = False
             if len(self._angles) > 64:
                 self._angles.clear()
             self._angles[key] = angles
-        return Scan(
-            f.stamp_ns or t_log, clean_ros_ranges(f.ranges, rmin, rmax), angles, rmax, rmin, self._sensor_pose
-        )
+        return Scan(t, clean_ros_ranges(f.ranges, rmin, rmax), angles, rmax, rmin, self._sensor_pose)
 
     # -- streaming --------------------------------------------------------------------------------------
     def ticks(self) -> Iterator[Tick]:
@@ -597,31 +721,36 @@ class RosbagReader:
             self._zero_stamps += 1
         return ScanEvent(scan.t_ns, scan)
 
+    # the handlers raise ValueError on values out of range (see base.check_*): a malformed message
     def _on_odom(self, raw: bytes, t_log: int) -> Event:
         f = self._odom_fields(raw)
-        t = f.stamp_ns or t_log
-        return OdomEvent(t, Odometry(t, Pose2D(f.x, f.y, rosraw.yaw_of(f.q)), f.vx, f.wz))
+        t = check_time(f.stamp_ns or t_log)
+        pose = check_pose(f.x, f.y, rosraw.yaw_of(f.q), "odometry pose")
+        v = check_speed(f.vx, "odometry velocity", allow_nan=True)
+        w = check_speed(f.wz, "odometry turn rate", allow_nan=True)
+        return OdomEvent(t, Odometry(t, pose, v, w))
 
     def _on_tf(self, raw: bytes, t_log: int) -> list[Event]:
         out: list[Event] = []
         for tr in self._tf(raw):
             if _frame(tr.child) == self._tf_child and _is_odom_edge(tr.parent, tr.child):
-                t = tr.stamp_ns or t_log
-                out.append(OdomEvent(t, Odometry(t, Pose2D(tr.x, tr.y, rosraw.yaw_of(tr.q)))))
+                t = check_time(tr.stamp_ns or t_log)
+                out.append(OdomEvent(t, Odometry(t, check_pose(tr.x, tr.y, rosraw.yaw_of(tr.q), "odom tf"))))
         return out
 
     def _on_cmd(self, raw: bytes, t_log: int) -> Event:
         assert self.cmd_topic is not None
         stamped = self.topics[self.cmd_topic].msgtype == TWIST_STAMPED
         f = self._twist(raw, stamped)
-        t = f.stamp_ns or t_log
-        return CmdEvent(t, Command(t, f.vx, f.wz, f.vy))
+        t = check_time(f.stamp_ns or t_log)
+        v, w, vy = (check_speed(x, "command") for x in (f.vx, f.wz, f.vy))
+        return CmdEvent(t, Command(t, v, w, vy))
 
     def _on_truth(self, raw: bytes, t_log: int) -> Event:
         assert self.truth_topic is not None
         f = self._pose(raw, self.topics[self.truth_topic].msgtype)
-        t = f.stamp_ns or t_log
-        return TruthEvent(t, Pose2D(f.x, f.y, rosraw.yaw_of(f.q)))
+        t = check_time(f.stamp_ns or t_log)
+        return TruthEvent(t, check_pose(f.x, f.y, rosraw.yaw_of(f.q), "ground-truth pose"))
 
 
 def _stamp(header: Any) -> int:
@@ -637,6 +766,8 @@ def _describe_error(err: BaseException) -> str:
     name = type(err).__name__
     if isinstance(err, AssertionError):
         return "inconsistent index records (the library's consistency check failed)"
+    if isinstance(err, (MemoryError, OverflowError)):
+        return f"{name}: a record length or count beyond what the file can hold"
     return f"{name}: {text}" if text else name
 
 

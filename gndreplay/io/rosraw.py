@@ -124,7 +124,7 @@ def yaw_of(q: tuple[float, float, float, float]) -> float:
     """Yaw [rad] of a quaternion (x, y, z, w), in (-pi, pi]."""
     qx, qy, qz, qw = q
     yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-    return yaw if yaw > -math.pi else math.pi
+    return math.pi if yaw <= -math.pi else yaw  # NaN (a NaN quaternion) stays NaN
 
 
 class _Reader:

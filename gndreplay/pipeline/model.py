@@ -2,9 +2,10 @@
 
 The grid is square, world-aligned (never rotated) and follows the robot's position in whole cells. Each scan
 is traced with Bresenham from the laser pose: the cells on the way become FREE, the hit cell OCCUPIED, so
-every new scan overwrites what it covers and people who walked away disappear (GND Fig. 2). When the robot
-leaves the central control zone the whole array is shifted by an integer number of cells in one slice copy
-(new cells UNKNOWN), so no cell is ever resampled.
+every new scan overwrites what it covers and people who walked away disappear (GND Fig. 2) - except where
+a ray only grazes an occupied cell or is a dropout between returns (``RobotCentredGrid.integrate``). When
+the robot leaves the central control zone the whole array is shifted by an integer number of cells in one
+slice copy (new cells UNKNOWN), so no cell is ever resampled.
 
 Frames and indices: ``cells[row, col]`` with row along world y and col along world x. The grid sits on a
 world lattice of pitch ``cell_m``: local cell (row, col) is world lattice cell
@@ -26,10 +27,13 @@ from ..errors import ConfigError
 from ..types import Pose2D, Scan
 
 __all__ = [
+    "CLEAR_CORE_CELLS",
+    "DROPOUT_MAX_BEAMS",
     "FREE",
     "GRID_200",
     "GRID_400",
     "OCCUPIED",
+    "PROTECT_MAX_CELLS",
     "UNKNOWN",
     "GridParams",
     "IntegrateStats",
@@ -145,10 +149,30 @@ def _clip_segment(
     return True, x0 + t0 * dx, y0 + t0 * dy, x0 + t1 * dx, y0 + t1 * dy, t1 >= 1.0
 
 
+DROPOUT_MAX_BEAMS = 2
+"""A run of at most this many consecutive beams without a return, with a hit on both sides, is a dropout
+(**choice**: dark or specular spots and single-beam glitches are one or two beams wide; a real opening the
+robot could use is tens of beams wide at the ranges that matter: 0.85 m at 8 m is 12 beams of 0.5 deg)."""
+
+CLEAR_CORE_CELLS = 0.25
+"""A ray clears an OCCUPIED cell only if it passes within this distance [cells] of the cell's centre."""
+
+PROTECT_MAX_CELLS = 20.0
+"""Longest protected tail of a ray [cells] (the grazing limit: incidence angles below asin(sqrt(2) / 20),
+about 4 deg, are treated as 4 deg)."""
+
+
 @njit(cache=True)
-def _trace_free(cells: NDArray[np.uint8], c0: int, r0: int, c1: int, r1: int, include_end: bool) -> None:
+def _trace_free(
+    cells: NDArray[np.uint8], c0: int, r0: int, c1: int, r1: int, include_end: bool,
+    sx: float, sy: float, ux: float, uy: float, length: float, protect: float,
+) -> None:
     """Bresenham (8-connected, all octants) from cell (r0, c0) to (r1, c1): mark FREE, the end cell only
-    when ``include_end``. Both ends must be inside the grid."""
+    when ``include_end``. Both ends must be inside the grid.
+
+    A cell already OCCUPIED is cleared only when the ray (from (sx, sy), unit direction (ux, uy), ``length``
+    long, all in cells) passes within CLEAR_CORE_CELLS of its centre and the cell is not in the ray's last
+    ``protect`` cells (see ``_protected_tail``)."""
     dc = abs(c1 - c0)
     dr = -abs(r1 - r0)
     sc = 1 if c0 < c1 else -1
@@ -156,11 +180,17 @@ def _trace_free(cells: NDArray[np.uint8], c0: int, r0: int, c1: int, r1: int, in
     err = dc + dr
     c, r = c0, r0
     while True:
-        if c == c1 and r == r1:
-            if include_end:
+        last = c == c1 and r == r1
+        if not last or include_end:
+            if cells[r, c] != 2:
                 cells[r, c] = 1
+            else:
+                qx, qy = c + 0.5 - sx, r + 0.5 - sy
+                along = qx * ux + qy * uy
+                if abs(qx * uy - qy * ux) <= CLEAR_CORE_CELLS and length - along >= protect:
+                    cells[r, c] = 1
+        if last:
             return
-        cells[r, c] = 1
         e2 = 2 * err
         if e2 >= dr:
             err += dr
@@ -168,6 +198,39 @@ def _trace_free(cells: NDArray[np.uint8], c0: int, r0: int, c1: int, r1: int, in
         if e2 <= dc:
             err += dc
             r += sr
+
+
+@njit(cache=True)
+def _protected_tail(
+    px: NDArray[np.float64], py: NDArray[np.float64], ok: NDArray[np.bool_], angles: NDArray[np.float64],
+    i: int, a: int, b: int, sx: float, sy: float, ux: float, uy: float, length: float,
+) -> float:
+    """Length [cells] at the end of ray ``i`` (``length`` cells long, direction (ux, uy)) in which it must
+    not clear OCCUPIED cells: sqrt(2) / sin(incidence), capped at PROTECT_MAX_CELLS.
+
+    Why: a ray that ends on a surface at incidence angle alpha runs within sqrt(2) cells of it (the farthest
+    a cell holding a point of the surface reaches from it) over its last sqrt(2) / sin(alpha) cells; the
+    cells it crosses there hold that same surface, seen by earlier scans head-on, and the grazing ray only
+    skims them. The surface's direction comes from the hit points of beams ``a`` and ``b`` (the neighbours,
+    -1 for none), each used only if it is close enough to lie on the same surface (no farther than a
+    surface at the grazing limit would put it); without one the surface is taken as seen head-on."""
+    min_sin = math.sqrt(2.0) / PROTECT_MAX_CELLS
+    ex, ey = sx + length * ux, sy + length * uy
+    tx, ty, n_ok = 0.0, 0.0, 0
+    for j, sign in ((a, -1.0), (b, 1.0)):
+        if j < 0 or not ok[j]:
+            continue
+        dx, dy = px[j] - ex, py[j] - ey
+        if math.hypot(dx, dy) > length * abs(angles[j] - angles[i]) / min_sin + 1.0:
+            continue
+        tx += sign * dx
+        ty += sign * dy
+        n_ok += 1
+    norm = math.hypot(tx, ty)
+    if n_ok == 0 or norm == 0.0:
+        return math.sqrt(2.0)
+    sin_a = abs(ux * ty - uy * tx) / norm
+    return math.sqrt(2.0) / max(sin_a, min_sin)
 
 
 @njit(cache=True)
@@ -186,32 +249,64 @@ def _integrate_kernel(
 ) -> tuple[int, int]:
     """Trace every beam from the laser at (sx, sy) [cell units, local grid] with heading sth [rad].
 
-    Pass 1 clears free space along all rays; pass 2 marks the hits, so no ray of the same scan can erase
-    another ray's hit. Returns (beams_traced, hits)."""
+    Pass 1 finds the hits and their points; pass 2 clears free space along all rays (with the dropout and
+    grazing rules of ``RobotCentredGrid.integrate``); pass 3 marks the hits, so no ray of the same scan can
+    erase another ray's hit. Returns (beams_traced, hits)."""
     n = cells.shape[0]
     hi = n * (1.0 - 1e-12)  # floor(hi) == n - 1
     m = ranges.shape[0]
     end_r = np.empty(m, np.int64)
     end_c = np.empty(m, np.int64)
     is_hit = np.zeros(m, np.bool_)
+    ok = np.zeros(m, np.bool_)  # beam returned a hit (inside the grid or not)
+    px = np.empty(m, np.float64)
+    py = np.empty(m, np.float64)
+    for i in range(m):
+        r = ranges[i]
+        if not (math.isnan(r) or r < min_range or r >= max_range or math.isinf(r)):
+            ok[i] = True
+            a = sth + angles[i]
+            px[i] = sx + r * inv_cell * math.cos(a)
+            py[i] = sy + r * inv_cell * math.sin(a)
+    prev_hit = np.empty(m, np.int64)  # nearest hit at or before each beam, -1 for none
+    next_hit = np.empty(m, np.int64)  # nearest hit at or after each beam, -1 for none
+    last = -1
+    for i in range(m):
+        if ok[i]:
+            last = i
+        prev_hit[i] = last
+    last = -1
+    for i in range(m - 1, -1, -1):
+        if ok[i]:
+            last = i
+        next_hit[i] = last
     traced = 0
     for i in range(m):
         r = ranges[i]
-        hit = False
+        hit = ok[i]
+        on_surface = hit  # the ray ends on a surface: a hit, or a dropout clipped at its neighbours
+        a_nb, b_nb = i - 1, (i + 1 if i + 1 < m else -1)
         if math.isnan(r) or r < min_range:
             if not invalid_clears:
                 continue
             length = clear_range
-        elif r >= max_range or math.isinf(r):  # +inf or a finite no-return marker
-            length = clear_range
-        else:
+        elif hit:
             length = r
-            hit = True
+        else:  # +inf or a finite no-return marker
+            length = clear_range
+            a_nb, b_nb = prev_hit[i], next_hit[i]
+            if a_nb >= 0 and b_nb >= 0 and b_nb - a_nb - 1 <= DROPOUT_MAX_BEAMS:
+                # a dropout: the surface the neighbours see continues behind it; clear only up to the
+                # nearer of them and leave the end cell, which may hold that surface
+                length = min(length, ranges[a_nb], ranges[b_nb])
+                on_surface = True
         if length <= 0.0:
             continue
         a = sth + angles[i]
-        ex = sx + length * inv_cell * math.cos(a)
-        ey = sy + length * inv_cell * math.sin(a)
+        ux, uy = math.cos(a), math.sin(a)
+        len_c = length * inv_cell
+        ex = sx + len_c * ux
+        ey = sy + len_c * uy
         visible, x0, y0, x1, y1, end_inside = _clip_segment(sx, sy, ex, ey, hi)
         if not visible:
             continue
@@ -219,8 +314,11 @@ def _integrate_kernel(
         r0 = min(max(math.floor(y0), 0), n - 1)
         c1 = min(max(math.floor(x1), 0), n - 1)
         r1 = min(max(math.floor(y1), 0), n - 1)
+        protect = 0.0
+        if on_surface:
+            protect = _protected_tail(px, py, ok, angles, i, a_nb, b_nb, sx, sy, ux, uy, len_c)
         hit = hit and end_inside
-        _trace_free(cells, c0, r0, c1, r1, not hit)
+        _trace_free(cells, c0, r0, c1, r1, not (on_surface and end_inside), sx, sy, ux, uy, len_c, protect)
         traced += 1
         end_r[i], end_c[i], is_hit[i] = r1, c1, hit
     hits = 0
@@ -327,7 +425,23 @@ class RobotCentredGrid:
         Hits (finite ranges in [min_range_m, max_range_m)) clear the ray and mark the hit cell OCCUPIED;
         no-return beams (+inf or >= max_range_m) clear up to min(max_range_m, free_clip_m) and add no
         obstacle; invalid beams (nan or < min_range_m) are skipped unless ``params.invalid_clears``.
-        Rays are clipped at the grid border; a hit outside the grid adds no obstacle."""
+        Rays are clipped at the grid border; a hit outside the grid adds no obstacle.
+
+        Two rules keep a wall from being erased by rays that say nothing about it:
+
+        - Dropouts: a no-return beam in a run of at most DROPOUT_MAX_BEAMS beams without a return, with hits
+          on both sides, clears only up to the nearer of those two hits, end cell excluded. For a surface
+          continuous between the two hit points the missing return lies no nearer than about the nearer
+          of them (the chord between two points at a beam step of a fraction of a degree), so this clears
+          only what the dropout certainly saw; without the rule a black or shiny spot on a wall clears a
+          free ray through the wall for free_clip_m metres. Longer runs are openings and clear as before.
+        - Grazing: an OCCUPIED cell holds a hit somewhere inside it. A ray clears it only if it passes
+          within CLEAR_CORE_CELLS of its centre (a ray through the cell's rim leaves most of it unobserved)
+          and not within the tail of a ray that ends on a surface, sqrt(2) / sin(incidence) cells long
+          (see ``_protected_tail``), where the ray runs within a cell of that very surface. A wall seen
+          head-on thus survives later rays along it; an obstacle that left is still cleared by the rays
+          through it (the first rule needs a ray within a quarter cell of the cell centre: with 0.5 deg
+          beams and 5 cm cells, about one per scan at 3 m, one every other scan at 6 m)."""
         shift = self.recentre(robot_pose)
         p = self.params
         sp = scan.sensor_pose
@@ -361,6 +475,12 @@ class RobotCentredGrid:
 
         The reactor's memory: obstacles seen by earlier scans stay available while the grid keeps them.
         Order is row-major over the grid (deterministic)."""
+        return self.cell_points(robot_pose, radius_m, OCCUPIED)
+
+    def cell_points(self, robot_pose: Pose2D, radius_m: float, state: np.uint8) -> NDArray[np.float64]:
+        """(K, 2) centres of the cells in ``state`` (UNKNOWN / FREE / OCCUPIED) whose centre is within
+        ``radius_m`` of the robot, in the ROBOT frame [m], row-major order. Cells beyond the grid's edge
+        are not returned (they are unknown, but the grid does not hold them)."""
         p = self.params
         n, c = p.size_cells, p.cell_m
         row, col = self.robot_cell(robot_pose)
@@ -369,7 +489,7 @@ class RobotCentredGrid:
         c0, c1 = max(col - h, 0), min(col + h + 1, n)
         if r0 >= r1 or c0 >= c1:
             return np.zeros((0, 2))
-        rows, cols = np.nonzero(self.cells[r0:r1, c0:c1] == OCCUPIED)
+        rows, cols = np.nonzero(self.cells[r0:r1, c0:c1] == state)
         dx = (cols + (c0 + self._off_col) + 0.5) * c - robot_pose.x
         dy = (rows + (r0 + self._off_row) + 0.5) * c - robot_pose.y
         keep = dx * dx + dy * dy <= radius_m * radius_m

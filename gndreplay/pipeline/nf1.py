@@ -43,7 +43,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 from numba import njit
@@ -51,15 +51,20 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..geometry import wrap_angle
 from ..types import Flag
+from .cspace import free_cspace
 
 __all__ = [
     "Nf1Params",
+    "Nf1Planner",
     "PlanResult",
+    "Planner",
     "descend",
+    "nearest_true",
     "nf1_wavefront",
     "path_direction",
     "plan",
     "project_goal",
+    "resolve_goal",
     "tighten",
 ]
 
@@ -109,17 +114,20 @@ class Nf1Params:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class PlanResult:
-    """Outcome of one planning call. A failure is a value: ``ok`` False, ``flag`` says why.
+    """Outcome of one planning call, NF1's or the tunnel planner's (``Planner``). A failure is a value:
+    ``ok`` False, ``flag`` says why.
 
     Attributes:
         ok: a path from the robot cell to the goal cell exists.
-        flag: Flag.NONE, Flag.GOAL_IN_OBSTACLE or Flag.PLANNER_NO_PATH.
+        flag: Flag.NONE, Flag.GOAL_IN_OBSTACLE or Flag.PLANNER_NO_PATH (the tunnel planner also
+            Flag.PLANNER_TIMEOUT when its expansion budget ran out).
         goal_cell: (row, col) of the goal cell planned to: the cell containing the goal, or for a goal
             outside the grid its projection onto the border (moved to a free border cell nearby, see
             ``Nf1Params.border_search_m``).
         goal_projected: the goal lay outside the grid and was projected onto its border.
         path_cells: (K, 2) int32 (row, col), raw path from the robot cell to the goal cell, consecutive
-            cells 8-adjacent; empty when not ok.
+            cells 8-adjacent (tunnel planner: the chain of graph nodes, robot first, goal last); empty when
+            not ok.
         n_escape: how many leading cells of ``path_cells`` may be outside free C-space: 0 when the robot
             cell is free, 1 when it is C-obstacle but the wave reached it from a free neighbour, more when
             the path escapes on a straight segment (see the module notes).
@@ -131,7 +139,12 @@ class PlanResult:
             the point ``lookahead_m`` along the tightened path, or to the goal if the path is shorter);
             nan when not ok.
         length_m: length of the tightened path [m]; nan when not ok.
-        cost_m: NF1 value of the robot cell (the raw path length the wave measured) [m]; nan when not ok.
+        cost_m: NF1 value of the robot cell (the raw path length the wave measured; tunnel planner: the
+            length of the node chain) [m]; nan when not ok.
+        nodes_expanded: search effort: cells the NF1 wave labelled, or nodes the tunnel planner expanded
+            (also on failure).
+        width_m: width of the free tunnel around ``waypoints_cells`` (tunnel planner: robot width plus
+            margins); nan for NF1, whose C-space is a disc model and reports no width.
     """
 
     ok: bool
@@ -144,6 +157,21 @@ class PlanResult:
     direction_rad: float
     length_m: float
     cost_m: float
+    nodes_expanded: int = 0
+    width_m: float = math.nan
+
+
+class Planner(Protocol):
+    """What the stack needs from a planner: built once with its settings and the grid geometry, then
+    asked every tick. Both NF1 (``Nf1Planner``) and the tunnel planner (``tunnel.TunnelPlanner``)
+    implement it; ``stack.make_planner`` picks one by name."""
+
+    def plan(
+        self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike
+    ) -> PlanResult:
+        """Plan on the robot-centred grid (UNKNOWN / FREE / OCCUPIED cells) from the robot cell to the goal
+        (corner coordinates, see ``plan``)."""
+        ...
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -692,6 +720,30 @@ def _free_border_cell(
     return _nearest(goal, radius_cells, free.shape, valid)
 
 
+def nearest_true(
+    mask: NDArray[np.bool_], centre: tuple[int, int], radius_cells: float
+) -> tuple[int, int] | None:
+    """Nearest True cell of ``mask`` (Euclidean, ties row-major) within ``radius_cells`` of ``centre``."""
+    return _nearest(centre, radius_cells, mask.shape, lambda rs, cs, _rr, _cc: mask[rs, cs])
+
+
+def resolve_goal(
+    free: NDArray[np.bool_],
+    start: tuple[int, int],
+    goal_rc_float: NDArray[np.float64],
+    border_search_cells: float,
+) -> tuple[tuple[int, int], bool]:
+    """The goal cell a planner plans to, and whether the goal lay outside the grid: ``project_goal``, then
+    for a projected goal on a C-obstacle border cell the nearest free border cell within
+    ``border_search_cells`` (the cell may still be C-obstacle: the caller reports GOAL_IN_OBSTACLE)."""
+    g = goal_rc_float
+    goal = project_goal(start, g, free.shape)
+    projected = not (0 <= math.floor(g[0]) < free.shape[0] and 0 <= math.floor(g[1]) < free.shape[1])
+    if projected and not free[goal]:
+        goal = _free_border_cell(free, goal, border_search_cells) or goal
+    return goal, projected
+
+
 def _fail(flag: Flag, goal: tuple[int, int], projected: bool) -> PlanResult:
     return PlanResult(
         ok=False,
@@ -735,10 +787,7 @@ def plan(
     f = _as_free(free)
     start = _check_cell("start_rc", start_rc, f.shape)
     g = np.asarray(goal_rc_float, dtype=np.float64).reshape(2)
-    goal = project_goal(start, g, f.shape)
-    projected = not (0 <= math.floor(g[0]) < f.shape[0] and 0 <= math.floor(g[1]) < f.shape[1])
-    if projected and not f[goal]:
-        goal = _free_border_cell(f, goal, params.border_search_m / cell_m) or goal
+    goal, projected = resolve_goal(f, start, g, params.border_search_m / cell_m)
     if not f[goal]:
         return _fail(Flag.GOAL_IN_OBSTACLE, goal, projected)
 
@@ -778,4 +827,31 @@ def plan(
         direction_rad=direction,
         length_m=length_cells * cell_m,
         cost_m=cost_cells * cell_m,
+        nodes_expanded=int(np.count_nonzero(nf < np.inf)),
     )
+
+
+class Nf1Planner:
+    """NF1 behind the ``Planner`` protocol: C-space of the grid (a disc of the robot's inner radius plus
+    ``margin_m``, ``cspace.free_cspace``), then ``plan``.
+
+    Args:
+        params: NF1 settings.
+        cell_m: cell side [m].
+        inflate_m: C-space dilation radius [m] (robot inner radius + C-space margin).
+        unknown_is_free: plan through UNKNOWN cells.
+    """
+
+    def __init__(self, params: Nf1Params, *, cell_m: float, inflate_m: float, unknown_is_free: bool) -> None:
+        self.params = params
+        self.cell_m = cell_m
+        self.inflate_m = inflate_m
+        self.unknown_is_free = unknown_is_free
+
+    def plan(
+        self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike
+    ) -> PlanResult:
+        free = free_cspace(
+            grid_cells, cell_m=self.cell_m, inflate_m=self.inflate_m, unknown_is_free=self.unknown_is_free
+        )
+        return plan(free, start_rc, goal_rc_float, cell_m=self.cell_m, params=self.params)

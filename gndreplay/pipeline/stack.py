@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from functools import partial
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,29 +19,38 @@ from numpy.typing import NDArray
 from ..geometry import transform_points, wrap_angle
 from ..robot import RobotConfig
 from ..types import Flag, Pose2D, Scan, Tick
-from .cspace import free_cspace
-from .model import GridParams, RobotCentredGrid
+from .model import UNKNOWN, GridParams, RobotCentredGrid
 from .nd import NdParams, Situation, nd_step
-from .nf1 import Nf1Params, PlanResult, plan
+from .nf1 import Nf1Params, Nf1Planner, Planner, PlanResult
 from .supervisor import (
     Mode,
+    SafeCommand,
     SupervisorParams,
     TrapDetector,
     budget_flags,
     escape_command,
     gnd_mode,
     rotate_command,
-    swept_collision,
+    safe_command,
+    safety_reach_m,
 )
+from .tunnel import TunnelParams, TunnelPlanner, warm_up_planners
 
-__all__ = ["MODULES", "NavigationStack", "StackParams", "TickResult", "warm_up"]
+__all__ = ["MODULES", "PLANNERS", "NavigationStack", "StackParams", "TickResult", "make_planner", "warm_up"]
 
 MODULES = ("match", "model", "planner", "reactor")
+
+PLANNERS = ("nf1", "tunnel")
+"""Planner kinds ``make_planner`` builds."""
 
 
 @dataclass(frozen=True, slots=True)
 class StackParams:
-    """Everything the stack needs, one frozen section per stage (see ``gndreplay.config``)."""
+    """Everything the stack needs, one frozen section per stage (see ``gndreplay.config``).
+
+    ``planner_kind`` chooses the planner ("nf1": ``planner`` settings and the [cspace] margin; "tunnel":
+    ``tunnel`` settings, its own margin); ``planner.lookahead_m`` places the reactor's target for both.
+    """
 
     robot: RobotConfig
     grid: GridParams
@@ -48,6 +59,8 @@ class StackParams:
     supervisor: SupervisorParams
     cspace_margin_m: float = 0.05
     unknown_is_free: bool = True
+    planner_kind: Literal["nf1", "tunnel"] = "nf1"
+    tunnel: TunnelParams = TunnelParams()
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -65,6 +78,10 @@ class TickResult:
         goal: the goal in the corrected frame.
         path_xy: (K, 2) tightened planned path in the corrected frame (empty when the planner failed).
         timings_ms: per-module wall time [ms] ("match", "model", "planner", "reactor").
+        planner_nodes: the planner's search effort this tick (NF1: cells the wave labelled; tunnel: nodes
+            expanded), also when it failed.
+        planner_length_m: length of the planned path / tunnel polyline [m] (nan when the planner failed).
+        tunnel_width_m: width of the tunnel (nan for NF1 or when the planner failed).
     """
 
     t_ns: int
@@ -79,6 +96,25 @@ class TickResult:
     goal: tuple[float, float]
     path_xy: NDArray[np.float64] = field(repr=False)
     timings_ms: dict[str, float] = field(default_factory=dict)
+    planner_nodes: int = 0
+    planner_length_m: float = math.nan
+    tunnel_width_m: float = math.nan
+
+
+def make_planner(params: StackParams) -> Planner:
+    """The planner ``params.planner_kind`` names, built with its own settings and the grid geometry."""
+    p = params
+    if p.planner_kind == "tunnel":
+        return TunnelPlanner(
+            p.tunnel, cell_m=p.grid.cell_m, inner_radius_m=p.robot.inner_radius_m,
+            unknown_is_free=p.unknown_is_free,
+        )
+    if p.planner_kind == "nf1":
+        return Nf1Planner(
+            p.planner, cell_m=p.grid.cell_m, inflate_m=p.robot.inner_radius_m + p.cspace_margin_m,
+            unknown_is_free=p.unknown_is_free,
+        )
+    raise ValueError(f"unknown planner kind {p.planner_kind!r}; known: {', '.join(PLANNERS)}")
 
 
 def _ms(t0: int) -> float:
@@ -97,6 +133,7 @@ class NavigationStack:
     def __init__(self, params: StackParams) -> None:
         self.params = params
         self.grid = RobotCentredGrid(params.grid)
+        self._planner = make_planner(params)
         self._trap = TrapDetector(params.supervisor)
         self._escape_left = 0
         self._escape_v = 0.0
@@ -149,7 +186,7 @@ class NavigationStack:
             mode, v, vy, w = Mode.GOAL, 0.0, 0.0, 0.0
             flags |= Flag.GOAL_REACHED
 
-        mode, v, vy, w, flags = self._reflexive(tick, mode, v, vy, w, flags)
+        mode, v, vy, w, flags = self._reflexive(tick, pose, mode, v, vy, w, flags)
         path = planned.waypoints_cells
         path_xy = self.grid.cells_to_world(path) if path.shape[0] else np.zeros((0, 2))
         return TickResult(
@@ -165,19 +202,15 @@ class NavigationStack:
             goal=(float(goal[0]), float(goal[1])),
             path_xy=path_xy,
             timings_ms=timings,
+            planner_nodes=planned.nodes_expanded,
+            planner_length_m=planned.length_m,
+            tunnel_width_m=planned.width_m if planned.ok else math.nan,
         )
 
     def _plan(self, pose: Pose2D, goal: NDArray[np.float64]) -> PlanResult:
-        p = self.params
-        free = free_cspace(
-            self.grid.cells,
-            cell_m=p.grid.cell_m,
-            inflate_m=p.robot.inner_radius_m + p.cspace_margin_m,
-            unknown_is_free=p.unknown_is_free,
-        )
         start = self.grid.robot_cell(pose)
         goal_rc = self.grid.world_to_cell_float(goal[None, :])[0]
-        return plan(free, start, goal_rc, cell_m=p.grid.cell_m, params=p.planner)
+        return self._planner.plan(self.grid.cells, start, goal_rc)
 
     def _reactor_target(
         self, pose: Pose2D, goal: NDArray[np.float64], planned: PlanResult
@@ -190,26 +223,40 @@ class NavigationStack:
         return _to_robot(pose, goal[None, :])[0]
 
     def _reflexive(
-        self, tick: Tick, mode: Mode, v: float, vy: float, w: float, flags: Flag
+        self, tick: Tick, pose: Pose2D, mode: Mode, v: float, vy: float, w: float, flags: Flag
     ) -> tuple[Mode, float, float, float, Flag]:
-        """The reflexive loop on the raw scan: stale data, imminent collision, trap escape."""
+        """The reflexive loop: stale data, a command whose swept footprint would touch an obstacle of the
+        raw scan or the grid (replaced by ``safe_command``'s rule, recorded as the mode), trap escape."""
         p = self.params
         prev, self._prev_t_ns = self._prev_t_ns, tick.t_ns
         if prev is not None and (tick.t_ns - prev) / 1e9 > p.supervisor.stale_scan_s:
             return Mode.STALE, 0.0, 0.0, 0.0, flags | Flag.STALE_SCAN
         raw = transform_points(tick.scan.sensor_pose.as_array(), tick.scan.points())
+        cell_m = p.grid.cell_m
+        reach = safety_reach_m(p.robot, p.supervisor, cell_m)
+        near = raw[np.hypot(raw[:, 0], raw[:, 1]) <= reach]
+        grid_xy = self.grid.occupied_points(pose, reach)
+        unknown_xy = partial(self.grid.cell_points, pose, reach, UNKNOWN)
+
+        def check(v: float, vy: float, w: float) -> SafeCommand:
+            return safe_command(v, vy, w, near, grid_xy, p.robot, p.supervisor, cell_m=cell_m,
+                                unknown_xy=unknown_xy)
+
         if self._escape_left > 0:
             self._escape_left -= 1
-            if not swept_collision(raw, self._escape_v, 0.0, p.robot, p.supervisor):
+            if check(self._escape_v, 0.0, 0.0).rule is None:
                 return Mode.ESCAPE, self._escape_v, 0.0, 0.0, flags
             self._escape_left = 0
-        if mode is not Mode.GOAL and swept_collision(raw, v, w, p.robot, p.supervisor, vy_mps=vy):
-            mode, v, vy, w = Mode.EMERGENCY, 0.0, 0.0, 0.0
-            flags |= Flag.EMERGENCY_STOP
+        if mode is not Mode.GOAL:
+            safe = check(v, vy, w)
+            if safe.rule is not None:
+                mode, v, vy, w = safe.rule, safe.v_mps, safe.vy_mps, safe.w_radps
+                if safe.rule is Mode.EMERGENCY:
+                    flags |= Flag.EMERGENCY_STOP
         if self._trap.update(mode, w):
             flags |= Flag.TRAP_DETECTED
             v_esc, possible = escape_command(raw, p.robot, p.supervisor)
-            if possible:
+            if possible and check(v_esc, 0.0, 0.0).rule is None:
                 self._escape_left, self._escape_v = p.supervisor.escape_ticks - 1, v_esc
                 return Mode.ESCAPE, v_esc, 0.0, 0.0, flags
         return mode, v, vy, w, flags
@@ -234,6 +281,18 @@ def warm_up(params: StackParams) -> None:
                 pose = Pose2D(0.05 * k, 0.0, 0.0)
                 stack.step(Tick(index=k, t_ns=k, scan=scan, odom=pose), pose, goal)
                 k += 1
+    # an obstacle closer than the robot's inner radius: the robot cell is not free, so the planner escapes
+    # along a straight line of cells to the nearest reachable one (nf1's escape kernels)
+    stack = NavigationStack(params)
+    angles = np.linspace(-math.pi / 2, math.pi / 2, 181)
+    close = np.where(np.abs(angles) < 0.3, 0.6 * params.robot.inner_radius_m, 3.0)
+    scan = Scan(t_ns=k, ranges_m=close, angles_rad=angles, max_range_m=8.0)
+    for goal in ((3.0, 0.0), (-3.0, 0.5)):
+        pose = Pose2D(0.0, 0.0, 0.0)
+        stack.step(Tick(index=k, t_ns=k, scan=scan, odom=pose), pose, goal)
+        k += 1
+    if params.planner_kind == "tunnel":  # its search kernels, on cases the synthetic scans above may miss
+        warm_up_planners(params.tunnel)
 
 
 def _finite(x: float) -> float:

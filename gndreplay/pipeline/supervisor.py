@@ -4,14 +4,23 @@ GND (Minguez & Montano) chooses one of three modes per tick from what the planne
 return: mpND (planner OK: the reactor steers to the instantaneous path direction), mND (planner failed:
 the reactor steers to the goal itself) and ROTATE (no free walking area: stop and rotate until the model
 changes). The multi-loop paper adds a reflexive loop below them that overrides everything: brake on an
-imminent collision seen in the *raw* current scan, stop on stale sensor data, and escape a trap (repeated
-stopped rotations or emergencies) with a slow straight motion where the scan shows room.
+imminent collision, stop on stale sensor data, and escape a trap (repeated stopped rotations or
+emergencies) with a slow straight motion where the scan shows room.
+
+The collision check (``safe_command``) sweeps the real footprint (rectangle or circle) along the commanded
+arc over the braking horizon the robot's acceleration limits give, against the raw current scan *and* the
+grid's occupied cells (the wheelchair's laser sees only its front half: what it passes while turning was
+seen earlier, and is only in the grid). A command that would touch is replaced by the first admissible one
+of: a slower arc, the other turn direction, a short reverse through grid cells known FREE, and only then a
+stop; the tick's mode says which rule fired (SAFE_SLOW, SAFE_TURN, SAFE_REVERSE, EMERGENCY).
 """
 
 from __future__ import annotations
 
 import enum
+import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,13 +31,18 @@ from ..types import Flag
 
 __all__ = [
     "Mode",
+    "SafeCommand",
     "SupervisorParams",
     "TrapDetector",
+    "braking_time_s",
     "budget_flags",
     "escape_command",
     "footprint_contains",
+    "footprint_signed_distance",
     "gnd_mode",
     "rotate_command",
+    "safe_command",
+    "safety_reach_m",
     "swept_collision",
 ]
 
@@ -39,7 +53,10 @@ class Mode(enum.Enum):
     MPND = "mpND"  # planner OK, reactor follows the instantaneous path direction
     MND = "mND"  # planner failed, reactor goes to the goal itself
     ROTATE = "ROTATE"  # reactor found no free walking area: stop and rotate
-    EMERGENCY = "EMERGENCY"  # reflexive: imminent collision in the raw scan, brake
+    EMERGENCY = "EMERGENCY"  # reflexive: every admissible command would touch an obstacle, stop
+    SAFE_SLOW = "SAFE_SLOW"  # reflexive: the command would touch; a slower motion along the same arc
+    SAFE_TURN = "SAFE_TURN"  # reflexive: the command would touch; the other turn direction
+    SAFE_REVERSE = "SAFE_REVERSE"  # reflexive: the command would touch; a short reverse through known free
     STALE = "STALE"  # reflexive: sensor data too old, stop
     ESCAPE = "ESCAPE"  # reflexive: trap detected, slow straight escape
     GOAL = "GOAL"  # goal reached, stop
@@ -59,14 +76,17 @@ class SupervisorParams:
         rotate_w_frac: turn rate of ROTATE, as a fraction of wmax (**choice**: 0.5).
         goal_tolerance_m: distance at which the goal counts as reached.
         stale_scan_s: a scan older than this at tick time (gap to the previous scan) stops the robot.
-        brake_decel_mps2, reaction_s: braking model for the swept-area check: horizon =
-            reaction_s + v / brake_decel_mps2 (**choice**: 0.5 m/s^2 and 0.3 s, a cautious wheelchair).
+        brake_decel_mps2: unused since the swept-area check brakes with the robot's own limits
+            (``RobotConfig.accel_mps2`` / ``alpha_radps2``); kept so existing configuration files load.
+        reaction_s: time the command is held before braking starts in the swept-area check (**choice**:
+            0.3 s, more than a scan period of both presets).
         emergency_margin_m: extra margin around the footprint in the swept-area check.
         trap_window: number of recent ticks inspected for a trap.
         trap_count: stopped rotations with alternating sign, or emergencies, within the window that
             make a trap (the multi-loop paper's "repetitive stopped rotation").
         escape_ticks: how many ticks the escape motion lasts once triggered.
-        escape_v_frac: escape speed, as a fraction of vmax (**choice**: 0.3).
+        escape_v_frac: escape speed, and speed of the safety check's short reverse, as a fraction of vmax
+            (**choice**: 0.3).
         escape_clearance_m: free distance the raw scan must show ahead/behind to escape that way.
     """
 
@@ -105,37 +125,58 @@ def footprint_contains(
     points_xy: NDArray[np.float64], robot: RobotConfig, margin_m: float
 ) -> NDArray[np.bool_]:
     """(M,) mask of points (robot frame) inside the footprint grown by ``margin_m``."""
+    return footprint_signed_distance(points_xy, robot) <= margin_m
+
+
+def footprint_signed_distance(points_xy: NDArray[np.float64], robot: RobotConfig) -> NDArray[np.float64]:
+    """(..., 2) points in the robot frame -> (...) signed distance [m] to the footprint: positive outside,
+    negative inside (exact Euclidean distance to the rectangle or circle)."""
+    x, y = points_xy[..., 0], points_xy[..., 1]
     if robot.shape == "circle":
-        return np.hypot(points_xy[:, 0], points_xy[:, 1]) <= robot.radius_m + margin_m
-    x, y = points_xy[:, 0], points_xy[:, 1]
-    return (
-        (x <= robot.front_m + margin_m)
-        & (x >= -robot.rear_m - margin_m)
-        & (np.abs(y) <= robot.width_m / 2.0 + margin_m)
-    )
+        return np.hypot(x, y) - robot.radius_m
+    dx = np.maximum(x - robot.front_m, -robot.rear_m - x)
+    dy = np.abs(y) - robot.width_m / 2.0
+    outside = np.hypot(np.maximum(dx, 0.0), np.maximum(dy, 0.0))
+    return outside + np.minimum(np.maximum(dx, dy), 0.0)
 
 
-def swept_collision(
-    points_xy: NDArray[np.float64],
-    v_mps: float,
-    w_radps: float,
-    robot: RobotConfig,
-    params: SupervisorParams,
-    *,
-    vy_mps: float = 0.0,
-    n_steps: int = 12,
+def braking_time_s(v_mps: float, vy_mps: float, w_radps: float, robot: RobotConfig,
+                   params: SupervisorParams) -> float:
+    """Time [s] the command sweeps at full twist: reaction_s, plus half the braking time.
+
+    The command is held for reaction_s, then v and w ramp down together to zero (the path stays on the
+    commanded arc) at the robot's limits, in max(|v| / accel, |w| / alpha); a linear ramp covers half the
+    distance and angle the full twist would in that time."""
+    speed = math.hypot(v_mps, vy_mps)
+    brake = max(speed / robot.accel_mps2, abs(w_radps) / robot.alpha_radps2)
+    return params.reaction_s + 0.5 * brake
+
+
+def safety_reach_m(robot: RobotConfig, params: SupervisorParams, cell_m: float) -> float:
+    """Radius [m] around the rotation centre that holds every obstacle any command within the robot's
+    limits can touch over its braking horizon (the grid cells to collect for ``safe_command``)."""
+    speed = math.hypot(robot.vmax_mps, robot.vmax_mps if robot.drive == "holonomic" else 0.0)
+    t = braking_time_s(speed, 0.0, robot.wmax_radps, robot, params)
+    return robot.outer_radius_m + speed * t + params.emergency_margin_m + cell_m
+
+
+_SWEEP_STEP_M = 0.02  # largest displacement of any footprint point between two checked poses [m]
+_SWEEP_MAX_POSES = 48
+
+
+def _sweep_touches(
+    points_xy: NDArray[np.float64], margin_m: NDArray[np.float64] | float, v_mps: float, vy_mps: float,
+    w_radps: float, robot: RobotConfig, params: SupervisorParams,
 ) -> bool:
-    """True when the footprint swept along the commanded motion over the braking horizon hits a point.
-
-    ``points_xy``: (M, 2) raw scan hits in the robot frame (the reflexive loop uses raw data). The motion
-    is integrated exactly as a constant-twist arc; the horizon is reaction_s + |v| / brake_decel_mps2.
-    A pure rotation sweeps the rotating footprint (it matters for the rectangular wheelchair).
-    """
+    """True when the footprint, moved along the constant-twist arc for ``braking_time_s``, comes within
+    ``margin_m`` of a point *and closer than it is now* (a point beside a robot driving parallel to it,
+    or already under it, does not block every motion; one the motion approaches does)."""
     if points_xy.shape[0] == 0:
         return False
-    speed = float(np.hypot(v_mps, vy_mps))
-    horizon = params.reaction_s + speed / params.brake_decel_mps2
-    ts = np.linspace(0.0, horizon, n_steps)
+    t_end = braking_time_s(v_mps, vy_mps, w_radps, robot, params)
+    reach = (math.hypot(v_mps, vy_mps) + abs(w_radps) * robot.outer_radius_m) * t_end
+    n = min(max(math.ceil(reach / _SWEEP_STEP_M), 1), _SWEEP_MAX_POSES)
+    ts = np.linspace(0.0, t_end, n + 1)
     th = w_radps * ts
     # constant-twist integration (exact for an arc); the limit w -> 0 is a straight line
     if abs(w_radps) > 1e-9:
@@ -148,8 +189,93 @@ def swept_collision(
     dx = points_xy[None, :, 0] - px[:, None]
     dy = points_xy[None, :, 1] - py[:, None]
     ct, st = np.cos(th)[:, None], np.sin(th)[:, None]
-    local = np.stack([ct * dx + st * dy, -st * dx + ct * dy], axis=-1).reshape(-1, 2)
-    return bool(footprint_contains(local, robot, params.emergency_margin_m).any())
+    local = np.stack([ct * dx + st * dy, -st * dx + ct * dy], axis=-1)
+    d = footprint_signed_distance(local, robot)  # (n + 1, M); row 0 is now
+    closer = d[1:] < d[:1] - 1e-9
+    return bool(np.any((d[1:] <= margin_m) & closer))
+
+
+def swept_collision(
+    points_xy: NDArray[np.float64],
+    v_mps: float,
+    w_radps: float,
+    robot: RobotConfig,
+    params: SupervisorParams,
+    *,
+    vy_mps: float = 0.0,
+    grow_m: float = 0.0,
+) -> bool:
+    """True when the footprint swept along the commanded motion over the braking horizon touches a point.
+
+    ``points_xy``: (M, 2) obstacle points in the robot frame (raw scan hits, or occupied cell centres with
+    ``grow_m`` = half a cell: the obstacle lies anywhere in its cell). Touching means coming within
+    emergency_margin_m + grow_m of a point and closer than now; a pure rotation sweeps the rotating
+    footprint (it matters for the rectangular wheelchair)."""
+    margin = params.emergency_margin_m + grow_m
+    return _sweep_touches(points_xy, margin, v_mps, vy_mps, w_radps, robot, params)
+
+
+@dataclass(frozen=True, slots=True)
+class SafeCommand:
+    """The command after the collision check, and the rule that replaced it (None: unchanged)."""
+
+    v_mps: float
+    vy_mps: float
+    w_radps: float
+    rule: Mode | None
+
+
+def safe_command(
+    v_mps: float,
+    vy_mps: float,
+    w_radps: float,
+    scan_xy: NDArray[np.float64],
+    grid_xy: NDArray[np.float64],
+    robot: RobotConfig,
+    params: SupervisorParams,
+    *,
+    cell_m: float,
+    unknown_xy: Callable[[], NDArray[np.float64]] | None = None,
+) -> SafeCommand:
+    """The command if its swept footprint touches nothing, else the safest admissible replacement.
+
+    Obstacles: ``scan_xy`` raw hits of the current scan and ``grid_xy`` OCCUPIED cell centres (both robot
+    frame); cell centres are grown by half a cell (``swept_collision``). Replacements, first admissible
+    wins: the same arc at 1/2 then 1/4 of the speed (SAFE_SLOW: a shorter braking horizon); the other turn
+    direction, on the same arc then in place (SAFE_TURN); for a turning command, a straight reverse at
+    escape_v_frac * vmax whose sweep also avoids every cell not known FREE (``unknown_xy()``: UNKNOWN cell
+    centres, computed only if needed; without it no reverse) (SAFE_REVERSE); else stop (EMERGENCY). A still
+    command is never checked.
+
+    The reverse only serves a turn: backing off makes room for the sweep of a rectangle turning (the
+    wheelchair's problem); for a straight command it would only back off and come again, tick after tick.
+    """
+    grow = 0.5 * cell_m
+
+    def touches(v: float, vy: float, w: float) -> bool:
+        return swept_collision(scan_xy, v, w, robot, params, vy_mps=vy) or swept_collision(
+            grid_xy, v, w, robot, params, vy_mps=vy, grow_m=grow
+        )
+
+    if (v_mps == 0.0 and vy_mps == 0.0 and w_radps == 0.0) or not touches(v_mps, vy_mps, w_radps):
+        return SafeCommand(v_mps, vy_mps, w_radps, None)
+    candidates: list[tuple[float, float, float, Mode]] = [
+        (f * v_mps, f * vy_mps, f * w_radps, Mode.SAFE_SLOW) for f in (0.5, 0.25)
+    ]
+    if w_radps != 0.0:
+        candidates.append((v_mps, vy_mps, -w_radps, Mode.SAFE_TURN))
+        if v_mps != 0.0 or vy_mps != 0.0:
+            candidates.append((0.0, 0.0, -w_radps, Mode.SAFE_TURN))
+    for v, vy, w, rule in candidates:
+        if not touches(v, vy, w):
+            return SafeCommand(v, vy, w, rule)
+    if unknown_xy is not None and w_radps != 0.0:
+        v_back = -params.escape_v_frac * robot.vmax_mps
+        if not touches(v_back, 0.0, 0.0) and not swept_collision(
+            unknown_xy(), v_back, 0.0, robot, params, grow_m=grow
+        ):
+            return SafeCommand(v_back, 0.0, 0.0, Mode.SAFE_REVERSE)
+    return SafeCommand(0.0, 0.0, 0.0, Mode.EMERGENCY)
 
 
 def escape_command(

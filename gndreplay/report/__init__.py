@@ -2,13 +2,14 @@
 
 A replay feeds the sinks while it streams (``MapSink`` -> maps.npz, ``McapSink`` -> results.mcap);
 ``build_report(run_dir)`` then draws fig_model.png, fig_raw.png, fig_commands.png, fig_timing.png and
-report.md from the run's files alone (also what ``gndreplay report RUN_DIR`` does). matplotlib and rosbags
+report.md from the run's files alone (``ReportSink`` does it inside the replay's staging directory,
+``gndreplay report RUN_DIR`` afterwards). matplotlib and rosbags
 are imported only when a figure or the MCAP is made.
 """
 
 from __future__ import annotations
 
-from .build import REPORT_FILE, build_report
+from .build import REPORT_FILE, ReportSink, build_report
 from .figures import FIGURES
 from .maps import MAPS_FILE, GridSnapshot, HitRaster, MapsData, MapSink, load_maps
 from .mcap_export import MCAP_FILE, McapSink, grid_to_occupancy
@@ -24,6 +25,7 @@ __all__ = [
     "MapSink",
     "MapsData",
     "McapSink",
+    "ReportSink",
     "RunData",
     "RunDirError",
     "build_report",

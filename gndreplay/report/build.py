@@ -1,23 +1,29 @@
-"""``build_report``: (re)draw the figures and report.md of a run directory from its files alone."""
+"""``build_report``: (re)draw the figures and report.md of a run directory from its files alone;
+``ReportSink`` does it inside a replay's staging directory, so a run directory appears with its figures."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
-from ..fsutil import atomic_write_text
+from ..fsutil import add_to_marker, atomic_write_text
+from ..pipeline.model import RobotCentredGrid
+from ..pipeline.stack import TickResult
+from ..types import Pose2D, Tick
 from .figures import build_figures
 from .markdown import render_report
 from .rundir import load_run
 
-__all__ = ["REPORT_FILE", "build_report"]
+__all__ = ["REPORT_FILE", "ReportSink", "build_report"]
 
 REPORT_FILE = "report.md"
 
 
-def build_report(run_dir: Path) -> list[Path]:
+def build_report(run_dir: Path, *, name: str | None = None) -> list[Path]:
     """Read ``run_dir`` (commands.csv, timing.csv, the TUM trajectories, summary.json and maps.npz when
     present) and write fig_model.png, fig_raw.png, fig_commands.png, fig_timing.png and report.md into it,
-    overwriting. Deterministic: the same files give the same bytes.
+    overwriting. Deterministic: the same files give the same bytes. ``name`` titles report.md (default:
+    the directory's name).
 
     Returns:
         The paths written (the four figures, then report.md).
@@ -28,7 +34,38 @@ def build_report(run_dir: Path) -> list[Path]:
     run_dir = Path(run_dir)
     data = load_run(run_dir)
     written = build_figures(data, run_dir)
-    text = render_report(data, [p.name for p in written])
+    text = render_report(data, [p.name for p in written], name=name)
     report = run_dir / REPORT_FILE
     atomic_write_text(report, text)
+    add_to_marker(run_dir, [p.name for p in (*written, report)])  # a later --overwrite may replace them
     return [*written, report]
+
+
+class ReportSink:
+    """A ``RunSink`` (and ``StagedSink``) that draws the figures and report.md at ``finish``, inside the
+    staging directory, so the run directory is published complete. Give it last: it reads the files the
+    replay and the other sinks (maps.npz) wrote. ``on_draw`` is called just before drawing (progress)."""
+
+    def __init__(self, on_draw: Callable[[], None] | None = None) -> None:
+        self.on_draw = on_draw
+        self._name: str | None = None
+        self.written: list[str] = []
+
+    def start(self, staging: Path, target: Path) -> None:
+        """Remember the run directory's final name (report.md's title)."""
+        self._name = Path(target).name
+
+    def add_scan(self, tick: Tick, pose_corrected: Pose2D) -> None:
+        """Nothing while streaming: the report reads the run's files."""
+
+    def add_result(self, tick: Tick, result: TickResult, grid: RobotCentredGrid) -> None:
+        """Nothing while streaming: the report reads the run's files."""
+
+    def finish(self, run_dir: Path) -> None:
+        """Draw the figures and report.md into ``run_dir``."""
+        if self.on_draw is not None:
+            self.on_draw()
+        self.written = [Path(p).name for p in build_report(run_dir, name=self._name)]
+
+    def abort(self) -> None:
+        """Nothing to release."""

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from ..geometry import compose, transform_points
 from ..pipeline.model import RobotCentredGrid
 from ..pipeline.stack import TickResult
+from ..replay import BUDGET_FLAGS
 from ..types import Pose2D, Tick
 
 __all__ = [
@@ -182,7 +183,7 @@ def _snapshot(tick: Tick, result: TickResult, grid: RobotCentredGrid, elapsed_s:
         path_xy=path.copy(),
         mode=str(result.mode.value),
         situation=str(result.situation.name),
-        flags="|".join(result.flags.names()),
+        flags="|".join((result.flags & ~BUDGET_FLAGS).names()),  # no wall-clock facts in the maps
     )
 
 

@@ -61,16 +61,18 @@ def trajectory_gap(odom: NDArray[np.float64], corrected: NDArray[np.float64]) ->
             "max_gap_m": float(gap.max())}
 
 
-def render_report(data: RunData, figures: Iterable[str] = tuple(FIGURES)) -> str:
-    """The Markdown text of report.md (deterministic given the run's files); links the named figures."""
+def render_report(data: RunData, figures: Iterable[str] = tuple(FIGURES), *, name: str | None = None) -> str:
+    """The Markdown text of report.md (deterministic given the run's files); links the named figures.
+    ``name`` titles it (default: the run directory's name)."""
     s = data.summary
     n = int(s.get("ticks", len(data.commands)))
     cfg = s.get("config", {}) or {}
     flags: Mapping[str, int] = s.get("flags", {}) or {}
+    over_budget: Mapping[str, int] = s.get("over_budget", {}) or {}
     budgets = budgets_ms(s)
     period = scan_period_s(data.traj_corrected[:, 0])
     opts = s.get("options", {}) or {}
-    out = [f"# gndreplay run: {data.run_dir.name}", ""]
+    out = [f"# gndreplay run: {name or data.run_dir.name}", ""]
     overview = [
         ("log", f"`{s.get('log', '-')}`"),
         ("gndreplay version", str(s.get("gndreplay_version", "-"))),
@@ -93,7 +95,7 @@ def render_report(data: RunData, figures: Iterable[str] = tuple(FIGURES)) -> str
         if not q:
             continue
         b = budgets.get(m)
-        over = flags.get(_OVER[m], "-") if m in _OVER else "-"
+        over = over_budget.get(_OVER[m], flags.get(_OVER[m], "-")) if m in _OVER else "-"
         rows.append((m, *(_num(q.get(k)) for k in ("median", "p90", "p99", "max")),
                      "-" if b is None else f"{b:g}", str(over)))
     out += ["## Latency per tick [ms]", "",

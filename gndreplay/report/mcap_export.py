@@ -1,7 +1,8 @@
 """results.mcap: the replay as standard ROS 2 messages (opens in Foxglove, reads back with rosbags).
 
 Written with the rosbags rosbag2 writer (MCAP storage, zstd chunks). The writer produces a bag *folder*; the
-sink stages it in a temporary directory and moves the single ``.mcap`` file to ``run_dir/results.mcap``.
+sink stages it in a temporary folder inside the replay's staging directory (``start``; nothing in $TMPDIR)
+and moves the single ``.mcap`` file to ``run_dir/results.mcap``.
 
 Frames: ``map`` is the corrected odometry frame (scan matching), ``odom`` the raw odometry frame,
 ``base_link`` the robot, ``laser`` the scanner. Stamps (header and log time) are the tick times.
@@ -160,8 +161,9 @@ def _due(t_ns: int, next_ns: int | None, every_s: float) -> tuple[bool, int | No
 class McapSink:
     """A ``RunSink`` writing ``results.mcap`` (topics in the module docstring).
 
-    The bag is staged in a temporary directory (under ``staging_dir``, default the system's) while the
-    replay streams; ``finish`` moves the file into the run directory. If the replay fails before
+    The bag is staged in a temporary directory while the replay streams: inside the replay's staging
+    directory (``start``, called by ``run_replay``), else under ``staging_dir`` (default the system's);
+    ``finish`` moves the file into the run directory. If the replay fails before
     ``finish``, call ``close()`` (or use the sink as a context manager) to remove the staging directory; it
     is also removed when the sink is garbage-collected.
 
@@ -223,8 +225,14 @@ class McapSink:
             self._cleanup()
 
     def abort(self) -> None:
-        """RunSink hook for a failed replay: close the writer and remove the staging directory."""
-        self.close()
+        """RunSink hook for a failed replay: close the writer and remove the staging directory (never
+        raises: the replay's own error is the one to report)."""
+        try:
+            self.close()
+        except Exception:  # a half-written bag in a folder being removed anyway
+            self._writer = None
+            if self._cleanup is not None:
+                self._cleanup()
 
     def __enter__(self) -> McapSink:
         return self
@@ -234,6 +242,10 @@ class McapSink:
         self.close()
 
     # ---- RunSink ------------------------------------------------------------------------------------
+
+    def start(self, staging: Path, target: Path) -> None:
+        """``StagedSink`` hook: keep the temporary bag inside the replay's staging directory."""
+        self.staging_dir = Path(staging)
 
     def add_scan(self, tick: Tick, pose_corrected: Pose2D) -> None:
         """Nothing per scan (the topics follow the ticks the stack ran)."""

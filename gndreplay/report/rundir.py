@@ -8,7 +8,7 @@ from __future__ import annotations
 import csv
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -54,10 +54,12 @@ class Commands:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class Timing:
-    """timing.csv as arrays: t_s (K,) and ms per module name (K,) (match, model, planner, reactor, total)."""
+    """timing.csv as arrays: t_s (K,), ms per module name (K,) (match, model, planner, reactor, total) and
+    over_budget: flag name -> (K,) bool mask for the ``*_OVER_BUDGET`` flags that fired."""
 
     t_s: F64
     ms: Mapping[str, F64]
+    over_budget: Mapping[str, NDArray[np.bool_]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -127,25 +129,38 @@ def read_commands(path: Path) -> Commands:
 
 
 def read_timing(path: Path) -> Timing:
-    """Parse timing.csv (``t,match_ms,model_ms,planner_ms,reactor_ms,total_ms``).
+    """Parse timing.csv (``t,match_ms,model_ms,planner_ms,reactor_ms,total_ms[,flags]``).
 
     Raises:
-        RunDirError: missing file, missing column or a malformed number.
+        RunDirError: missing file, missing column or a malformed row (named by line).
     """
     with open(_need(path), newline="") as f:
-        header = f.readline().strip().split(",")
-        if not header or header[0] != "t":
-            raise RunDirError(f"{path}: expected a header starting with t")
+        rows = list(csv.reader(f))
+    header = rows[0] if rows else []
+    if not header or header[0] != "t":
+        raise RunDirError(f"{path}: expected a header starting with t")
+    numeric = [k for k, name in enumerate(header) if k == 0 or name.endswith("_ms")]
+    flag_col = header.index("flags") if "flags" in header else None
+    body = rows[1:]
+    data = np.empty((len(body), len(numeric)), dtype=np.float64)
+    over: dict[str, NDArray[np.bool_]] = {}
+    for k, r in enumerate(body):
         try:
-            data = np.loadtxt(f, delimiter=",", dtype=np.float64, ndmin=2)
+            if len(r) != len(header):
+                raise ValueError(f"{len(r)} fields, expected {len(header)}")
+            data[k] = [float(r[c]) for c in numeric]
         except ValueError as err:
-            raise RunDirError(f"{path}: malformed row: {err}") from err
-    data = data.reshape(-1, len(header))
-    ms = {name.removesuffix("_ms"): data[:, k] for k, name in enumerate(header) if k and name.endswith("_ms")}
+            raise RunDirError(f"{path} line {k + 2}: malformed row ({err})") from err
+        for name in filter(None, r[flag_col].split("|")) if flag_col is not None else ():
+            mask = over.get(name)
+            if mask is None:
+                mask = over[name] = np.zeros(len(body), dtype=bool)
+            mask[k] = True
+    ms = {header[c].removesuffix("_ms"): data[:, j] for j, c in enumerate(numeric) if c}
     missing = [m for m in TIMING_MODULES if m not in ms]
     if missing:
         raise RunDirError(f"{path}: missing column(s) {', '.join(m + '_ms' for m in missing)}")
-    return Timing(t_s=data[:, 0], ms=ms)
+    return Timing(t_s=data[:, 0], ms=ms, over_budget=over)
 
 
 def read_tum(path: Path) -> F64:

@@ -722,12 +722,97 @@ def match_quality(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, se
 
 
 @njit(cache=True, error_model="numpy")
+def coarse_rotation(pa, pr, ref_r, ok, half_bins, step_bins, every, tol_abs, tol_rel):
+    """Correlative rotation search: the rotation of the scan about the reference origin whose range
+    profile agrees best with the reference's, over +-``half_bins`` bins in steps of ``step_bins``.
+
+    A scan point of bearing a and range r is *covered* at rotation d when one of the bins around a + d holds
+    a reference point, and *agrees* when r is within tol_abs + tol_rel r of the range interval of those. The score is the
+    fraction of covered points that agree (at least half the points covered): counting agreeing points
+    alone would favour the rotation that overlaps the map most, in a round hall any rotation back towards
+    the map. Unlike IDC, which follows the gradient of its bearing window, this sees the whole window at
+    once: it finds the basin, IDC aligns in it. Uses every ``every``-th point.
+
+    Returns (best rotation [rad], its score, the score at rotation 0); ties go to the smallest rotation.
+    """
+    n_bins = ref_r.shape[0]
+    inv_res = n_bins / TWO_PI
+    n_s = 2 * (half_bins // step_bins) + 1
+    # the range interval of the reference over bins b-1..b+1 (empty: lo > hi), so that each (point,
+    # rotation) is one lookup; a point agrees when its range is within tolerance of that interval
+    lo = np.full(n_bins, np.inf)
+    hi = np.full(n_bins, -np.inf)
+    for b in range(n_bins):
+        if ok[b]:
+            r = ref_r[b]
+            for db in range(-1, 2):
+                bb = b + db
+                if bb < 0:
+                    bb += n_bins
+                elif bb >= n_bins:
+                    bb -= n_bins
+                lo[bb] = min(lo[bb], r)
+                hi[bb] = max(hi[bb], r)
+    hits = np.zeros(n_s)
+    cov = np.zeros(n_s)
+    n_pts = 0
+    for i in range(0, pa.shape[0], every):
+        n_pts += 1
+        r = pr[i]
+        tol = tol_abs + tol_rel * r
+        b0 = _bin(pa[i], inv_res, n_bins) - (n_s // 2) * step_bins
+        for k in range(n_s):
+            b = b0 + k * step_bins
+            if b < 0:
+                b += n_bins
+            elif b >= n_bins:
+                b -= n_bins
+            seen = lo[b] <= hi[b]
+            cov[k] += 1.0 if seen else 0.0
+            hits[k] += 1.0 if (seen and r > lo[b] - tol and r < hi[b] + tol) else 0.0
+    score = np.zeros(n_s)
+    for k in range(n_s):
+        if cov[k] >= 0.5 * n_pts and cov[k] > 0.0:
+            score[k] = hits[k] / cov[k]
+    c = n_s // 2
+    best = c
+    for d in range(1, c + 1):
+        if score[c + d] > score[best]:
+            best = c + d
+        if score[c - d] > score[best]:
+            best = c - d
+    return (best - c) * step_bins * TWO_PI / n_bins, score[best], score[c]
+
+
+@njit(cache=True, error_model="numpy")
+def _idc_polish(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, th0, max_iter,
+                win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every,
+                polish_iter, w_t, w_r):
+    """IDC from rotation ``th0``, then the point-to-line polish (``polish_iter`` > 0) or just the quality of
+    the IDC pose: (x, y, th, iterations, pairs, mean pair distance, 3x3 information)."""
+    x, y, th, iters, _ = idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, 0.0,
+                                   0.0, th0, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r,
+                                   max_cp_bins, stride, mrp_every)
+    if polish_iter > 0:
+        x, y, th, it2, pairs, resid, info = polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, ex, ey, il,
+                                                                 nx, ny, x, y, th, polish_iter, gate_min,
+                                                                 tol_t, tol_r, max_cp_bins, w_t, w_r)
+        return x, y, th, iters + it2, pairs, resid, info
+    pairs, resid, info = match_quality(px, py, x, y, th, ref_x, ref_y, nxt, cover, ex, ey, il, nx, ny,
+                                       gate_min, max_cp_bins)
+    return x, y, th, iters, pairs, resid, info
+
+
+@njit(cache=True, error_model="numpy")
 def match_scan(kf_xy, kf_n, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend_m, seg_abs_m, seg_rel,
                gap_bins, normal_chord_m, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r,
-               max_cp_bins, stride, mrp_every, polish_iter, w_t, w_r):
+               max_cp_bins, stride, mrp_every, polish_iter, w_t, w_r, pa, coarse_bins, coarse_step,
+               coarse_every, coarse_tol_abs, coarse_tol_rel, coarse_min_gain, coarse_margin):
     """The whole match in one call (one dispatch instead of four): render the reference at (ox, oy, oth),
     its segments, IDC from the prediction, then the point-to-line polish (``polish_iter`` > 0) or just the
-    quality of the IDC pose.
+    quality of the IDC pose. With ``coarse_bins`` > 0, the correlative rotation search (coarse_rotation)
+    may start a second IDC in another basin; that one wins when its mean truncated pair distance is
+    ``coarse_margin`` lower.
 
     Returns (x, y, th, iterations, pairs, mean pair distance [m], 3x3 point-to-line information, smallest
     eigenvalue of its translational 2x2 block).
@@ -735,17 +820,28 @@ def match_scan(kf_xy, kf_n, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend
     ref_x, ref_y, ref_r, ref_a, ok, nxt = render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r,
                                                            blend_m, seg_abs_m, seg_rel, gap_bins)
     ex, ey, il, nx, ny, cover = segments(ref_x, ref_y, ok, nxt, normal_chord_m)
-    x, y, th, iters, _ = idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, 0.0,
-                                   0.0, 0.0, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r,
-                                   max_cp_bins, stride, mrp_every)
-    if polish_iter > 0:
-        x, y, th, it2, pairs, resid, info = polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, ex, ey, il,
-                                                                 nx, ny, x, y, th, polish_iter, gate_min,
-                                                                 tol_t, tol_r, max_cp_bins, w_t, w_r)
-        iters += it2
-    else:
-        pairs, resid, info = match_quality(px, py, x, y, th, ref_x, ref_y, nxt, cover, ex, ey, il, nx, ny,
-                                           gate_min, max_cp_bins)
+    x, y, th, iters, pairs, resid, info = _idc_polish(
+        px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, 0.0, max_iter, win0,
+        win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every, polish_iter, w_t,
+        w_r)
+    if coarse_bins > 0:
+        # IDC only follows its bearing window: when the correlative search sees a better-agreeing rotation
+        # elsewhere in the window, IDC starts from there too and the match with more pairs wins
+        th1, s1, s0 = coarse_rotation(pa, pr, ref_r, ok, coarse_bins, coarse_step, coarse_every,
+                                      coarse_tol_abs, coarse_tol_rel)
+        if s1 >= s0 + coarse_min_gain and abs(_pm_pi(th1 - th)) > win_min:
+            x2, y2, t2, it2, p2, r2, i2 = _idc_polish(
+                px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, th1, max_iter,
+                win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every,
+                polish_iter, w_t, w_r)
+            iters += it2
+            # another basin than the prior's must be clearly better (a symmetric room has many equal ones):
+            # mean truncated pair distance (gate_min for an unpaired point) lower by coarse_margin
+            n = px.shape[0]
+            cost1 = (resid * pairs + gate_min * (n - pairs)) / n
+            cost2 = (r2 * p2 + gate_min * (n - p2)) / n
+            if cost2 < (1.0 - coarse_margin) * cost1:
+                x, y, th, pairs, resid, info = x2, y2, t2, p2, r2, i2
     # smallest eigenvalue of the symmetric 2x2 block [[a, b], [b, c]]
     a = info[0, 0]
     b = info[0, 1]

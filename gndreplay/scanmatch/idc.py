@@ -59,6 +59,11 @@ class IdcParams:
     # fast (passing close to an obstacle) and the map must take in the new part before it is lost
     keyframe_pair_ratio: float = 0.8
     map_keyframes: int = 40
+    # the map is trusted for 10 s without a scan: after a longer gap (a recording paused; a log sampled by
+    # distance has gaps while the robot stands, and its map stays good) the scan is matched as usual, but if
+    # the match fails the map restarts from it at the odometry's prediction at once, instead of after
+    # reset_after_failures failures (restarting after every long gap doubled ACES' error when decimated)
+    map_max_gap_s: float = 10.0
     # reference rendering: 0.25 deg bins (finer than the 0.5-1 deg beams, so map points keep their detail);
     # points within 5 cm behind the nearest one of a bin are averaged (same wall seen by several keyframes)
     n_bins: int = 1440
@@ -105,10 +110,24 @@ class IdcParams:
     # degenerate geometry: the smallest eigenvalue of the translational point-to-line information counts the
     # pairs that constrain the weakest direction; the dev logs never go below 31, a bare corridor is ~0
     degenerate_min_info: float = 5.0
-    # a correction beyond 0.3 m / 10 deg plus 50 % of the odometry increment is not believed
-    max_correction_m: float = 0.3
-    max_correction_rad: float = math.radians(10.0)
-    max_correction_rel: float = 0.5
+    # consistency guard (see IdcMatcher._guard). The odometry's error model: sigma = odo_sigma_m +
+    # odo_sigma_rel * step and odo_sigma_rad + odo_sigma_rel_rad * turn, times a per-robot scale learnt
+    # online: the running RMS of the normalised corrections of accepted matches (weight odo_learn_rate, each
+    # clipped at odo_learn_clip sigmas), never below 1 (the model only widens for worse odometry). A match
+    # beyond guard_sigmas of it is suspicious: the fallback priors are tried too, and the winner needs a
+    # second opinion, the match from the odometry's prediction in a guard_window_rad bearing window. The
+    # defaults put 3 sigmas at 0.3 m / 10 deg + 50 % of the increment
+    odo_sigma_m: float = 0.1
+    odo_sigma_rel: float = 1.0 / 6.0
+    odo_sigma_rad: float = math.radians(10.0 / 3.0)
+    odo_sigma_rel_rad: float = 1.0 / 6.0
+    guard_sigmas: float = 3.0
+    odo_learn_rate: float = 0.02
+    odo_learn_clip: float = 10.0
+    guard_window_rad: float = math.radians(3.0)
+    guard_gain: float = 0.03
+    guard_agree_m: float = 0.05
+    guard_agree_rad: float = math.radians(1.0)
     # odometry stalls (see IdcMatcher._priors): while the pose repeats after a corrected step of at least
     # 0.1 m or 5 deg, constant velocity competes with no motion (a robot slowing down to a real stop moves
     # less than that per scan)
@@ -125,6 +144,16 @@ class IdcParams:
     still_max_m: float = 0.1
     still_max_rad: float = math.radians(5.0)
     # after a failed (or suspiciously weak, see recheck_pair_ratio) match: constant velocity, then no motion
+    # coarse rotation search (see _idc_kernels.coarse_rotation): the rotation within +-45 deg of the prior
+    # (2 deg steps, ~90 points) whose range profile agrees best with the map; when it beats the prior by
+    # coarse_min_gain of the points, IDC also starts from it and that match wins if its mean truncated pair
+    # distance is lower by guard_gain (see IdcMatcher._cost)
+    coarse_window_rad: float = math.radians(45.0)
+    coarse_step_rad: float = math.radians(2.0)
+    coarse_points: int = 90
+    coarse_tol_m: float = 0.05
+    coarse_tol_rel: float = 0.02
+    coarse_min_gain: float = 0.05
     fallback_priors: int = 2
     # a match pairing fewer than this fraction of the previous match's pairs may sit in a wrong basin (a fast
     # turn): the fallback priors are tried too and the match with most pairs wins
@@ -177,6 +206,9 @@ class IdcMatcher:
         self._stalled = False
         self._failures = 0
         self._last_pairs = 0
+        self._last_t_ns = 0
+        self._odo_ms = (1.0, 1.0)  # running mean square of the normalised corrections (see _guard)
+        self._odo_scale = (1.0, 1.0)  # learnt scale of the odometry's error model
         self._still_ref = ZERO  # standstill averaging (see _standing_mean)
         self._still_sum = [0.0, 0.0, 0.0]
         self._still_n = 0
@@ -251,14 +283,16 @@ class IdcMatcher:
         sp = scan.sensor_pose
         sensor = (sp.x, sp.y, sp.theta)
         odom_a = (odom.x, odom.y, odom.theta)
+        gap_s = (scan.t_ns - self._last_t_ns) * 1e-9
+        self._last_t_ns = scan.t_ns
         if not self._started:
             self._started = True
             self._prev_pose = self._anchor_pose = self._anchor_odom = odom_a
             self._add_keyframe(_compose(odom_a, sensor), np.column_stack([px, py]))
             return MatchResult(odom, True, 0, math.nan, 0)  # the first scan defines the corrected frame
         priors, compete, fresh = self._priors(odom_a)
-        # a hypothesis is believed near its own guess or near the odometry's prediction (see _match)
-        gate = (_compose(priors[0][0], sensor), priors[0][1]) if fresh else None
+        pa = np.arctan2(py, px)
+        odo_laser = _compose(priors[0][0], sensor)
         standing = (p.average_when_still and odom_a == self._anchor_odom and not self._stalled
                     and self._odom_step_small)
         if not standing:
@@ -266,12 +300,16 @@ class IdcMatcher:
         iterations = 0
         outcomes: list[_Outcome] = []
         for h, (hyp, incr) in enumerate(priors[: max(compete, 1 + p.fallback_priors)]):
-            out = self._match(px, py, pr, _compose(hyp, sensor), incr, gate)
+            out = self._match(px, py, pr, pa, _compose(hyp, sensor), incr)
+            if not fresh and not out.reason and self._suspicious(out.laser, _compose(hyp, sensor), incr):
+                # no odometry to ask (stalled): a match far from its own prior is not believed
+                out = out._replace(reason="correction too far from the prior (odometry stalled)")
             iterations += out.iterations
             outcomes.append(out)
             if out.iterations == 0:
                 break  # nothing to match (too few beams): another prior will not help
             if h + 1 >= compete and any(not o.reason and o.pairs >= p.recheck_pair_ratio * self._last_pairs
+                                        and not (fresh and self._suspicious(o.laser, odo_laser, priors[0][1]))
                                         for o in outcomes):
                 break
         accepted = [o for o in outcomes if not o.reason]
@@ -279,10 +317,20 @@ class IdcMatcher:
         # only run when the first match failed or paired suspiciously few points, so a fallback far from
         # odometry may win (CSAIL's odometry under-reports turns; requiring it to be near odometry too raised
         # the median relation error over ten start scans from 0.054 to 0.070 m)
-        res = min(accepted, key=lambda o: (-o.pairs, o.residual_m)) if accepted else outcomes[0]
+        # the matches within the odometry's error model come first; a suspicious one is only taken (after the
+        # guard's second opinion) when no other hypothesis gives an unsuspicious match
+        plausible = [o for o in accepted if not (fresh and self._suspicious(o.laser, odo_laser, priors[0][1]))]
+        pool = plausible or accepted
+        res = min(pool, key=lambda o: (-o.pairs, o.residual_m)) if pool else outcomes[0]
+        if fresh and not res.reason:
+            res, extra = self._guard(res, px, py, pr, pa, odo_laser, priors[0][1])
+            iterations += extra
         if res.reason:
             pose = priors[0][0]
             self._failures += 1
+            if gap_s > p.map_max_gap_s:  # the map is past its validity and does not fit: start a new one
+                return self._restart(odom_a, sensor, px, py, f"{res.reason} after a gap of {gap_s:.1f} s: "
+                                                             f"map restarted", res, iterations)
             if self._failures >= p.reset_after_failures:
                 self._reset_map()
                 self._add_keyframe(_compose(pose, sensor), np.column_stack([px, py]))
@@ -310,6 +358,24 @@ class IdcMatcher:
         return MatchResult(_pose(pose), not res.reason, res.pairs, res.residual_m, iterations,
                            res.reason)
 
+    def _restart(self, odom_a: P3, sensor: P3, px: F64, py: F64, reason: str, res: _Outcome,
+                 iterations: int) -> MatchResult:
+        """Restart the map from this scan at the odometry's prediction (the previous corrected pose ∘ the
+        odometry increment) and forget the motion state; the scan itself is not matched (MATCH_FAILED,
+        ``reason``)."""
+        pose = _compose(self._anchor_pose, _compose(_inverse(self._anchor_odom), odom_a))
+        self._reset_map()
+        self._add_keyframe(_compose(pose, sensor), np.column_stack([px, py]))
+        self._failures = 0
+        self._last_pairs = 0
+        self._last_incr = ZERO
+        self._stalled = False
+        self._still_n = 0
+        self._odom_step_small = True
+        self._prev_pose = self._anchor_pose = pose
+        self._anchor_odom = odom_a
+        return MatchResult(_pose(pose), False, res.pairs, res.residual_m, iterations, reason)
+
     def _standing_mean(self, pose: P3) -> P3:
         """The mean of this standstill's matched poses (the last moving one included): while the robot
         stands, every scan measures the same pose against the same map. A match further than
@@ -331,23 +397,69 @@ class IdcMatcher:
         sx, sy, sth = self._still_sum
         return _compose(self._still_ref, (sx / n, sy / n, sth / n))
 
-    def _too_far(self, corr: P3, incr: P3) -> str:
-        """Why a correction ``corr`` of a prediction that assumed the increment ``incr`` is not believed
-        (beyond 0.3 m / 10 deg plus 50 % of the increment), or "" when it is."""
+    def _cost(self, o: _Outcome, n: int) -> float:
+        """Mean truncated distance of the n points at a match: a pair's distance, gate_min_m for a point
+        left unpaired (lower is better; compares two poses of one scan against one map)."""
+        gate = self.params.gate_min_m
+        return (o.residual_m * o.pairs + gate * (n - o.pairs)) / n
+
+    def _odo_sigmas(self, incr: P3) -> tuple[float, float]:
+        """The odometry's error model for an increment: (translation sigma [m], rotation sigma [rad])."""
         p = self.params
-        corr_m = math.hypot(corr[0], corr[1])
-        max_m = p.max_correction_m + p.max_correction_rel * math.hypot(incr[0], incr[1])
-        max_rad = p.max_correction_rad + p.max_correction_rel * abs(incr[2])
-        if corr_m > max_m or abs(corr[2]) > max_rad:
-            return f"correction {corr_m:.3f} m, {math.degrees(corr[2]):.1f} deg too far from odometry"
-        return ""
+        return (p.odo_sigma_m + p.odo_sigma_rel * math.hypot(incr[0], incr[1]),
+                p.odo_sigma_rad + p.odo_sigma_rel_rad * abs(incr[2]))
 
-    def _near(self, laser: P3, gate: tuple[P3, P3]) -> bool:
-        """Whether a laser pose passes the correction gate against the odometry's prediction ``gate``."""
-        return not self._too_far(_compose(_inverse(gate[0]), laser), gate[1])
+    def _z(self, laser: P3, odo_laser: P3, incr: P3) -> tuple[float, float]:
+        """How far a laser pose is from the odometry's prediction, in sigmas of the odometry's error model
+        (translation, rotation), and before the learnt scale."""
+        corr = _compose(_inverse(odo_laser), laser)
+        s_t, s_r = self._odo_sigmas(incr)
+        return math.hypot(corr[0], corr[1]) / s_t, abs(corr[2]) / s_r
 
-    def _match(self, px: F64, py: F64, pr: F64, laser_prior: P3, incr: P3,
-               gate: tuple[P3, P3] | None) -> _Outcome:
+    def _suspicious(self, laser: P3, odo_laser: P3, incr: P3) -> bool:
+        """Whether a match is beyond ``guard_sigmas`` of the learnt odometry error model."""
+        z_t, z_r = self._z(laser, odo_laser, incr)
+        g = self.params.guard_sigmas
+        return z_t > g * self._odo_scale[0] or z_r > g * self._odo_scale[1]
+
+    def _guard(self, res: _Outcome, px: F64, py: F64, pr: F64, pa: F64, odo_laser: P3,
+               incr: P3) -> tuple[_Outcome, int]:
+        """Never worse than odometry: a match within ``guard_sigmas`` of the odometry's prediction (in the
+        learnt error model, see IdcParams) is taken and teaches the model; a match further away needs a
+        second opinion, the match from the odometry's prediction in a narrow bearing window. The far match
+        is believed when the odometry's neighbourhood does not fit the map (that match fails its gates) or
+        when it pairs ``guard_gain`` of the points more; otherwise the odometry is kept (MATCH_FAILED).
+        Returns the outcome and the iterations the second opinion took."""
+        p = self.params
+        corr = _compose(_inverse(odo_laser), res.laser)
+        z_t, z_r = self._z(res.laser, odo_laser, incr)
+        if self._suspicious(res.laser, odo_laser, incr):
+            near = self._match(px, py, pr, pa, odo_laser, incr, p.guard_window_rad, False)
+            extra = near.iterations
+            d = _compose(_inverse(near.laser), res.laser)
+            # the near match went most of the way from the odometry to the far one: the map agrees with it
+            agree = (math.hypot(d[0], d[1]) <= max(p.guard_agree_m, 0.5 * math.hypot(corr[0], corr[1]))
+                     and abs(d[2]) <= max(p.guard_agree_rad, 0.5 * abs(corr[2])))
+            if not near.reason and not agree:
+                c_far, c_near = self._cost(res, px.shape[0]), self._cost(near, px.shape[0])
+                if c_near < (1.0 - p.guard_gain) * c_far:
+                    return near, extra  # a better match near the odometry: the far one was a wrong basin
+                if c_far >= (1.0 - p.guard_gain) * c_near:
+                    return _Outcome(odo_laser, near.pairs, near.residual_m, res.iterations + extra,
+                                    f"unconfirmed match: {math.hypot(corr[0], corr[1]):.3f} m, "
+                                    f"{math.degrees(corr[2]):.1f} deg from odometry ({max(z_t, z_r):.1f} "
+                                    f"sigma) and no better than the match near odometry"), extra
+        else:
+            extra = 0
+        a = p.odo_learn_rate
+        c2 = p.odo_learn_clip ** 2
+        self._odo_ms = ((1.0 - a) * self._odo_ms[0] + a * min(z_t * z_t, c2),
+                        (1.0 - a) * self._odo_ms[1] + a * min(z_r * z_r, c2))
+        self._odo_scale = (max(1.0, math.sqrt(self._odo_ms[0])), max(1.0, math.sqrt(self._odo_ms[1])))
+        return res, extra
+
+    def _match(self, px: F64, py: F64, pr: F64, pa: F64, laser_prior: P3, incr: P3,
+               win0_rad: float | None = None, coarse: bool = True) -> _Outcome:
         """Align the scan with the map rendered at ``laser_prior`` and apply the acceptance gates.
 
         The correction gate accepts a pose near the prior itself or near ``gate`` (the laser pose that fresh
@@ -364,12 +476,17 @@ class IdcMatcher:
         if p.polish_iterations > 0:
             w_t = (p.pair_sigma_m / (p.prior_sigma_m + p.prior_sigma_rel * math.hypot(incr[0], incr[1]))) ** 2
             w_r = (p.pair_sigma_m / (p.prior_sigma_rad + p.prior_sigma_rel_rad * abs(incr[2]))) ** 2
+        bin_rad = 2.0 * math.pi / p.n_bins
+        coarse_step = max(1, round(p.coarse_step_rad / bin_rad))
+        coarse_bins = round(p.coarse_window_rad / bin_rad) if coarse else 0
+        win0 = p.win0_rad if win0_rad is None else win0_rad
         x, y, th, iters, pairs, resid, _info, weakest = k.match_scan(
             self._kf_xy, self._kf_n, laser_prior[0], laser_prior[1], laser_prior[2], px, py, pr, p.n_bins,
             p.min_range_m, p.max_range_m + p.gate0_m, p.blend_m, p.seg_abs_m, p.seg_rel, p.gap_bins,
-            p.normal_chord_m, p.max_iterations, p.win0_rad, p.win_tau, p.win_min_rad, p.gate0_m, p.gate_min_m,
+            p.normal_chord_m, p.max_iterations, win0, p.win_tau, p.win_min_rad, p.gate0_m, p.gate_min_m,
             p.tol_m, p.tol_rad, p.max_cp_bins, stride, max(1, n // (stride * p.mrp_points)),
-            p.polish_iterations, w_t, w_r)
+            p.polish_iterations, w_t, w_r, pa, coarse_bins, coarse_step, max(1, n // p.coarse_points),
+            p.coarse_tol_m, p.coarse_tol_rel, p.coarse_min_gain, p.guard_gain)
         est = _compose(laser_prior, (x, y, th))
         if pairs < need:
             return _Outcome(est, pairs, resid, iters, f"too few pairs: {pairs} < {need}")
@@ -379,9 +496,4 @@ class IdcMatcher:
             return _Outcome(est, pairs, resid, iters,
                             f"degenerate geometry: translation unobservable (information {weakest:.1f} "
                             f"< {p.degenerate_min_info})")
-        far = self._too_far((x, y, th), incr)
-        if far and gate is not None and self._near(est, gate):
-            far = ""
-        if far:
-            return _Outcome(est, pairs, resid, iters, far)
         return _Outcome(est, pairs, resid, iters, "")

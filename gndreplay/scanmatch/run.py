@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import time
@@ -141,7 +142,7 @@ def matcher_report(traj: CorrectedTrajectory, relations: Relations | None = None
 def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence[Method] = METHODS, *,
                   relations: Relations | None = None, out_dir: str | os.PathLike[str] | None = None,
                   idc: IdcParams | None = None, kiss: KissParams | None = None,
-                  tol_s: float = 1e-4) -> list[MatcherReport]:
+                  tol_s: float = 1e-4, relations_name: str = "relations") -> list[MatcherReport]:
     """The ``gndreplay scanmatch`` command as a function: each matcher over the same log, one report each.
 
     Args:
@@ -151,20 +152,24 @@ def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence
         out_dir: when given, one TUM trajectory per matcher is written there as ``<method>.tum``.
         idc, kiss: matcher parameters.
         tol_s: stamp tolerance for relations [s].
+        relations_name: how error messages name the relations (their file).
 
     Raises:
-        ScanMatchError: unknown method.
+        ScanMatchError: unknown method, or relations given of which none matches a scan of the log (a table
+            of NaN would hide a wrong relations file or a wrong ``tol_s``).
     """
     out = None if out_dir is None else Path(out_dir)
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
     rows: list[MatcherReport] = []
     for method in methods:
         traj = correct_trajectory(ticks_factory(), make_matcher(method, idc=idc, kiss=kiss))
-        tum = None
+        row = matcher_report(traj, relations, tol_s=tol_s)
+        if relations is not None and row.relations is not None and row.relations.matched == 0:
+            raise ScanMatchError(f"{relations_name}: none of its {len(relations)} relations matches two scan "
+                                 f"stamps of the log within {tol_s:g} s")
         if out is not None:
+            out.mkdir(parents=True, exist_ok=True)  # only once a trajectory is worth writing
             path = out / f"{method}.tum"
             write_tum(path, traj.t_ns, traj.poses)
-            tum = str(path)
-        rows.append(matcher_report(traj, relations, tol_s=tol_s, tum_path=tum))
+            row = dataclasses.replace(row, tum_path=str(path))
+        rows.append(row)
     return rows

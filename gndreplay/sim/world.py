@@ -28,6 +28,7 @@ __all__ = [
     "MovingPolygon",
     "SwingingDoor",
     "World",
+    "add_laser_noise",
     "box",
     "cast_rays",
     "footprint_segments",
@@ -358,6 +359,13 @@ def simulate_ranges(
     exact = cast_rays(p[:2], laser.angles() + p[2], world.segments_at(t_s), max_range_m=laser.max_range_m)
     if rng is None:
         return exact
+    return add_laser_noise(exact, laser, rng)
+
+
+def add_laser_noise(exact: F64, laser: LaserModel, rng: np.random.Generator) -> F64:
+    """Exact ranges -> what ``laser`` reports: Gaussian noise, rounding to ``resolution_m``, dropouts,
+    no-return at max range, nan below min range. Draws exactly ``2 * n_beams`` numbers (noise, then
+    dropouts), so a seeded generator gives the same stream whatever the geometry."""
     noise = rng.standard_normal(laser.n_beams) * laser.range_sigma_m
     drop = rng.random(laser.n_beams) < laser.dropout_prob
     with np.errstate(invalid="ignore"):

@@ -1,0 +1,128 @@
+"""Closed-loop scorecard: every shipped scenario x preset over N seeds, one table.
+
+Per row: success rate, collisions (of which hit-by-mover: the robot was standing still), time-outs, mean
+time to goal of the successes, minimum clearance over all runs, longest stall (no 0.2 m and no 45 deg net
+for that long), trap detections, and the wall time split in two: the simulator (world, robot, laser,
+odometry) per step and the robot side (matcher + stack) per tick, means over all ticks. Every kernel is
+compiled and every stage warmed by one short run per preset before anything is timed; runs are
+sequential in this process (one core). Latency is the fixed default (0 s), so the outcomes are
+reproducible; only the ms columns vary with the machine.
+
+    .venv/bin/python benchmarks/scenarios.py [--seeds 20] [--scenarios a,b] [--presets wheelchair,xr4000]
+        [--jobs 1] [--out DIR] [--jsonl FILE]
+    .venv/bin/python benchmarks/scenarios.py --table-from FILE      # the table of the runs so far
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import statistics
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+from gndreplay.config import preset
+from gndreplay.sim import shipped_scenarios, simulate_scenario
+
+
+def one(args: tuple[str, str, int, str]) -> dict[str, Any]:
+    """One run (in this process or a worker): the outcome and the timings."""
+    name, preset_name, seed, out = args
+    t0 = time.perf_counter()
+    o = simulate_scenario(name, out_dir=Path(out) / f"{name}-{preset_name}-{seed}", cfg=preset(preset_name),
+                          seed=seed, figures=False, overwrite=True)
+    c = o.collision or {}
+    return {
+        "outcome": o.outcome, "t": o.end_time_s, "clear": o.min_clearance_m, "stall": o.longest_stall_s,
+        "traps": o.trap_count, "hit_by_mover": bool(c.get("hit_by_mover")), "ticks": o.ticks,
+        "sim": o.sim_ms_per_step, "stack": o.stack_ms_per_tick, "wall": time.perf_counter() - t0,
+        "object": c.get("object"),
+    }
+
+
+def warm(out: str, presets: list[str]) -> None:
+    """Compile and warm every stage once per preset (a short run)."""
+    name = next(iter(shipped_scenarios()))
+    for p in presets:
+        simulate_scenario(name, out_dir=Path(out) / f"warm-{p}", cfg=preset(p), seed=0, figures=False,
+                          time_limit_s=2.0, overwrite=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seeds", type=int, default=20, help="seeds 0 .. N-1")
+    ap.add_argument("--scenarios", default="", help="comma-separated names (default: every shipped one)")
+    ap.add_argument("--presets", default="wheelchair,xr4000")
+    ap.add_argument("--jobs", type=int, default=1, help="worker processes (timings are per process)")
+    ap.add_argument("--out", default="", help="keep the run directories here (default: a temporary dir)")
+    ap.add_argument("--jsonl", default="", help="append each run's numbers to this file as it finishes")
+    ap.add_argument("--table-from", default="", help="print the table from such a file and exit")
+    a = ap.parse_args()
+    names = [s for s in a.scenarios.split(",") if s] or list(shipped_scenarios())
+    presets = [p for p in a.presets.split(",") if p]
+    out = a.out or tempfile.mkdtemp(prefix="gndreplay-bench-scenarios-")
+    if a.table_from:
+        rows = [json.loads(line) for line in Path(a.table_from).read_text().splitlines() if line.strip()]
+        tasks = [(r["scenario"], r["preset"], r["seed"], "") for r in rows]
+        table(names, presets, tasks, rows, f"from {a.table_from}: {len(rows)} runs")
+        return
+    warm(out, presets)
+    # seed-major order: stopped early, the runs so far cover every row equally
+    tasks = [(n, p, s, out) for s in range(a.seeds) for n in names for p in presets]
+    t0 = time.perf_counter()
+    log = open(a.jsonl, "a") if a.jsonl else None  # noqa: SIM115
+    if a.jobs > 1:
+        with ProcessPoolExecutor(a.jobs, initializer=warm, initargs=(out, presets)) as ex:
+            results = list(ex.map(one, tasks))
+    else:
+        results = []
+        for k, t in enumerate(tasks):
+            results.append(one(t))
+            if log is not None:
+                row = {"scenario": t[0], "preset": t[1], "seed": t[2], **results[-1]}
+                log.write(json.dumps(row) + "\n")
+                log.flush()
+            print(f"\r{k + 1}/{len(tasks)} {t[0]} {t[1]} seed {t[2]}: {results[-1]['outcome']}    ",
+                  end="", file=sys.stderr, flush=True)
+        print(file=sys.stderr)
+    wall = time.perf_counter() - t0
+    table(names, presets, tasks, results,
+          f"{a.seeds} seeds per row, latency 0 s, {a.jobs} process(es), total wall {wall:.0f} s")
+
+
+def table(names: list[str], presets: list[str], tasks: list[tuple[str, str, int, str]],
+          results: list[dict[str, Any]], head: str) -> None:
+    """Print the Markdown table (one row per scenario x preset)."""
+    print(head + "\n")
+    print("| scenario | preset | runs | success | collisions (hit by mover) | time-outs "
+          "| mean time to goal s | min clearance m | longest stall s | traps | sim ms/step | stack ms/tick |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for n in names:
+        for p in presets:
+            rows = [r for (tn, tp, _, _), r in zip(tasks, results, strict=True) if tn == n and tp == p]
+            if not rows:
+                continue
+            ok = [r for r in rows if r["outcome"] == "success"]
+            col = [r for r in rows if r["outcome"] == "collision"]
+            clear = [r["clear"] for r in rows if r["clear"] is not None]
+            ticks = sum(r["ticks"] for r in rows)
+            sim = sum(r["sim"] * r["ticks"] for r in rows) / max(ticks, 1)
+            stack = sum(r["stack"] * r["ticks"] for r in rows) / max(ticks, 1)
+            mean_t = f"{statistics.mean(r['t'] for r in ok):.1f}" if ok else "-"
+            print(f"| {n} | {p} | {len(rows)} | {100 * len(ok) / len(rows):.0f} % | {len(col)} "
+                  f"({sum(r['hit_by_mover'] for r in col)}) | "
+                  f"{sum(r['outcome'] == 'timeout' for r in rows)} | {mean_t} | "
+                  f"{min(clear) if clear else math.nan:.3f} | {max(r['stall'] for r in rows):.1f} | "
+                  f"{sum(r['traps'] for r in rows)} | {sim:.2f} | {stack:.2f} |")
+
+
+if __name__ == "__main__":
+    main()

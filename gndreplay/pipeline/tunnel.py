@@ -1,0 +1,609 @@
+"""Tunnel planner of the wheelchair paper (Minguez, Montesano, Montano; section III-B, Fig. 3).
+
+The planner does not compute a path: it decides whether a *tunnel* of free space joins the robot and the
+goal, and which course the first part of that tunnel takes (the reactor steers within it). It builds a
+graph whose nodes are points in free space and whose arcs are straight tunnels, best-first (A*): expanding
+a node places new nodes where the free space seen from it has a discontinuity or where an obstacle ends,
+keeps those joined to it by a free tunnel, and the search stops when the goal is accessible from the node
+being expanded. No public implementation exists; every choice below is ours and marked **choice**.
+
+Coordinates as in ``nf1`` (which this module shares its result type, goal handling and line-of-sight walk
+with): ``free[row, col]``, row along world y, col along world x; the goal in corner coordinates, nodes and
+the polyline in index coordinates (cell centres); angles counter-clockwise from +col towards +row.
+
+Choices:
+
+* **Tunnel = segment in C-space.** The straight tunnel of the robot's width (plus a margin on each side)
+  between two nodes is free iff the segment between them stays in free C-space for a disc of radius
+  ``inner_radius + margin_m`` (the Minkowski sum of the segment and that disc is the tunnel). Checked
+  exactly by ``nf1``'s supercover walk (every cell the segment touches), the same test NF1's string
+  pulling uses. The C-space is ``cspace.free_cspace``'s, with the tunnel planner's *own* ``margin_m``
+  (default half a cell, 0.025 m): a passage 0.1 m wider than the robot (edge cells 0.1 m farther apart than
+  the robot's width) stays open at 5 cm cells, one as wide as the robot or narrower is closed
+  (tests/test_tunnel.py, both presets).
+* **Discontinuities and obstacle ends are found in C-space**, by casting ``n_rays`` rays (default 360,
+  1 deg) from the node against the C-obstacles. A range jump between adjacent rays larger than ``jump_m``
+  is a discontinuity (C-obstacles already contain the robot's width, so any opening left in C-space is
+  wide enough; the threshold only filters ray-sampling noise along walls); a ray stopped by an obstacle
+  beside a ray that reaches the grid border is where "an obstacle ends". A node goes on the far ray (the
+  first ray past the corner), ``advance_m`` beyond the near range, or halfway to the far range when that is
+  closer. The far ray grazes the corner, so when the tunnel to that point is blocked the ray tilted away
+  from the corner by 1, 2 and 4 cells (at the corner's range) is tried.
+* **Passages are found in the workspace** (the paper's "discontinuity between obstacles", Fig. 3a): the
+  same rays continue from their C-space end to the first obstacle cell. Where two adjacent ranges jump by
+  more than the tunnel width, the gap runs from the near hit to the closest hit on the far side (within
+  90 deg); a gap wider than the tunnel and at most ``passage_max_m`` wide gets a node in front of it on its
+  axis (dilation radius + 2 cells from its waist, the free C-space cell nearest its middle) and one through
+  it, as far beyond, joined to the node in front (or to the node that already took that space); passages
+  are placed before the C-space nodes of the same expansion. Why: the C-space of a passage barely wider
+  than the robot is a one- or two-cell waist that rays from afar almost never thread, and a straight
+  tunnel through it must follow its axis. A too narrow passage gets no node (its gap is not
+  wider than the tunnel) and, were a node placed, its tunnel would be blocked (Fig. 3a, nodes 2 and 3).
+* **Rays march** by the chessboard distance to the nearest C-obstacle cell (two raster passes; a lower
+  bound of the Euclidean one) minus one, so open space costs a few steps per ray. In the workspace a C-free
+  cell d from C-obstacle is at least d + floor((rho - 1) / sqrt 2) from an obstacle (every cell within
+  rho - 1 cells of an obstacle is C-obstacle, rho the dilation radius), so one distance transform serves
+  both.
+* **"Unless the space is already taken by a node"**: a candidate whose cell lies within ``spacing_m`` of
+  any node already in the graph (open or expanded) is dropped. ``spacing_m`` is capped below twice the
+  dilation radius so a node never takes space on the other side of a wall (two C-free points on opposite
+  sides of a wall are at least that far apart).
+* **Priority** f = g + w h: g the length of the node chain from the robot, h the straight distance to the
+  goal, w = ``heuristic_weight`` (1: the paper's cost, A*). Ties: the older node. The open list is scanned
+  linearly (a few hundred nodes at most).
+* **Goal test** on expansion (ALGORITHMS.md section 4): the search stops when the tunnel from the node being
+  expanded to the goal cell is free. The robot's own node is expanded first, and when the goal is in sight
+  from it nothing else is computed (no distance transform, no ray). The goal cell is resolved as for NF1 (a
+  goal outside the grid is projected onto the border, moved to a free border cell nearby); a goal cell
+  outside free C-space is GOAL_IN_OBSTACLE.
+* **Robot in C-obstacle** (closer to a wall than the dilation radius): as NF1's escape, the search starts
+  from the nearest free cell within ``escape_m`` and the chain begins with the straight escape segment.
+* **Not reachable**: the open list empties (PLANNER_NO_PATH: no tunnel joins robot and goal, the
+  supervisor goes to mND), or ``max_expansions`` nodes were expanded without reaching the goal
+  (PLANNER_TIMEOUT: the search gave up; the supervisor treats it like a time-out). The search is not
+  complete at cell level (rays sample directions): NF1 may find a way the tunnel planner misses; the
+  converse cannot happen (a free tunnel chain is a 4-connected path of free cells).
+* **Tunnel and course**: the node chain is string-pulled (from each node, skip to the farthest later node
+  whose tunnel is free, so the polyline is made of free tunnels); the course is the direction of its first
+  tunnel, the paper's "main course of the first part of the tunnel". The stack puts the reactor's target
+  ``lookahead_m`` along it, as for NF1's instantaneous direction.
+
+Cost: a plan is the C-space (about 0.5 ms on 400 x 400) plus, unless the goal is in sight, one distance
+transform (about 0.4 ms) and about 0.1-0.2 ms per expansion (``benchmarks/planner.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from numpy.typing import ArrayLike, NDArray
+
+from ..geometry import wrap_angle
+from ..types import Flag
+from .cspace import free_cspace
+from .model import FREE, OCCUPIED, UNKNOWN
+from .nf1 import PlanResult, _visible, nearest_true, resolve_goal
+
+__all__ = ["TunnelParams", "TunnelPlanner", "tunnel_plan", "warm_up_planners"]
+
+# search outcomes of the kernel
+_FOUND, _EXHAUSTED, _BUDGET = 0, 1, 2
+
+
+@dataclass(frozen=True, slots=True)
+class TunnelParams:
+    """Settings of the tunnel planner (see the module notes for what each choice means).
+
+    Attributes:
+        margin_m: added on each side of the robot's width: tunnels are C-space segments for a disc of radius
+            inner radius + margin_m [m].
+        n_rays: rays cast from a node to find discontinuities (evenly spaced over 360 deg).
+        jump_m: range jump between adjacent rays that counts as a discontinuity [m].
+        advance_m: a new node goes this far beyond the near side of the discontinuity [m].
+        passage_max_m: workspace gaps between two obstacles up to this wide (and wider than the tunnel)
+            get a node in front of them on their axis and one through them [m].
+        spacing_m: a candidate this close to an existing node is not placed [m]; used capped at twice the
+            dilation radius (inner radius + margin_m) minus one cell.
+        max_expansions: expansions before the search gives up (PLANNER_TIMEOUT).
+        heuristic_weight: priority g + heuristic_weight * h; 1 is the paper's A*, larger values expand
+            fewer nodes for a longer tunnel.
+        escape_m: how far the search may start from the robot cell when the robot stands in C-obstacle [m]
+            (as ``Nf1Params.escape_m``).
+        border_search_m: a projected goal on a C-obstacle border cell moves to the nearest free border
+            cell within this distance [m] (as ``Nf1Params.border_search_m``).
+    """
+
+    margin_m: float = 0.025
+    n_rays: int = 360
+    jump_m: float = 0.4
+    advance_m: float = 0.6
+    passage_max_m: float = 1.5
+    spacing_m: float = 0.5
+    max_expansions: int = 400
+    heuristic_weight: float = 1.0
+    escape_m: float = 0.5
+    border_search_m: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("jump_m", "advance_m", "spacing_m", "passage_max_m"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
+        for name in ("margin_m", "escape_m", "border_search_m"):
+            if not getattr(self, name) >= 0.0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+        if self.n_rays < 8:
+            raise ValueError(f"n_rays must be >= 8, got {self.n_rays!r}")
+        if not self.heuristic_weight >= 1.0:
+            raise ValueError(f"heuristic_weight must be >= 1, got {self.heuristic_weight!r}")
+        if self.max_expansions < 1:
+            raise ValueError(f"max_expansions must be >= 1, got {self.max_expansions!r}")
+
+
+# ---------------------------------------------------------------------------------------------------------
+# numba kernels
+
+
+@njit(cache=True)
+def _chessboard_distance(free: NDArray[np.bool_]) -> NDArray[np.int32]:
+    """(R, C) -> (R, C) chessboard distance [cells] from each cell to the nearest non-free cell (a lower
+    bound of the Euclidean one); cells outside the grid do not count. Two raster passes."""
+    n_r, n_c = free.shape
+    big = np.int32(1 << 20)
+    d = np.empty((n_r, n_c), np.int32)
+    for r in range(n_r):
+        for c in range(n_c):
+            if not free[r, c]:
+                d[r, c] = 0
+                continue
+            m = big
+            if r > 0:
+                m = min(m, d[r - 1, c])
+                if c > 0:
+                    m = min(m, d[r - 1, c - 1])
+                if c < n_c - 1:
+                    m = min(m, d[r - 1, c + 1])
+            if c > 0:
+                m = min(m, d[r, c - 1])
+            d[r, c] = min(m + 1, big)
+    for r in range(n_r - 1, -1, -1):
+        for c in range(n_c - 1, -1, -1):
+            m = d[r, c]
+            if m == 0:
+                continue
+            if r < n_r - 1:
+                m = min(m, d[r + 1, c] + 1)
+                if c > 0:
+                    m = min(m, d[r + 1, c - 1] + 1)
+                if c < n_c - 1:
+                    m = min(m, d[r + 1, c + 1] + 1)
+            if c < n_c - 1:
+                m = min(m, d[r, c + 1] + 1)
+            d[r, c] = m
+    return d
+
+
+@njit(cache=True)
+def _march(
+    mask: NDArray[np.bool_], dist: NDArray[np.int32], bonus: int, r0: float, c0: float, dr: float, dc: float,
+    t: float,
+) -> tuple[float, bool]:
+    """March a ray from parameter ``t`` while ``mask`` holds; returns the last sample inside and whether
+    the grid border stopped it. ``dist`` + ``bonus`` (where ``dist`` > 0, else 0) is a lower bound of the
+    chessboard distance to the nearest cell outside ``mask``; the ray steps by it minus one (>= 1)."""
+    n_r, n_c = mask.shape
+    last = t
+    while True:
+        ri = math.floor(r0 + t * dr + 0.5)
+        ci = math.floor(c0 + t * dc + 0.5)
+        if ri < 0 or ri >= n_r or ci < 0 or ci >= n_c:
+            return last, True
+        if not mask[ri, ci]:
+            return last, False
+        last = t
+        d = dist[ri, ci]
+        t += max(float(d + bonus) - 1.0, 1.0) if d > 0 else 1.0
+
+
+@njit(cache=True)
+def _cast_rays(
+    free: NDArray[np.bool_], clear: NDArray[np.bool_], dist: NDArray[np.int32], bonus: int, r0: float,
+    c0: float, sin_t: NDArray[np.float64], cos_t: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64], NDArray[np.bool_]]:
+    """Range [cells] of each ray from (r0, c0) to its last sample in free C-space and, continuing from
+    there, to its last sample clear of obstacles, and for each whether the grid border stopped it.
+    ``dist`` is the chessboard distance to C-obstacle; ``bonus`` what it adds up to in the workspace."""
+    n = sin_t.shape[0]
+    rng = np.empty(n, np.float64)
+    border = np.zeros(n, np.bool_)
+    wrng = np.empty(n, np.float64)
+    wborder = np.zeros(n, np.bool_)
+    for k in range(n):
+        rng[k], border[k] = _march(free, dist, 0, r0, c0, sin_t[k], cos_t[k], 0.0)
+        if border[k]:
+            wrng[k], wborder[k] = rng[k], True
+        else:
+            wrng[k], wborder[k] = _march(clear, dist, bonus, r0, c0, sin_t[k], cos_t[k], rng[k])
+    return rng, border, wrng, wborder
+
+
+@njit(cache=True)
+def _stamp(taken: NDArray[np.bool_], r: int, c: int, rad: int) -> None:
+    """Mark the disc of radius ``rad`` [cells] around (r, c) as taken."""
+    n_r, n_c = taken.shape
+    for dr in range(-rad, rad + 1):
+        rr = r + dr
+        if rr < 0 or rr >= n_r:
+            continue
+        half = int(math.sqrt(rad * rad - dr * dr))
+        for cc in range(max(c - half, 0), min(c + half + 1, n_c)):
+            taken[rr, cc] = True
+
+
+@njit(cache=True)
+def _try_add(
+    free: NDArray[np.bool_], taken: NDArray[np.bool_], nr: NDArray[np.int32], nc: NDArray[np.int32],
+    parent: NDArray[np.int32], g: NDArray[np.float64], f: NDArray[np.float64], n: int, par: int,
+    rr: int, cc: int, goal_r: int, goal_c: int, spacing: int, hw: float,
+) -> int:
+    """Add node (rr, cc) under ``par`` if it is in the grid, free, not taken and joined to ``par`` by a free
+    tunnel; returns the new node count (``n`` unchanged when it was not added)."""
+    if rr < 0 or rr >= free.shape[0] or cc < 0 or cc >= free.shape[1] or n >= nr.shape[0]:
+        return n
+    if taken[rr, cc] or not free[rr, cc] or not _visible(free, nr[par], nc[par], rr, cc):
+        return n
+    nr[n] = rr
+    nc[n] = cc
+    parent[n] = par
+    g[n] = g[par] + math.hypot(rr - nr[par], cc - nc[par])
+    f[n] = g[n] + hw * math.hypot(goal_r - rr, goal_c - cc)
+    _stamp(taken, rr, cc, spacing)
+    return n + 1
+
+
+@njit(cache=True)
+def _nearest_node(nr: NDArray[np.int32], nc: NDArray[np.int32], n: int, r: int, c: int) -> int:
+    """Index of the node nearest (r, c) among the first ``n`` (ties: the oldest)."""
+    best, bd = 0, np.inf
+    for i in range(n):
+        d = (nr[i] - r) ** 2 + (nc[i] - c) ** 2
+        if d < bd:
+            best, bd = i, d
+    return best
+
+
+@njit(cache=True)
+def _away(near: int, far: int) -> int:
+    """+-1: the ray index step from ``near`` towards ``far`` (adjacent, modulo the ray count)."""
+    step = far - near
+    if step > 1:
+        return -1
+    if step < -1:
+        return 1
+    return step
+
+
+@njit(cache=True)
+def _search(
+    free: NDArray[np.bool_], clear: NDArray[np.bool_], start_r: int, start_c: int, g0: float,
+    goal_r: int, goal_c: int, n_rays: int, rho: float, jump: float, advance: float, passage_max: float,
+    spacing: int, max_expansions: int, hw: float,
+) -> tuple[int, int, int, NDArray[np.int32], NDArray[np.int32], NDArray[np.int32], NDArray[np.float64], int]:
+    """A* over free-space nodes from (start_r, start_c) (chain length ``g0`` already travelled) to the goal
+    cell; ``free`` is the C-space, ``clear`` the workspace (not an obstacle), lengths in cells. Returns
+    (status, n_expanded, goal_parent, node rows, node cols, parents, g, n): the goal is accessible from node
+    ``goal_parent`` when status is _FOUND."""
+    cap = min(max_expansions * (n_rays + 1) + 1, free.shape[0] * free.shape[1] + 1)
+    nr = np.empty(cap, np.int32)
+    nc = np.empty(cap, np.int32)
+    parent = np.empty(cap, np.int32)
+    g = np.empty(cap, np.float64)
+    f = np.empty(cap, np.float64)
+    closed = np.zeros(cap, np.bool_)
+    taken = np.zeros(free.shape, np.bool_)
+    dtheta = 2.0 * math.pi / n_rays
+    theta = np.arange(n_rays) * dtheta
+    sin_t = np.sin(theta)
+    cos_t = np.cos(theta)
+    nr[0] = start_r
+    nc[0] = start_c
+    parent[0] = -1
+    g[0] = g0
+    f[0] = g0 + hw * math.hypot(goal_r - start_r, goal_c - start_c)
+    n = 1
+    if _visible(free, start_r, start_c, goal_r, goal_c):  # the goal in sight: no ray needed
+        return _FOUND, 1, 0, nr, nc, parent, g, n
+    dist = _chessboard_distance(free)
+    # workspace clearance from the C-space one: every cell within rho - 1 of an obstacle is C-obstacle (also
+    # with free_cspace's sub-cell rule), so a C-free cell d (chessboard) from C-obstacle is at least d + j
+    # from an obstacle, j = floor((rho - 1) / sqrt 2)
+    j_ws = max(math.floor((rho - 1.0) / math.sqrt(2.0) - 1e-9), 0)
+    _stamp(taken, start_r, start_c, spacing)
+    n_expanded = 0
+    width = 2.0 * rho
+    while True:
+        best = -1
+        bf = np.inf
+        for i in range(n):
+            if not closed[i] and f[i] < bf:
+                bf = f[i]
+                best = i
+        if best < 0:
+            return _EXHAUSTED, n_expanded, -1, nr, nc, parent, g, n
+        if n_expanded >= max_expansions:
+            return _BUDGET, n_expanded, -1, nr, nc, parent, g, n
+        closed[best] = True
+        n_expanded += 1
+        r0 = int(nr[best])
+        c0 = int(nc[best])
+        if _visible(free, r0, c0, goal_r, goal_c):
+            return _FOUND, n_expanded, best, nr, nc, parent, g, n
+        rng, border, wr, wb = _cast_rays(free, clear, dist, j_ws, float(r0), float(c0), sin_t, cos_t)
+        # workspace gaps between two obstacles, wider than the robot: a node in front of the passage, on
+        # its axis, and one through it (a straight tunnel through a tight passage must follow its axis);
+        # first, so that the space in front of a passage goes to its axis node
+        for k in range(n_rays):
+            k1 = (k + 1) % n_rays
+            if wb[k] and wb[k1]:
+                continue
+            if wb[k] != wb[k1]:
+                near, far = (k1, k) if wb[k] else (k, k1)
+            elif abs(wr[k] - wr[k1]) > width:
+                near, far = (k, k1) if wr[k] < wr[k1] else (k1, k)
+            else:
+                continue
+            step = _away(near, far)
+            a_r = r0 + (wr[near] + 1.0) * sin_t[near]  # the obstacle the near ray hit
+            a_c = c0 + (wr[near] + 1.0) * cos_t[near]
+            w = np.inf
+            b_r = 0.0
+            b_c = 0.0
+            reach = wr[near] + 1.0
+            for j in range(n_rays // 4):  # the other side: the hit beyond the gap closest to it
+                if reach * math.sin((j + 1) * dtheta) > passage_max:
+                    break  # every later ray passes farther than passage_max from the near hit
+                kk = (far + j * step) % n_rays
+                if wb[kk]:
+                    continue
+                p_r = r0 + (wr[kk] + 1.0) * sin_t[kk]
+                p_c = c0 + (wr[kk] + 1.0) * cos_t[kk]
+                dd = math.hypot(p_r - a_r, p_c - a_c)
+                if dd < w:
+                    w, b_r, b_c = dd, p_r, p_c
+            if not width < w <= passage_max:
+                continue
+            m_r = 0.5 * (a_r + b_r)
+            m_c = 0.5 * (a_c + b_c)
+            mi = math.floor(m_r + 0.5)
+            mj = math.floor(m_c + 0.5)
+            if not (0 <= mi < free.shape[0] and 0 <= mj < free.shape[1]) or not clear[mi, mj]:
+                continue  # not open between its sides (a wall seen at a grazing angle)
+            best_d = np.inf  # snap to the waist: the free C-space cell nearest the middle (hits are +-1 cell)
+            wi, wj = -1, -1
+            for ii in range(max(mi - 3, 0), min(mi + 4, free.shape[0])):
+                for jj in range(max(mj - 3, 0), min(mj + 4, free.shape[1])):
+                    dd = (ii - m_r) ** 2 + (jj - m_c) ** 2
+                    if free[ii, jj] and dd < best_d:
+                        best_d, wi, wj = dd, ii, jj
+            if wi < 0:
+                continue  # closed in C-space: the robot does not fit
+            m_r, m_c = float(wi), float(wj)
+            u_r = -(b_c - a_c) / w  # unit normal of the gap, towards the expanded node
+            u_c = (b_r - a_r) / w
+            if u_r * (r0 - m_r) + u_c * (c0 - m_c) < 0.0:
+                u_r, u_c = -u_r, -u_c
+            off = rho + 2.0
+            q_r = math.floor(m_r + off * u_r + 0.5)
+            q_c = math.floor(m_c + off * u_c + 0.5)
+            t_r = math.floor(m_r - off * u_r + 0.5)
+            t_c = math.floor(m_c - off * u_c + 0.5)
+            m = _try_add(free, taken, nr, nc, parent, g, f, n, best, q_r, q_c, goal_r, goal_c, spacing, hw)
+            via = n if m > n else _nearest_node(nr, nc, n, q_r, q_c)  # the node in front of the passage
+            n = _try_add(free, taken, nr, nc, parent, g, f, m, via, t_r, t_c, goal_r, goal_c, spacing, hw)
+        # C-space discontinuities and obstacle ends: a node just past the corner, on the far side
+        for k in range(n_rays):
+            k1 = (k + 1) % n_rays
+            if border[k] and border[k1]:
+                continue
+            if border[k] != border[k1]:  # an obstacle ends
+                near, far = (k1, k) if border[k] else (k, k1)
+            elif abs(rng[k] - rng[k1]) > jump:  # a discontinuity
+                near, far = (k, k1) if rng[k] < rng[k1] else (k1, k)
+            else:
+                continue
+            d = min(rng[near] + advance, 0.5 * (rng[near] + rng[far]))
+            step = _away(near, far)
+            prev = -1
+            for lateral in (0.0, 1.0, 2.0, 4.0):  # the far ray grazes the corner: tilt away by a few cells
+                tilt = math.floor(math.atan2(lateral, max(rng[near], 1.0)) / dtheta + 0.5)
+                kk = (far + step * tilt) % n_rays
+                if kk == prev:
+                    continue
+                prev = kk
+                if rng[kk] < d:
+                    break
+                rr = math.floor(r0 + d * sin_t[kk] + 0.5)
+                cc = math.floor(c0 + d * cos_t[kk] + 0.5)
+                if 0 <= rr < free.shape[0] and 0 <= cc < free.shape[1] and taken[rr, cc]:
+                    break
+                m = _try_add(free, taken, nr, nc, parent, g, f, n, best, rr, cc, goal_r, goal_c, spacing, hw)
+                if m > n:
+                    n = m
+                    break
+
+@njit(cache=True)
+def _string_pull(free: NDArray[np.bool_], chain: NDArray[np.int32], first_free: bool) -> NDArray[np.int64]:
+    """Indices of the chain kept: from each kept node, the farthest later node whose tunnel is free. The
+    escape segment (robot cell in C-obstacle: ``first_free`` False) is kept as it is."""
+    m = chain.shape[0]
+    keep = np.empty(m, np.int64)
+    keep[0] = 0
+    k = 1
+    i = 0
+    if not first_free and m > 1:
+        keep[1] = 1
+        k = 2
+        i = 1
+    while i < m - 1:
+        j = m - 1
+        while j > i + 1 and not _visible(free, chain[i, 0], chain[i, 1], chain[j, 0], chain[j, 1]):
+            j -= 1
+        keep[k] = j
+        k += 1
+        i = j
+    return keep[:k].copy()
+
+
+# ---------------------------------------------------------------------------------------------------------
+# public functions
+
+
+def _result(
+    ok: bool, flag: Flag, goal: tuple[int, int], projected: bool, *, expanded: int, width_m: float,
+    chain: NDArray[np.int32] | None = None, n_escape: int = 0, waypoints: NDArray[np.float64] | None = None,
+    direction: float = math.nan, length_m: float = math.nan, cost_m: float = math.nan,
+) -> PlanResult:
+    return PlanResult(
+        ok=ok,
+        flag=flag,
+        goal_cell=goal,
+        goal_projected=projected,
+        path_cells=np.zeros((0, 2), np.int32) if chain is None else chain,
+        n_escape=n_escape,
+        waypoints_cells=np.zeros((0, 2), np.float64) if waypoints is None else waypoints,
+        direction_rad=direction,
+        length_m=length_m,
+        cost_m=cost_m,
+        nodes_expanded=expanded,
+        width_m=width_m,
+    )
+
+
+def tunnel_plan(
+    grid_cells: NDArray[np.uint8],
+    start_rc: tuple[int, int],
+    goal_rc_float: ArrayLike,
+    *,
+    cell_m: float,
+    radius_m: float,
+    unknown_is_free: bool = True,
+    params: TunnelParams = TunnelParams(),
+) -> PlanResult:
+    """Search a chain of free tunnels from the robot cell to the goal (see the module notes).
+
+    Args:
+        grid_cells: (H, W) grid of UNKNOWN / FREE / OCCUPIED cells.
+        start_rc: (row, col) robot cell.
+        goal_rc_float: (row, col) goal in corner coordinates; outside the grid it is projected onto the
+            border along the robot-goal line.
+        cell_m: cell side [m].
+        radius_m: the C-space dilation radius [m] (robot inner radius + margin); the tunnel width is twice
+            it.
+        unknown_is_free: UNKNOWN cells are free (else obstacles), as for NF1's C-space.
+        params: planner settings.
+    Returns:
+        PlanResult: ``waypoints_cells`` the string-pulled tunnel polyline (robot cell first, goal cell last),
+        ``direction_rad`` the course of its first tunnel, ``width_m`` the tunnel width, ``nodes_expanded``;
+        ``ok`` False with GOAL_IN_OBSTACLE, PLANNER_NO_PATH (no tunnel joins robot and goal) or
+        PLANNER_TIMEOUT (``max_expansions`` reached).
+    Raises:
+        ValueError: bad grid, robot cell outside the grid, non-finite goal, cell_m <= 0 or radius_m < 0.
+    """
+    if not cell_m > 0.0:
+        raise ValueError(f"cell_m must be > 0, got {cell_m!r}")
+    cells = np.asarray(grid_cells)
+    if cells.ndim != 2 or cells.dtype != np.uint8:
+        raise ValueError(f"grid_cells must be a 2-D uint8 array, got shape {cells.shape} dtype {cells.dtype}")
+    f = free_cspace(cells, cell_m=cell_m, inflate_m=radius_m, unknown_is_free=unknown_is_free)
+    clear = cells != OCCUPIED
+    if not unknown_is_free:
+        clear &= cells != UNKNOWN
+    start = (int(start_rc[0]), int(start_rc[1]))
+    if not (0 <= start[0] < f.shape[0] and 0 <= start[1] < f.shape[1]):
+        raise ValueError(f"start_rc {start} is outside the grid of shape {f.shape}")
+    g = np.asarray(goal_rc_float, dtype=np.float64).reshape(2)
+    width_m = 2.0 * radius_m
+    goal, projected = resolve_goal(f, start, g, params.border_search_m / cell_m)
+    if not f[goal]:
+        return _result(False, Flag.GOAL_IN_OBSTACLE, goal, projected, expanded=0, width_m=width_m)
+
+    root = start
+    if not f[start]:
+        escape = nearest_true(f, start, params.escape_m / cell_m)
+        if escape is None:
+            return _result(False, Flag.PLANNER_NO_PATH, goal, projected, expanded=0, width_m=width_m)
+        root = escape
+    g0 = math.hypot(root[0] - start[0], root[1] - start[1])
+    status, expanded, last, nr, nc, parent, gs, _ = _search(
+        f, clear, root[0], root[1], g0, goal[0], goal[1], params.n_rays, radius_m / cell_m,
+        params.jump_m / cell_m, params.advance_m / cell_m, params.passage_max_m / cell_m,
+        max(min(int(params.spacing_m / cell_m), int(2.0 * radius_m / cell_m) - 1), 1), params.max_expansions,
+        params.heuristic_weight,
+    )
+    if status != _FOUND:
+        flag = Flag.PLANNER_TIMEOUT if status == _BUDGET else Flag.PLANNER_NO_PATH
+        return _result(False, flag, goal, projected, expanded=expanded, width_m=width_m)
+
+    idx = [last]
+    while parent[idx[-1]] >= 0:
+        idx.append(int(parent[idx[-1]]))
+    nodes = np.stack([nr[idx[::-1]], nc[idx[::-1]]], axis=1)
+    prefix = [start] if root != start else []
+    chain = np.asarray([*prefix, *map(tuple, nodes), goal], dtype=np.int32)
+    n_escape = 1 if prefix else int(not f[start])
+    waypoints = chain[_string_pull(f, chain, not prefix)].astype(np.float64)
+    cost_cells = float(gs[last]) + math.hypot(goal[0] - nr[last], goal[1] - nc[last])
+    seg = np.diff(waypoints, axis=0)
+    length_cells = float(np.hypot(seg[:, 0], seg[:, 1]).sum())
+    # robot and goal share a cell (two equal waypoints): head for the goal point itself
+    d = seg[0] if np.any(seg[0]) else g - 0.5 - np.asarray(start, dtype=np.float64)
+    direction = float(wrap_angle(math.atan2(d[0], d[1])))
+    return _result(
+        True, Flag.NONE, goal, projected, expanded=expanded, width_m=width_m, chain=chain,
+        n_escape=n_escape, waypoints=waypoints, direction=direction, length_m=length_cells * cell_m,
+        cost_m=cost_cells * cell_m,
+    )
+
+
+class TunnelPlanner:
+    """The tunnel planner behind the ``nf1.Planner`` protocol: ``tunnel_plan`` on its own C-space (a disc of
+    the robot's inner radius plus ``params.margin_m``).
+
+    Args:
+        params: tunnel planner settings.
+        cell_m: cell side [m].
+        inner_radius_m: the robot's inner radius (half its width for a rectangle) [m].
+        unknown_is_free: plan through UNKNOWN cells.
+    """
+
+    def __init__(
+        self, params: TunnelParams, *, cell_m: float, inner_radius_m: float, unknown_is_free: bool
+    ) -> None:
+        self.params = params
+        self.cell_m = cell_m
+        self.radius_m = inner_radius_m + params.margin_m
+        self.unknown_is_free = unknown_is_free
+
+    def plan(
+        self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike
+    ) -> PlanResult:
+        return tunnel_plan(
+            grid_cells, start_rc, goal_rc_float, cell_m=self.cell_m, radius_m=self.radius_m,
+            unknown_is_free=self.unknown_is_free, params=self.params,
+        )
+
+
+def warm_up_planners(params: TunnelParams = TunnelParams()) -> None:
+    """Compile (or load from the numba cache) the tunnel planner's kernels before the first timed tick:
+    a goal in sight, a search around a wall with a passage, an enclosed goal, and a robot in C-obstacle."""
+    cells = np.full((60, 60), FREE, dtype=np.uint8)
+    cells[5:25, 30] = OCCUPIED
+    cells[40:55, 30] = OCCUPIED
+    planner = TunnelPlanner(params, cell_m=0.05, inner_radius_m=0.3, unknown_is_free=True)
+    for start, goal in (((30, 10), (30.5, 20.5)), ((20, 10), (30.5, 50.5)), ((20, 29), (20.5, 50.5))):
+        planner.plan(cells, start, goal)
+    cells[40, 40:56] = cells[55, 40:56] = OCCUPIED
+    cells[40:56, 40] = cells[40:56, 55] = OCCUPIED
+    planner.plan(cells, (30, 10), (47.5, 47.5))

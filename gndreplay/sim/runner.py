@@ -1,0 +1,242 @@
+"""``gndreplay simulate SCENARIO``: one closed-loop run written as a run directory.
+
+:func:`simulate_scenario` wires a :class:`~.closedloop.ClosedLoop` into :func:`gndreplay.replay.run_replay`
+(matcher -> stack -> commands.csv, timing.csv, summary.json, ...) and adds, through a ``RunSink``:
+
+- ``result.json``   the outcome and scores (deterministic with a fixed latency);
+- ``log.mcap``      /scan (LaserScan), /odom (Odometry, drifting), /cmd_vel (TwistStamped, the stack's
+                    commands), /ground_truth (PoseStamped), /tf_static (base_link -> laser); ``gndreplay run``
+                    replays it;
+- ``fig_world.png`` the true world, the trajectory with the footprint every second, events, movers, contact;
+- ``sim_timing.json`` wall-clock: simulator ms per step, stack (matcher included) ms per tick.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import tempfile
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..config import Config, preset
+from .closedloop import ClosedLoop, SimParams
+from .geometry import footprint_vertices
+from .geometry import warm_up as warm_up_geometry
+from .scenario_file import ScenarioSpec, resolve_scenario
+
+__all__ = ["RESULT_FILE", "SimOutcome", "SimSink", "simulate_scenario", "write_sim_mcap"]
+
+RESULT_FILE = "result.json"
+LOG_FILE = "log.mcap"
+FIGURE_FILE = "fig_world.png"
+TIMING_FILE = "sim_timing.json"
+
+
+@dataclass(frozen=True, slots=True)
+class SimOutcome:
+    """What one closed-loop run gives (the fields of result.json, plus the wall-clock timings)."""
+
+    scenario: str
+    preset: str
+    seed: int
+    outcome: str
+    end_time_s: float
+    time_to_goal_s: float | None
+    collision: dict[str, Any] | None
+    path_length_m: float
+    min_clearance_m: float | None
+    time_inside_security_pct: float
+    mean_abs_dw_dt_radps2: float
+    longest_stall_s: float
+    trap_count: int
+    ticks: int
+    modes: dict[str, int]
+    flags: dict[str, int]
+    result: dict[str, Any]
+    out_dir: Path
+    sim_ms_per_step: float
+    stack_ms_per_tick: float
+
+    @property
+    def success(self) -> bool:
+        return self.outcome == "success"
+
+
+class SimSink:
+    """A ``RunSink`` writing result.json, log.mcap, fig_world.png and sim_timing.json at the end."""
+
+    def __init__(self, loop: ClosedLoop, *, figure: bool = True) -> None:
+        self.loop, self.figure = loop, figure
+
+    def add_scan(self, tick: Any, pose_corrected: Any) -> None:
+        """Nothing per scan: the loop records what it needs."""
+
+    def add_result(self, tick: Any, result: Any, grid: Any) -> None:
+        """Nothing per tick."""
+
+    def finish(self, run_dir: Path) -> None:
+        run_dir = Path(run_dir)
+        result = self.loop.result()
+        (run_dir / RESULT_FILE).write_text(json.dumps(result, indent=2) + "\n")
+        write_sim_mcap(run_dir / LOG_FILE, self.loop)
+        (run_dir / TIMING_FILE).write_text(json.dumps(timings(self.loop), indent=2) + "\n")
+        if self.figure:
+            from .figure import draw_world
+
+            draw_world(run_dir / FIGURE_FILE, self.loop, result)
+
+    def abort(self) -> None:
+        """Nothing held."""
+
+
+def timings(loop: ClosedLoop) -> dict[str, float]:
+    """Mean wall time of the simulator per step and of the robot side (matcher + stack) per tick [ms]."""
+    sim = np.asarray(loop.rec.sim_ns, dtype=np.float64) / 1e6
+    stack = np.asarray(loop.rec.stack_ms, dtype=np.float64)
+    return {
+        "sim_ms_per_step": float(sim.mean()) if sim.size else 0.0,
+        "sim_ms_per_step_median": float(np.median(sim)) if sim.size else 0.0,
+        "stack_ms_per_tick": float(stack.mean()) if stack.size else 0.0,
+        "stack_ms_per_tick_median": float(np.median(stack)) if stack.size else 0.0,
+        "steps": int(sim.size),
+    }
+
+
+def write_sim_mcap(path: Path, loop: ClosedLoop) -> None:
+    """The simulated run as a bare ROS 2 MCAP file (topics in the module docstring)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from ..report.mcap_export import _Msgs
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    m = _Msgs(ts)
+    T = ts.types
+    rec, laser, mount = loop.rec, loop.laser, loop.mount
+    n = laser.n_beams
+    inc = laser.fov_rad / (n - 1)
+    topics = {
+        "/scan": "sensor_msgs/msg/LaserScan",
+        "/odom": "nav_msgs/msg/Odometry",
+        "/cmd_vel": "geometry_msgs/msg/TwistStamped",
+        "/ground_truth": "geometry_msgs/msg/PoseStamped",
+        "/tf_static": "tf2_msgs/msg/TFMessage",
+    }
+    tmp = Path(tempfile.mkdtemp(prefix="gndreplay-simlog-"))
+    try:
+        writer = Writer(tmp / "log", version=9, storage_plugin=StoragePlugin.MCAP)
+        writer.open()
+        conns = {t: writer.add_connection(t, ty, typestore=ts) for t, ty in topics.items()}
+
+        def put(topic: str, t: int, msg: Any) -> None:
+            writer.write(conns[topic], t, ts.serialize_cdr(msg, topics[topic]))
+
+        zero = np.zeros(36, dtype=np.float64)
+        for k, t in enumerate(rec.scan_t_ns):
+            if k == 0:
+                put("/tf_static", t, m.tf(t, ("base_link", "laser", mount.x, mount.y, mount.theta)))
+            scan = T["sensor_msgs/msg/LaserScan"](
+                header=m.hdr(t, "laser"), angle_min=-laser.fov_rad / 2.0, angle_max=laser.fov_rad / 2.0,
+                angle_increment=inc, time_increment=0.0, scan_time=loop.period_ns / 1e9, range_min=0.0,
+                range_max=laser.max_range_m, ranges=np.asarray(rec.scan_ranges[k], dtype=np.float32),
+                intensities=np.zeros(0, dtype=np.float32))
+            put("/scan", t, scan)
+            ox, oy, oth = rec.scan_odom[k]
+            v, vy, w = (rec.cmd[k][1:] if k < len(rec.cmd) else (0.0, 0.0, 0.0))
+            odom = T["nav_msgs/msg/Odometry"](
+                header=m.hdr(t, "odom"), child_frame_id="base_link",
+                pose=m["PoseWithCovariance"](pose=m.pose(ox, oy, oth), covariance=zero),
+                twist=m["TwistWithCovariance"](twist=m.twist(v, vy, w), covariance=zero))
+            put("/odom", t, odom)
+            gx, gy, gth = rec.scan_truth[k]
+            put("/ground_truth", t, m["PoseStamped"](header=m.hdr(t, "map"), pose=m.pose(gx, gy, gth)))
+            if k < len(rec.cmd):
+                put("/cmd_vel", t, m["TwistStamped"](header=m.hdr(t, "base_link"), twist=m.twist(v, vy, w)))
+        writer.close()
+        files = sorted((tmp / "log").glob("*.mcap"))
+        shutil.move(str(files[0]), str(path))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _outcome(result: dict[str, Any], out_dir: Path, t: dict[str, float]) -> SimOutcome:
+    names = {f.name for f in fields(SimOutcome)}
+    kw = {k: v for k, v in result.items() if k in names}
+    return SimOutcome(**kw, result=result, out_dir=out_dir, sim_ms_per_step=t["sim_ms_per_step"],
+                      stack_ms_per_tick=t["stack_ms_per_tick"])
+
+
+def simulate_scenario(
+    scenario: str | Path | ScenarioSpec,
+    *,
+    out_dir: Path,
+    cfg: Config | None = None,
+    seed: int = 0,
+    latency_s: float | None = 0.0,
+    perfect_odometry: bool = False,
+    time_limit_s: float | None = None,
+    figures: bool = True,
+    overwrite: bool = False,
+    on_tick: Any = None,
+    params: SimParams | None = None,
+    run_kwargs: dict[str, Any] | None = None,
+) -> SimOutcome:
+    """Run one scenario in closed loop and write its run directory.
+
+    Args:
+        scenario: a shipped scenario's name, a scenario file, or a parsed spec.
+        out_dir: the run directory (written by ``run_replay``: staged, moved into place at the end).
+        cfg: configuration; default: the scenario's preset.
+        seed: laser noise and odometry errors.
+        latency_s: command latency [s]; None = the stack's measured time (not deterministic).
+        perfect_odometry: no odometry drift.
+        time_limit_s: overrides the scenario's time limit (e.g. short CI runs).
+        figures: draw fig_world.png and the run's standard figures.
+        overwrite: replace an earlier run at ``out_dir`` (otherwise ``run_replay`` writes beside it,
+            ``out_dir-2``, ...; the outcome's ``out_dir`` says where).
+        on_tick: also called with each TickResult (progress bars).
+        run_kwargs: extra keyword arguments for ``run_replay`` (e.g. ``on_stage``).
+
+    Raises:
+        ConfigError: a bad scenario file (one line naming the file and the key).
+    """
+    from ..replay import RunOptions, run_replay
+
+    spec = scenario if isinstance(scenario, ScenarioSpec) else resolve_scenario(scenario)
+    cfg = cfg if cfg is not None else preset(spec.preset)
+    warm_up_geometry()
+    loop = ClosedLoop(spec, cfg, seed=seed, latency_s=latency_s, perfect_odometry=perfect_odometry,
+                      time_limit_s=time_limit_s, params=params or SimParams())
+
+    def tick_done(r: Any) -> None:
+        loop.on_tick(r)
+        if on_tick is not None:
+            on_tick(r)
+
+    sinks: list[Any] = [SimSink(loop, figure=figures)]
+    if figures:
+        from ..report import MapSink
+
+        sinks.insert(0, MapSink())
+    summary = run_replay(loop.ticks(), cfg, Path(out_dir), log=Path(spec.source),
+                         options=RunOptions(goal_xy=spec.goal), on_tick=tick_done, sinks=sinks,
+                         overwrite=overwrite, **(run_kwargs or {}))
+    if figures:
+        from ..report import build_report
+
+        build_report(summary.out_dir)
+    return _outcome(loop.result(), summary.out_dir, timings(loop))
+
+
+def footprint_outline(cfg: Config) -> np.ndarray:
+    """The footprint's outline in the robot frame (a 32-gon for a circle), for drawing."""
+    r = cfg.robot
+    if r.shape == "circle":
+        a = np.linspace(0.0, 2.0 * math.pi, 33)[:-1]
+        return np.column_stack([r.radius_m * np.cos(a), r.radius_m * np.sin(a)])
+    return footprint_vertices(r.front_m, r.rear_m, r.width_m)

@@ -1,0 +1,421 @@
+"""Scenario files (YAML): a world, its events and movers, a start and a goal, read into a frozen
+:class:`ScenarioSpec`.
+
+Schema (unknown keys are errors; every error is one line naming the file and the key)::
+
+    name: u_trap
+    description: free text                      # optional
+    preset: wheelchair                          # or xr4000
+    start: [x, y, theta]                        # m, m, rad
+    goal: [x, y]
+    time_limit: 120                             # s
+    world:
+      walls:    {id: [x1, y1, x2, y2], ...}     # or [x1, y1, x2, y2, thickness]; default 0.1 m
+      boxes:    {id: [cx, cy, length, width, theta], ...}
+      circles:  {id: [cx, cy, r], ...}
+      polygons: {id: [[x, y], [x, y], [x, y], ...], ...}
+    events:
+      - {at: 20.0, add: {walls: {door: [x1, y1, x2, y2]}}}   # appears at t = 20 s
+      - {at: 45.0, remove: door}
+      - {at: 10.0, close: door, over: 2.0}                    # a wall's leaf slides shut from (x1, y1)
+      - {at: 10.0, close: door, over: 2.0, swing: 90}         # ... or swings shut about (x1, y1) from +90 deg
+      - {at: 30.0, open: door, over: 2.0}
+    movers:
+      - {id: person, radius: 0.25, speed: 1.0, path: [[x, y], ...], loop: false, start_at: 0.0, yield_m: 0.3}
+
+A wall with ``close`` / ``open`` events is a door leaf: open (absent, or swung away) before its first
+``close``, closed before its first ``open``. Like a person moving it, a leaf waits while its next step
+would bring it closer than 0.3 m to the robot (``DEFAULT_YIELD_M``). A mover stands at its first waypoint
+until ``start_at``, then walks the path at ``speed`` (back to the start and again if ``loop``), and stays
+at its last waypoint.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import ConfigError
+from .geometry import box_vertices, wall_vertices
+
+__all__ = [
+    "DEFAULT_WALL_THICKNESS_M",
+    "DoorAction",
+    "Element",
+    "Mover",
+    "ScenarioSpec",
+    "load_scenario",
+    "parse_scenario",
+    "resolve_scenario",
+    "shipped_scenarios",
+]
+
+F64 = NDArray[np.float64]
+DEFAULT_WALL_THICKNESS_M = 0.1
+DEFAULT_YIELD_M = 0.3
+_KINDS = ("walls", "boxes", "circles", "polygons")
+
+
+@dataclass(frozen=True, slots=True)
+class DoorAction:
+    """A leaf moving to ``closed`` (1) or open (0) between ``t0_s`` and ``t1_s``."""
+
+    t0_s: float
+    t1_s: float
+    closed: float
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Element:
+    """One obstacle of the world.
+
+    Attributes:
+        id: the scenario's name for it (reported on contact).
+        kind: "wall", "box", "circle" or "polygon".
+        vertices: outline ``(K, 2)`` (closed position for a door leaf); None for a circle.
+        circle: ``(cx, cy, r)`` for a circle.
+        segment: ``(x1, y1, x2, y2, thickness)`` for a wall (a door leaf is drawn from it).
+        appear_s, remove_s: present from ``appear_s`` (None: from the start) until ``remove_s`` (None: ever).
+        door: leaf motions in time order (empty: a fixed element).
+        swing_rad: 0 for a sliding leaf, else the open angle of a swinging one (about (x1, y1)).
+    """
+
+    id: str
+    kind: Literal["wall", "box", "circle", "polygon"]
+    vertices: F64 | None
+    circle: tuple[float, float, float] | None = None
+    segment: tuple[float, float, float, float, float] | None = None
+    appear_s: float | None = None
+    remove_s: float | None = None
+    door: tuple[DoorAction, ...] = ()
+    swing_rad: float = 0.0
+
+    def present(self, t_s: float) -> bool:
+        """Whether the element exists at ``t_s``."""
+        after = self.appear_s is None or t_s >= self.appear_s
+        return after and (self.remove_s is None or t_s < self.remove_s)
+
+    def closed_fraction(self, t_s: float) -> float:
+        """A door leaf's closure at ``t_s``: 0 open, 1 closed (1 for a fixed element)."""
+        if not self.door:
+            return 1.0
+        f = 1.0 - self.door[0].closed
+        for a in self.door:
+            if t_s <= a.t0_s:
+                break
+            if t_s >= a.t1_s or a.t1_s <= a.t0_s:
+                f = a.closed
+            else:
+                f = f + (a.closed - f) * (t_s - a.t0_s) / (a.t1_s - a.t0_s)
+                break
+        return f
+
+    def leaf_speed(self, t_s: float) -> float:
+        """Upper bound of the speed of any point of a moving door leaf at ``t_s`` [m/s] (0 when still)."""
+        if self.segment is None:
+            return 0.0
+        x0, y0, x1, y1, th = self.segment
+        length = math.hypot(x1 - x0, y1 - y0)
+        for a in self.door:
+            if a.t0_s <= t_s < a.t1_s:
+                rate = 1.0 / (a.t1_s - a.t0_s)
+                reach = abs(self.swing_rad) * math.hypot(length, th / 2.0) if self.swing_rad else length
+                return rate * reach
+        return 0.0
+
+    def outline_at(self, t_s: float, door_t_s: float | None = None) -> F64 | None:
+        """The polygon at ``t_s`` (None when absent, a circle, or a fully open sliding leaf); a door leaf
+        is drawn as it is at ``door_t_s`` (default ``t_s``; later when the person moving it waited)."""
+        if self.vertices is None or not self.present(t_s):
+            return None
+        if not self.door or self.segment is None:
+            return self.vertices
+        f = self.closed_fraction(t_s if door_t_s is None else door_t_s)
+        x0, y0, x1, y1, th = self.segment
+        if self.swing_rad:
+            a = math.atan2(y1 - y0, x1 - x0) + (1.0 - f) * self.swing_rad
+            length = math.hypot(x1 - x0, y1 - y0)
+            return wall_vertices(x0, y0, x0 + length * math.cos(a), y0 + length * math.sin(a), th)
+        if f <= 0.0:
+            return None
+        return wall_vertices(x0, y0, x0 + f * (x1 - x0), y0 + f * (y1 - y0), th)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Mover:
+    """A circle walking along waypoints (see the module docstring)."""
+
+    id: str
+    radius_m: float
+    speed_mps: float
+    path: F64
+    loop: bool = False
+    start_at_s: float = 0.0
+    yield_m: float = DEFAULT_YIELD_M
+    _points: F64 = field(init=False, repr=False)
+    _cum: F64 = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        p = np.vstack([self.path, self.path[:1]]) if self.loop else self.path
+        object.__setattr__(self, "_points", p)
+        object.__setattr__(self, "_cum", np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p, axis=0).T))]))
+
+    def position(self, s_m: float) -> tuple[float, float]:
+        """The point at arc length ``s_m`` along the path (wrapped when looping, clamped otherwise)."""
+        p, cum = self._points, self._cum
+        total = float(cum[-1])
+        if total <= 0.0:
+            return float(p[0, 0]), float(p[0, 1])
+        s = s_m % total if self.loop else min(max(s_m, 0.0), total)
+        k = min(int(np.searchsorted(cum, s, side="right")) - 1, len(cum) - 2)
+        f = (s - cum[k]) / (cum[k + 1] - cum[k]) if cum[k + 1] > cum[k] else 0.0
+        return float(p[k, 0] + f * (p[k + 1, 0] - p[k, 0])), float(p[k, 1] + f * (p[k + 1, 1] - p[k, 1]))
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class ScenarioSpec:
+    """A parsed scenario file."""
+
+    name: str
+    description: str
+    preset: str
+    start: tuple[float, float, float]
+    goal: tuple[float, float]
+    time_limit_s: float
+    elements: tuple[Element, ...]
+    movers: tuple[Mover, ...]
+    source: str
+
+    def element_ids(self) -> list[str]:
+        """Names of the elements then of the movers, in index order (a contact names one of them)."""
+        return [e.id for e in self.elements] + [m.id for m in self.movers]
+
+
+# --------------------------------------------------------------------------------------------- parsing
+
+
+class _Err:
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def __call__(self, key: str, message: str) -> ConfigError:
+        return ConfigError(f"{self.source}: {key}: {message}")
+
+
+def _num(v: Any, key: str, err: _Err, *, positive: bool = False, nonneg: bool = False) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(float(v)):
+        raise err(key, f"expected a number, got {v!r}")
+    x = float(v)
+    if positive and x <= 0.0:
+        raise err(key, f"must be > 0, got {v!r}")
+    if nonneg and x < 0.0:
+        raise err(key, f"must be >= 0, got {v!r}")
+    return x
+
+
+def _nums(v: Any, key: str, err: _Err, sizes: tuple[int, ...]) -> list[float]:
+    if not isinstance(v, list) or len(v) not in sizes:
+        want = " or ".join(str(n) for n in sizes)
+        raise err(key, f"expected a list of {want} numbers, got {v!r}")
+    return [_num(x, key, err) for x in v]
+
+
+def _table(v: Any, key: str, err: _Err, allowed: tuple[str, ...],
+           required: tuple[str, ...] = ()) -> dict[str, Any]:
+    if not isinstance(v, dict):
+        raise err(key, f"expected a mapping, got {v!r}")
+    for k in v:
+        if k not in allowed:
+            raise err(f"{key}.{k}" if key else str(k), f"unknown key (known: {', '.join(allowed)})")
+    for k in required:
+        if k not in v:
+            raise err(f"{key}.{k}" if key else k, "missing")
+    return v
+
+
+def _elements(world: Any, key: str, err: _Err, appear_s: float | None) -> list[Element]:
+    out: list[Element] = []
+    for kind in _KINDS:
+        items = _table(world, key, err, _KINDS).get(kind) or {}
+        if not isinstance(items, dict):
+            raise err(f"{key}.{kind}", f"expected a mapping of id: geometry, got {items!r}")
+        for name, geom in items.items():
+            k = f"{key}.{kind}.{name}"
+            if kind == "walls":
+                g = _nums(geom, k, err, (4, 5))
+                th = g[4] if len(g) == 5 else DEFAULT_WALL_THICKNESS_M
+                if th < 0.0:
+                    raise err(k, f"thickness must be >= 0, got {th}")
+                if math.hypot(g[2] - g[0], g[3] - g[1]) <= 0.0:
+                    raise err(k, "the wall has zero length")
+                out.append(Element(str(name), "wall", wall_vertices(g[0], g[1], g[2], g[3], th),
+                                   segment=(g[0], g[1], g[2], g[3], th), appear_s=appear_s))
+            elif kind == "boxes":
+                g = _nums(geom, k, err, (5,))
+                if g[2] <= 0.0 or g[3] <= 0.0:
+                    raise err(k, "length and width must be > 0")
+                out.append(Element(str(name), "box", box_vertices(*g), appear_s=appear_s))
+            elif kind == "circles":
+                g = _nums(geom, k, err, (3,))
+                if g[2] <= 0.0:
+                    raise err(k, f"radius must be > 0, got {g[2]}")
+                out.append(Element(str(name), "circle", None, circle=(g[0], g[1], g[2]), appear_s=appear_s))
+            else:
+                if not isinstance(geom, list) or len(geom) < 3:
+                    raise err(k, f"expected a list of >= 3 [x, y] vertices, got {geom!r}")
+                v = np.array([_nums(p, k, err, (2,)) for p in geom], dtype=np.float64)
+                out.append(Element(str(name), "polygon", v, appear_s=appear_s))
+    return out
+
+
+def _movers(raw: Any, err: _Err) -> list[Mover]:
+    if not isinstance(raw, list):
+        raise err("movers", f"expected a list, got {raw!r}")
+    allowed = ("id", "radius", "speed", "path", "loop", "start_at", "yield_m")
+    out = []
+    for i, m in enumerate(raw):
+        key = f"movers[{i}]"
+        _table(m, key, err, allowed, ("id", "radius", "speed", "path"))
+        path = m["path"]
+        if not isinstance(path, list) or len(path) < 1:
+            raise err(f"{key}.path", f"expected a list of [x, y] waypoints, got {path!r}")
+        loop = m.get("loop", False)
+        if not isinstance(loop, bool):
+            raise err(f"{key}.loop", f"expected true or false, got {loop!r}")
+        out.append(Mover(
+            id=str(m["id"]),
+            radius_m=_num(m["radius"], f"{key}.radius", err, positive=True),
+            speed_mps=_num(m["speed"], f"{key}.speed", err, nonneg=True),
+            path=np.array([_nums(p, f"{key}.path", err, (2,)) for p in path], dtype=np.float64),
+            loop=loop,
+            start_at_s=_num(m.get("start_at", 0.0), f"{key}.start_at", err, nonneg=True),
+            yield_m=_num(m.get("yield_m", DEFAULT_YIELD_M), f"{key}.yield_m", err, nonneg=True),
+        ))
+    return out
+
+
+def parse_scenario(doc: Any, source: str) -> ScenarioSpec:
+    """Validate a loaded YAML document; ``source`` names it in errors."""
+    err = _Err(source)
+    top = ("name", "description", "preset", "start", "goal", "time_limit", "world", "events", "movers")
+    d = _table(doc, "", err, top, ("name", "start", "goal", "time_limit", "world"))
+    name = d["name"]
+    if not isinstance(name, str) or not name:
+        raise err("name", f"expected a non-empty string, got {name!r}")
+    description = d.get("description", "")
+    if not isinstance(description, str):
+        raise err("description", f"expected a string, got {description!r}")
+    preset = d.get("preset", "wheelchair")
+    if preset not in ("wheelchair", "xr4000"):
+        raise err("preset", f"expected wheelchair or xr4000, got {preset!r}")
+    sx, sy, st = _nums(d["start"], "start", err, (3,))
+    gx, gy = _nums(d["goal"], "goal", err, (2,))
+    time_limit = _num(d["time_limit"], "time_limit", err, positive=True)
+    elements = _elements(d["world"], "world", err, None)
+    by_id: dict[str, Element] = {}
+    actions: dict[str, list[tuple[str, DoorAction, float | None]]] = {}
+    removes: dict[str, float] = {}
+
+    def register(e: Element, key: str) -> None:
+        if e.id in by_id:
+            raise err(key, f"duplicate id {e.id!r}")
+        by_id[e.id] = e
+
+    for e in elements:
+        register(e, f"world.{e.kind}s.{e.id}" if e.kind != "box" else f"world.boxes.{e.id}")
+    events = d.get("events") or []
+    if not isinstance(events, list):
+        raise err("events", f"expected a list, got {events!r}")
+    for i, ev in enumerate(events):
+        key = f"events[{i}]"
+        _table(ev, key, err, ("at", "add", "remove", "close", "open", "over", "swing"), ("at",))
+        at = _num(ev["at"], f"{key}.at", err, nonneg=True)
+        what = [k for k in ("add", "remove", "close", "open") if k in ev]
+        if len(what) != 1:
+            raise err(key, "expected exactly one of add, remove, close, open")
+        op = what[0]
+        if op != "close" and op != "open" and ("over" in ev or "swing" in ev):
+            raise err(f"{key}.over", "only close / open events take over and swing")
+        if op == "add":
+            for e in _elements(ev["add"], f"{key}.add", err, at):
+                register(e, f"{key}.add.{e.id}")
+                elements.append(e)
+            continue
+        target = ev[op]
+        if not isinstance(target, str) or target not in by_id:
+            raise err(f"{key}.{op}", f"unknown element {target!r}")
+        if op == "remove":
+            removes[target] = at
+            continue
+        if by_id[target].kind != "wall":
+            raise err(f"{key}.{op}", f"only walls can open or close; {target!r} is a {by_id[target].kind}")
+        over = _num(ev.get("over", 0.0), f"{key}.over", err, nonneg=True)
+        swing = math.radians(_num(ev["swing"], f"{key}.swing", err)) if "swing" in ev else None
+        actions.setdefault(target, []).append((key, DoorAction(at, at + over, 1.0 if op == "close" else 0.0),
+                                               swing))
+    movers = _movers(d.get("movers") or [], err)
+    for m in movers:
+        if m.id in by_id:
+            raise err(f"movers.{m.id}", f"duplicate id {m.id!r}")
+    final: list[Element] = []
+    for e in elements:
+        acts = sorted(actions.get(e.id, []), key=lambda a: a[1].t0_s)
+        swings = {s for _, _, s in acts if s is not None}
+        if len(swings) > 1:
+            raise err(f"{acts[0][0]}.swing", f"door {e.id!r} has different swing angles")
+        final.append(Element(e.id, e.kind, e.vertices, e.circle, e.segment, e.appear_s, removes.get(e.id),
+                             tuple(a for _, a, _ in acts), swings.pop() if swings else 0.0))
+    return ScenarioSpec(name, description.strip(), preset, (sx, sy, st), (gx, gy), time_limit, tuple(final),
+                        tuple(movers), source)
+
+
+def load_scenario(path: Path) -> ScenarioSpec:
+    """Read and validate a scenario file."""
+    import yaml
+
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: scenario file not found") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ConfigError(f"{path}: cannot read the scenario: {e}") from None
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise ConfigError(f"{path}: not valid YAML: {' '.join(str(e).split())}") from None
+    return parse_scenario(doc, str(path))
+
+
+def shipped_scenarios() -> dict[str, str]:
+    """Name -> description of the scenarios shipped with gndreplay."""
+    out = {}
+    for f in sorted(resources.files(__package__).joinpath("scenarios").iterdir(), key=lambda p: p.name):
+        if f.name.endswith(".yaml"):
+            spec = parse_scenario(_yaml(f.read_text()), f"scenarios/{f.name}")
+            out[spec.name] = spec.description.split("\n")[0]
+    return out
+
+
+def _yaml(text: str) -> Any:
+    import yaml
+
+    return yaml.safe_load(text)
+
+
+def resolve_scenario(name_or_path: str | Path) -> ScenarioSpec:
+    """A shipped scenario by name, or a scenario file by path."""
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml") or p.is_file():
+        return load_scenario(p)
+    f = resources.files(__package__).joinpath("scenarios", f"{name_or_path}.yaml")
+    if not f.is_file():
+        known = ", ".join(shipped_scenarios())
+        raise ConfigError(f"{name_or_path}: no such scenario file or shipped scenario (shipped: {known})")
+    return parse_scenario(_yaml(f.read_text()), f"scenarios/{p.name}.yaml")

@@ -1,0 +1,275 @@
+"""``--out`` never deletes or overwrites anything gndreplay did not write (issue 12, item 1).
+
+Every case snapshots the user's files (paths and bytes) before and checks they are all still there after.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from gndreplay.cli import app
+from gndreplay.config import PRESETS
+from gndreplay.errors import OutputError
+from gndreplay.fsutil import (
+    RUN_MARKER,
+    TMP_PREFIX,
+    check_output_dir,
+    format_stamp,
+    is_output_dir,
+    remove_stale_staging,
+    resolve_output_dir,
+    safe_name,
+    staging_dir,
+)
+from gndreplay.replay import RunOptions, run_log
+
+SAMPLE = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
+runner = CliRunner()
+FAST = ["--until", "2", "--no-figures", "-q"]
+
+
+def snapshot(root: Path) -> dict[str, bytes]:
+    """Every file under ``root`` (relative path -> bytes)."""
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def assert_kept(before: dict[str, bytes], root: Path) -> None:
+    """Every file of ``before`` is still under ``root`` with the same bytes."""
+    after = snapshot(root)
+    lost = [k for k, v in before.items() if after.get(k) != v]
+    assert not lost, f"user files lost or changed: {lost}"
+
+
+def cli(*args: object) -> tuple[int, str]:
+    res = runner.invoke(app, [str(a) for a in args])
+    return res.exit_code, res.output
+
+
+def staging_dirs(parent: Path) -> list[Path]:
+    return sorted(parent.glob(f"{TMP_PREFIX}*"))
+
+
+@pytest.fixture
+def user_dir(tmp_path: Path) -> Path:
+    """A folder holding the user's log and a note."""
+    d = tmp_path / "d"
+    d.mkdir()
+    shutil.copy(SAMPLE, d / "log.clf.bz2")
+    (d / "notes.txt").write_text("mine\n")
+    return d
+
+
+@pytest.fixture
+def in_tmp(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
+    monkeypatch.chdir(tmp_path)
+    yield tmp_path
+
+
+# ---- refused before any work ---------------------------------------------------------------------------
+
+
+def test_out_holding_the_input_is_refused(user_dir: Path) -> None:
+    before = snapshot(user_dir)
+    code, out = cli("run", user_dir / "log.clf.bz2", "--out", user_dir, *FAST)
+    assert code == 2 and "contains the input" in out and len(out.strip().splitlines()) == 1
+    assert_kept(before, user_dir)
+    code, out = cli("run", user_dir / "log.clf.bz2", "--out", user_dir, "--overwrite", *FAST)
+    assert code == 2
+    assert_kept(before, user_dir)
+
+
+def test_out_dot_is_refused(user_dir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(user_dir)
+    before = snapshot(user_dir)
+    for out in (".", ".."):
+        code, text = cli("run", "log.clf.bz2", "--out", out, *FAST)
+        assert code == 2 and "current directory" in text, text
+    assert_kept(before, user_dir)
+    assert not staging_dirs(user_dir) and not staging_dirs(user_dir.parent)
+
+
+def test_a_dot_dot_stem_gets_a_safe_default_name(in_tmp: Path) -> None:
+    logs = in_tmp / "logs"
+    logs.mkdir()
+    shutil.copy(SAMPLE, logs / "...log.clf.bz2")  # the stem of this name used to be ".."
+    (in_tmp / "keep.txt").write_text("mine\n")
+    before = snapshot(in_tmp)
+    code, text = cli("run", logs / "...log.clf.bz2", *FAST)
+    assert code == 0, text
+    assert_kept(before, in_tmp)
+    assert is_output_dir(in_tmp / "out" / "run")
+    assert safe_name("..") == safe_name(".") == safe_name("") == "run"
+    assert safe_name(".hidden") == "hidden" and safe_name("a/b\x00c") == "a_b_c"
+
+
+def test_out_a_file_or_inside_a_file_is_refused_before_any_work(tmp_path: Path) -> None:
+    f = tmp_path / "file.txt"
+    f.write_text("mine\n")
+    before = snapshot(tmp_path)
+    for out, why in ((f, "is a file"), (f / "sub", "inside")):
+        t0 = time.perf_counter()
+        code, text = cli("run", SAMPLE, "--out", out, "--no-figures", "-q")  # the whole log: refused first
+        assert code == 2 and why in text, text
+        assert time.perf_counter() - t0 < 30.0  # not after a replay of the whole log
+    assert_kept(before, tmp_path)
+
+
+def test_a_non_empty_folder_gndreplay_did_not_write_is_refused(tmp_path: Path) -> None:
+    d = tmp_path / "results"
+    d.mkdir()
+    (d / "thesis.tex").write_text("mine\n")
+    before = snapshot(tmp_path)
+    for extra in ([], ["--overwrite"]):
+        code, text = cli("run", SAMPLE, "--out", d, *extra, *FAST)
+        assert code == 2 and RUN_MARKER in text, text
+    assert_kept(before, tmp_path)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert cli("run", SAMPLE, "--out", empty, *FAST)[0] == 0 and is_output_dir(empty)
+
+
+def test_an_earlier_run_is_kept_unless_overwrite(tmp_path: Path) -> None:
+    out = tmp_path / "runs" / "aces"
+    assert cli("run", SAMPLE, "--out", out, *FAST)[0] == 0
+    first = snapshot(out)
+    assert cli("run", SAMPLE, "--out", out, *FAST)[0] == 0  # beside it, not over it
+    assert_kept(first, out)
+    assert is_output_dir(out.with_name("aces-2"))
+    assert resolve_output_dir(out) == out.with_name("aces-3")
+    (out / "commands.csv").write_text("edited\n")  # gndreplay's own file: --overwrite may replace it
+    assert cli("run", SAMPLE, "--out", out, "--overwrite", *FAST)[0] == 0
+    assert (out / "commands.csv").read_text().startswith("t,v,")
+    (out / "my-notes.txt").write_text("mine\n")  # a file the user added: never deleted
+    before = snapshot(tmp_path)
+    code, text = cli("run", SAMPLE, "--out", out, "--overwrite", *FAST)
+    assert code == 2 and "my-notes.txt" in text
+    assert_kept(before, tmp_path)
+    assert not staging_dirs(out.parent)
+
+
+def test_figures_drawn_later_by_report_may_be_overwritten(tmp_path: Path) -> None:
+    out = tmp_path / "r"
+    assert cli("run", SAMPLE, "--out", out, "--until", "2", "-q", "--no-figures")[0] == 0
+    assert cli("report", out)[0] == 0  # adds the figures and report.md to the marker
+    assert "report.md" in (out / RUN_MARKER).read_text().splitlines()
+    assert cli("run", SAMPLE, "--out", out, "--overwrite", *FAST)[0] == 0
+    assert not (out / "report.md").exists() and not out.with_name("r-2").exists()
+
+
+def test_check_output_dir_api(tmp_path: Path) -> None:
+    (tmp_path / "log.clf").write_text("x\n")
+    with pytest.raises(OutputError, match="contains the input"):
+        check_output_dir(tmp_path, inputs=[tmp_path / "log.clf"])
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    with pytest.raises(OutputError, match="inside the input folder"):
+        check_output_dir(bag / "out", inputs=[bag])
+    check_output_dir(tmp_path / "new" / "deeper")  # a new folder: fine, nothing created
+    assert not (tmp_path / "new").exists()
+
+
+def test_format_stamp_is_exact() -> None:
+    assert format_stamp(1_103_939_430_181_894_000) == "1103939430.181894000"
+    assert format_stamp(0) == "0.000000000" and format_stamp(-1) == "-0.000000001"
+
+
+# ---- staging: interrupted runs leave nothing ------------------------------------------------------------
+
+
+def test_staging_is_removed_on_an_exception_and_published_on_success(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt), staging_dir(out) as tmp:
+        (tmp / "a.txt").write_text("half\n")
+        raise KeyboardInterrupt
+    assert not out.exists() and not staging_dirs(tmp_path)
+    with staging_dir(out) as tmp:
+        (tmp / "a.txt").write_text("whole\n")
+    assert (out / "a.txt").read_text() == "whole\n" and is_output_dir(out)
+    assert "a.txt" in (out / RUN_MARKER).read_text().splitlines()
+
+
+def test_interrupt_while_drawing_figures_leaves_no_run_directory(tmp_path: Path) -> None:
+    class Interrupting:
+        def add_scan(self, tick: object, pose: object) -> None: ...
+        def add_result(self, tick: object, result: object, grid: object) -> None: ...
+        def abort(self) -> None: ...
+        def finish(self, run_dir: Path) -> None:
+            (run_dir / "fig_model.png").write_bytes(b"half a figure")
+            raise KeyboardInterrupt
+
+    out = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        run_log(SAMPLE, PRESETS["wheelchair"], out, options=RunOptions(until_s=2.0), sinks=[Interrupting()])
+    assert not out.exists() and not staging_dirs(tmp_path)
+
+
+def test_stale_staging_of_a_dead_process_only_is_removed(tmp_path: Path) -> None:
+    proc = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                          text=True, check=True)
+    dead = int(proc.stdout)
+    from gndreplay.fsutil import _host
+
+    def fake(pid: int, marked: bool) -> Path:
+        d = tmp_path / f"{TMP_PREFIX}{_host()}-{pid}-abcd1234"
+        d.mkdir()
+        (d / "commands.csv").write_text("x\n")
+        if marked:
+            (d / RUN_MARKER).write_text("")
+        return d
+
+    stale, alive, foreign = fake(dead, True), fake(os.getpid(), True), fake(dead + 1_000_000, False)
+    assert remove_stale_staging(tmp_path) == [stale]
+    assert not stale.exists() and alive.exists() and foreign.exists()
+
+
+def _spawn_run(out: Path, tmpdir: Path, *extra: str) -> subprocess.Popen[bytes]:
+    env = {**os.environ, "TMPDIR": str(tmpdir), "MPLBACKEND": "Agg"}
+    code = "from gndreplay.cli import main; main()"
+    return subprocess.Popen([sys.executable, "-c", code, "run", str(SAMPLE), "--out", str(out), "-q",
+                             "--mcap", *extra], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+
+
+def _wait_for_ticks(parent: Path, proc: subprocess.Popen[bytes], timeout_s: float = 120.0) -> Path:
+    """Wait until the run streams (its staging directory has commands.csv with rows); return it."""
+    t_end = time.monotonic() + timeout_s
+    while time.monotonic() < t_end:
+        for d in staging_dirs(parent):
+            cmd = d / "commands.csv"
+            if cmd.is_file() and cmd.stat().st_size > 2000:
+                return d
+        assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+        time.sleep(0.05)
+    proc.kill()
+    raise AssertionError("the run never started streaming")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_killed_run_leaves_nothing_behind_after_the_next_run(tmp_path: Path, sig: signal.Signals) -> None:
+    parent, tmpdir = tmp_path / "runs", tmp_path / "tmpdir"
+    parent.mkdir()
+    tmpdir.mkdir()
+    (parent / "mine.txt").write_text("mine\n")
+    before = snapshot(tmp_path)
+    out = parent / "office"
+    proc = _spawn_run(out, tmpdir)
+    staged = _wait_for_ticks(parent, proc)
+    proc.send_signal(sig)
+    code = proc.wait(timeout=60)
+    assert code == -sig or code == 128 + sig, proc.stderr.read() if proc.stderr else code
+    if sig == signal.SIGTERM:  # Python saw it: the staging directory is already gone
+        assert not staged.exists()
+    assert not out.exists()
+    assert list(tmpdir.iterdir()) == []  # the MCAP is staged inside the run's staging directory
+    assert cli("run", SAMPLE, "--out", out, *FAST)[0] == 0  # the next run cleans a killed run's leftovers
+    assert not staging_dirs(parent) and is_output_dir(out)
+    assert_kept(before, tmp_path)

@@ -1,0 +1,272 @@
+"""Tunnel planner (wheelchair paper, Fig. 3) on grids with known answers, for both presets' robots."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from gndreplay.pipeline.cspace import free_cspace
+from gndreplay.pipeline.model import FREE, OCCUPIED
+from gndreplay.pipeline.nf1 import Nf1Params, _visible, plan
+from gndreplay.pipeline.tunnel import TunnelParams, TunnelPlanner, tunnel_plan
+from gndreplay.robot import WHEELCHAIR_ROBOT, XR4000_ROBOT, RobotConfig
+from gndreplay.types import Flag
+
+CELL_M = 0.05
+N = 240  # 12 m x 12 m, robot cell in the middle
+ROBOTS = {"wheelchair": WHEELCHAIR_ROBOT, "xr4000": XR4000_ROBOT}
+
+
+def to_cell(x: float, y: float) -> tuple[int, int]:
+    """World point (robot at the origin) -> (row, col); row along y, col along x."""
+    return N // 2 + round(y / CELL_M), N // 2 + round(x / CELL_M)
+
+
+def goal_rc(x: float, y: float) -> tuple[float, float]:
+    r, c = to_cell(x, y)
+    return r + 0.5, c + 0.5  # corner coordinates: the centre of the goal cell
+
+
+def empty() -> np.ndarray:
+    return np.full((N, N), FREE, dtype=np.uint8)
+
+
+def wall(g: np.ndarray, x0: float, y0: float, x1: float, y1: float) -> None:
+    """Mark the cells along a segment OCCUPIED (dense sampling: an 8-connected line at least)."""
+    n = int(max(abs(x1 - x0), abs(y1 - y0)) / CELL_M * 3) + 2
+    for s in np.linspace(0.0, 1.0, n):
+        r, c = to_cell(x0 + s * (x1 - x0), y0 + s * (y1 - y0))
+        if 0 <= r < N and 0 <= c < N:
+            g[r, c] = OCCUPIED
+
+
+def wall_with_passage(
+    g: np.ndarray, x: float, y_lo: float, y_hi: float, centre_y: float, width_m: float
+) -> None:
+    """A wall along x = const from y_lo to y_hi with a passage whose edge cell centres are ``width_m``
+    apart (how a laser marks two surfaces width_m apart), centred on centre_y."""
+    c = to_cell(x, 0.0)[1]
+    gap = round(width_m / CELL_M)
+    lo = to_cell(0.0, centre_y)[0] - gap // 2  # occupied edge cell; the other edge is lo + gap
+    r0, r1 = to_cell(0.0, y_lo)[0], to_cell(0.0, y_hi)[0]
+    g[r0 : lo + 1, c] = OCCUPIED
+    g[lo + gap : r1 + 1, c] = OCCUPIED
+
+
+def planner(robot: RobotConfig) -> TunnelPlanner:
+    return TunnelPlanner(
+        TunnelParams(), cell_m=CELL_M, inner_radius_m=robot.inner_radius_m, unknown_is_free=True
+    )
+
+
+def tunnel_is_free(g: np.ndarray, robot: RobotConfig, waypoints: np.ndarray) -> bool:
+    free = free_cspace(g, cell_m=CELL_M, inflate_m=robot.inner_radius_m + TunnelParams().margin_m)
+    w = waypoints.astype(int)
+    return all(_visible(free, *a, *b) for a, b in itertools.pairwise(w))
+
+
+def crossing_y(waypoints: np.ndarray, x: float) -> list[float]:
+    """y [m] where the polyline crosses the vertical line at x."""
+    c = to_cell(x, 0.0)[1]
+    out = []
+    for (r0, c0), (r1, c1) in itertools.pairwise(waypoints):
+        if (c0 - c) * (c1 - c) <= 0 and c0 != c1:
+            r = r0 + (r1 - r0) * (c - c0) / (c1 - c0)
+            out.append((r - N // 2) * CELL_M)
+    return out
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_goal_in_sight_is_one_tunnel(name: str) -> None:
+    robot = ROBOTS[name]
+    res = planner(robot).plan(empty(), to_cell(0, 0), goal_rc(3.0, 1.0))
+    assert res.ok and res.flag == Flag.NONE
+    assert res.nodes_expanded == 1
+    assert res.waypoints_cells.tolist() == [list(to_cell(0, 0)), list(to_cell(3.0, 1.0))]
+    assert res.direction_rad == pytest.approx(math.atan2(1.0, 3.0), abs=0.01)
+    assert res.width_m == pytest.approx(2 * (robot.inner_radius_m + TunnelParams().margin_m))
+    assert res.length_m == pytest.approx(math.hypot(3.0, 1.0), abs=0.05)
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_u_shaped_obstacle_course_points_out_of_the_u(name: str) -> None:
+    """Fig. 3b: the robot inside a U whose bottom lies between it and the goal."""
+    robot = ROBOTS[name]
+    g = empty()
+    wall(g, 1.2, -1.5, 1.2, 1.5)  # bottom of the U, between robot and goal
+    wall(g, -1.5, -1.5, 1.2, -1.5)
+    wall(g, -1.5, 1.5, 1.2, 1.5)
+    res = planner(robot).plan(g, to_cell(0, 0), goal_rc(3.5, 0.0))
+    assert res.ok
+    assert math.cos(res.direction_rad) < -0.5  # backwards, towards the mouth of the U
+    assert res.waypoints_cells[-1].tolist() == list(to_cell(3.5, 0.0))
+    assert tunnel_is_free(g, robot, res.waypoints_cells)
+    # the first tunnel leaves the U through its mouth: its end lies beyond the mouth (x < -1.5)
+    assert (res.waypoints_cells[1, 1] - N // 2) * CELL_M < -1.5
+    assert not [y for y in crossing_y(res.waypoints_cells, 1.2) if abs(y) <= 1.5]
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+@pytest.mark.parametrize(("extra_m", "taken"), [(-0.1, False), (0.0, False), (0.1, True)])
+@pytest.mark.parametrize("robot_xy", [(0.0, 0.0), (0.0, -1.0), (-2.0, 1.0)])
+def test_passage_taken_only_when_the_robot_fits(
+    name: str, extra_m: float, taken: bool, robot_xy: tuple[float, float]
+) -> None:
+    """A wall across the way with a passage at y = 0 (the shortest way) and a wide opening beyond y = 2.5:
+    a passage robot width + 0.1 m is taken, also seen at an angle from off its axis; a narrower one is not,
+    even though it is shorter."""
+    robot = ROBOTS[name]
+    g = empty()
+    wall_with_passage(g, 1.5, -6.0, 2.5, 0.0, 2 * robot.inner_radius_m + extra_m)
+    start = to_cell(*robot_xy)
+    res = planner(robot).plan(g, start, goal_rc(3.5, 0.0))
+    assert res.ok
+    assert tunnel_is_free(g, robot, res.waypoints_cells)
+    ys = crossing_y(res.waypoints_cells, 1.5)
+    assert len(ys) == 1
+    if taken:
+        assert abs(ys[0]) < 0.3
+        first = res.waypoints_cells[1] - res.waypoints_cells[0]
+        assert abs(math.atan2(-robot_xy[1], 1.5 - robot_xy[0]) - math.atan2(*first)) < math.radians(15)
+    else:
+        assert ys[0] > 2.5  # around the wall's end; the course points past it
+        assert res.direction_rad > math.atan2(2.5 - robot_xy[1], 1.5 - robot_xy[0])
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_closed_door_turns_the_course_backwards(name: str) -> None:
+    """Fig. 3c-d: in a corridor towards a door; when the door closes the course points back to the exit."""
+    robot = ROBOTS[name]
+    g = empty()
+    wall(g, -2.5, -0.8, 2.0, -0.8)
+    wall(g, -2.5, 0.8, 2.0, 0.8)
+    p = planner(robot)
+    opened = p.plan(g, to_cell(0, 0), goal_rc(4.0, 0.0))
+    assert opened.ok and abs(opened.direction_rad) < math.radians(10)
+    wall(g, 2.0, -0.8, 2.0, 0.8)  # the door closes
+    closed = p.plan(g, to_cell(0, 0), goal_rc(4.0, 0.0))
+    assert closed.ok
+    assert abs(closed.direction_rad) > math.radians(150)  # backwards, along the corridor
+    assert tunnel_is_free(g, robot, closed.waypoints_cells)
+    assert closed.nodes_expanded > opened.nodes_expanded
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_enclosed_goal_is_not_reachable(name: str) -> None:
+    robot = ROBOTS[name]
+    g = empty()
+    for a, b in [((2.0, -1.0), (4.0, -1.0)), ((4.0, -1.0), (4.0, 1.0)), ((4.0, 1.0), (2.0, 1.0)),
+                 ((2.0, 1.0), (2.0, -1.0))]:
+        wall(g, *a, *b)
+    res = planner(robot).plan(g, to_cell(0, 0), goal_rc(3.0, 0.0))
+    assert not res.ok and res.flag == Flag.PLANNER_NO_PATH  # the search ran out of nodes, not of budget
+    assert 1 < res.nodes_expanded < TunnelParams().max_expansions
+    assert res.waypoints_cells.shape == (0, 2) and math.isnan(res.direction_rad)
+    free = free_cspace(g, cell_m=CELL_M, inflate_m=robot.inner_radius_m + TunnelParams().margin_m)
+    assert plan(free, to_cell(0, 0), goal_rc(3.0, 0.0), cell_m=CELL_M).flag == Flag.PLANNER_NO_PATH
+
+
+def test_goal_in_obstacle_and_expansion_budget() -> None:
+    g = empty()
+    wall(g, 2.0, -6.0, 2.0, 6.0)  # a wall across the whole grid: the goal behind it is cut off
+    p = planner(WHEELCHAIR_ROBOT)
+    assert p.plan(g, to_cell(0, 0), goal_rc(2.0, 0.0)).flag == Flag.GOAL_IN_OBSTACLE
+    tight = TunnelPlanner(
+        TunnelParams(max_expansions=1), cell_m=CELL_M, inner_radius_m=0.35, unknown_is_free=True
+    )
+    g2 = empty()
+    wall(g2, 1.5, -2.0, 1.5, 2.0)
+    res = tight.plan(g2, to_cell(0, 0), goal_rc(3.0, 0.0))
+    assert res.flag == Flag.PLANNER_TIMEOUT and res.nodes_expanded == 1
+    assert planner(WHEELCHAIR_ROBOT).plan(g2, to_cell(0, 0), goal_rc(3.0, 0.0)).ok
+
+
+def test_robot_in_c_obstacle_escapes_first() -> None:
+    """The robot 0.2 m from a wall (closer than its half width): the chain starts with an escape segment."""
+    g = empty()
+    wall(g, -3.0, 0.2, 3.0, 0.2)
+    res = planner(WHEELCHAIR_ROBOT).plan(g, to_cell(0, 0), goal_rc(3.0, -1.0))
+    assert res.ok and res.n_escape == 1
+    assert res.path_cells[0].tolist() == list(to_cell(0, 0))
+    first = res.waypoints_cells[1] - res.waypoints_cells[0]
+    assert first[0] < 0  # away from the wall (towards -y)
+    assert np.hypot(*first) * CELL_M <= TunnelParams().escape_m + 1e-9
+
+
+def test_goal_outside_the_grid_is_projected() -> None:
+    res = planner(XR4000_ROBOT).plan(empty(), to_cell(0, 0), goal_rc(30.0, 0.0))
+    assert res.ok and res.goal_projected and res.goal_cell == (N // 2, N - 1)
+    assert abs(res.direction_rad) < 1e-9
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_tunnels_are_free_and_imply_an_nf1_path(seed: int) -> None:
+    """Random clutter: every tunnel of a found chain is free in C-space, the chain runs from the robot to
+    the goal, and then NF1 (complete on the same C-space) finds a path too."""
+    rng = np.random.default_rng(seed)
+    g = empty()
+    for _ in range(25):
+        x, y = rng.uniform(-5.5, 5.5, 2)
+        w, h = rng.uniform(0.2, 2.0, 2)
+        r0, c0 = to_cell(x, y)
+        g[max(r0, 0) : r0 + round(h / CELL_M), max(c0, 0) : c0 + round(w / CELL_M)] = OCCUPIED
+    robot = ROBOTS["wheelchair" if seed % 2 else "xr4000"]
+    radius = robot.inner_radius_m + TunnelParams().margin_m
+    free = free_cspace(g, cell_m=CELL_M, inflate_m=radius)
+    cells = np.argwhere(free)
+    for _ in range(5):
+        s = tuple(cells[rng.integers(len(cells))])
+        goal = cells[rng.integers(len(cells))] + 0.5
+        res = tunnel_plan(g, s, goal, cell_m=CELL_M, radius_m=radius)
+        nf1 = plan(free, s, goal, cell_m=CELL_M, params=Nf1Params())
+        if res.ok:
+            assert nf1.ok
+            assert res.waypoints_cells[0].tolist() == list(s)
+            assert res.waypoints_cells[-1].tolist() == np.floor(goal).tolist()
+            assert tunnel_is_free(g, robot, res.waypoints_cells)
+            assert res.length_m >= math.dist(s, np.floor(goal)) * CELL_M - 1e-9
+        else:
+            assert res.flag in (Flag.PLANNER_NO_PATH, Flag.PLANNER_TIMEOUT)
+
+
+def test_params_are_validated() -> None:
+    with pytest.raises(ValueError, match="spacing_m"):
+        TunnelParams(spacing_m=0.0)
+    with pytest.raises(ValueError, match="n_rays"):
+        TunnelParams(n_rays=4)
+    with pytest.raises(ValueError, match="grid_cells must be"):
+        tunnel_plan(np.ones((5, 5), dtype=bool), (2, 2), (3.5, 3.5), cell_m=CELL_M, radius_m=0.3)
+    assert dataclasses.replace(TunnelParams(), n_rays=720).n_rays == 720
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+@pytest.mark.parametrize("angle_deg", [30, 45, 60])
+@pytest.mark.parametrize("extra_m", [0.1, 0.15])
+def test_oblique_passage_taken_whenever_nf1_goes_through(name: str, angle_deg: int, extra_m: float) -> None:
+    """A passage in a wall at an angle to the cells: where the cells leave it open (NF1 on the same C-space
+    goes through), the tunnel goes through it as well."""
+    robot = ROBOTS[name]
+    a = math.radians(angle_deg)
+    ux, uy = -math.sin(a), math.cos(a)  # along the wall
+    half = robot.inner_radius_m + extra_m / 2
+    g = empty()
+    wall(g, 1.5 + ux * half, uy * half, 1.5 + ux * 8, uy * 8)
+    wall(g, 1.5 - ux * half, -uy * half, 1.5 - ux * 2.5, -uy * 2.5)
+    goal = goal_rc(1.5 + 2 * math.cos(a), 2 * math.sin(a))
+
+    def through(cells_rc: np.ndarray) -> bool:
+        xy = (np.asarray(cells_rc, dtype=float) - N // 2) * CELL_M
+        dense = np.concatenate([np.linspace(p, q, 20) for p, q in itertools.pairwise(xy)])
+        return bool(np.min(np.hypot(dense[:, 1] - 1.5, dense[:, 0])) < 0.2)
+
+    free = free_cspace(g, cell_m=CELL_M, inflate_m=robot.inner_radius_m + TunnelParams().margin_m)
+    nf1 = plan(free, to_cell(0, 0), goal, cell_m=CELL_M)
+    res = planner(robot).plan(g, to_cell(0, 0), goal)
+    assert nf1.ok and res.ok
+    assert tunnel_is_free(g, robot, res.waypoints_cells)
+    if through(nf1.path_cells):
+        assert through(res.waypoints_cells)
