@@ -646,6 +646,7 @@ def simulate(
         typer.Option("--preset", help="wheelchair or xr4000 (default: the scenario's).", show_default=False),
     ] = None,
     config: Annotated[Path | None, typer.Option("--config", help="TOML overriding the preset.")] = None,
+    planner: PlannerOpt = None,
     seed: Annotated[
         int, typer.Option("--seed", help="Seed of every random draw (the same seed gives the same bytes).")
     ] = 0,
@@ -718,7 +719,7 @@ def simulate(
         if not 0.0 <= latency_s < 10.0:
             raise typer.BadParameter(f"--latency must be in [0, 10) s, got {latency!r}")
     spec = resolve_scenario(scenario)
-    cfg = load_config(config, preset_name=preset_name or spec.preset)
+    cfg = _with_planner(load_config(config, preset_name=preset_name or spec.preset), planner)
     out_dir = out if out is not None else Path("out") / "sim" / f"{spec.name}-{cfg.preset}-{seed}"
     result = simulate_scenario(spec, out_dir=out_dir, cfg=cfg, seed=seed, latency_s=latency_s,
                                perfect_odometry=perfect_odometry, time_limit_s=time_limit, figures=figures,

@@ -211,6 +211,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (LaserConfig, "fov_deg"): _pos(360.0),
     (LaserConfig, "max_range_m"): _pos(_RANGE_M),
     (LaserConfig, "noise_std_m"): _nonneg(10.0),
+    (LaserConfig, "dropout_prob"): Range(0.0, 1.0, hi_open=True),
     (LaserConfig, "period_s"): _pos(_TIME),
     # grid: 4 to 4000 cells a side (4000^2 cells and the planner's float arrays still fit in memory)
     (GridParams, "size_cells"): _count(4, 4000),

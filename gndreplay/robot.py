@@ -79,6 +79,8 @@ class LaserConfig:
         fov_deg: field of view [deg].
         max_range_m: readings at or beyond this are no-returns [m].
         noise_std_m: standard deviation of the Gaussian range noise [m].
+        dropout_prob: probability that a beam returns nothing although it hits something (real lasers
+            drop single beams on dark or glancing surfaces; the model builder must not clear through them).
         period_s: time between scans [s].
 
     Allowed ranges: ``gndreplay.config.RANGES``.
@@ -88,6 +90,7 @@ class LaserConfig:
     fov_deg: float = 180.0
     max_range_m: float = 32.0
     noise_std_m: float = 0.01
+    dropout_prob: float = 0.002
     period_s: float = 0.2
 
 

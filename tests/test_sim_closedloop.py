@@ -385,3 +385,10 @@ def test_longest_stall_known_answer() -> None:
     # the longest stretch starts at t = 0 and ends when x reaches 0.2 m, at 8 s; the turn (45 deg takes
     # 7.9 s) is cut by the end of the run after 4 s
     assert longest_stall(t, poses) == pytest.approx(8.0, abs=0.011)
+
+
+def test_cli_office_still_writes_carmen_logs_only(tmp_path: Path) -> None:
+    # `simulate office` keeps its scripted CARMEN path (the sample log); a wrong suffix is refused early
+    r = CliRunner().invoke(app, ["simulate", "office", "--out", str(tmp_path / "office.txt")])
+    assert r.exit_code == 2 and "simulated logs are written as CARMEN" in r.stderr
+    assert not (tmp_path / "office.txt").exists()

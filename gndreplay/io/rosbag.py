@@ -14,8 +14,8 @@
   candidates.
 
 - Values: stamps, poses, twists, bearings and range_max outside the bounds of :mod:`.base` make a message
-  malformed (skipped and counted; an error with ``strict``); a ROS2 bag's ``metadata.yaml`` is type-checked
-  before rosbags (which trusts it) opens the bag.
+  malformed (skipped and counted; an error with ``strict``); what rosbags read from a bag's index or
+  ``metadata.yaml`` (topic names, types, counts) is type-checked before use.
 
 rosbags' storage readers (the ones AnyReader wraps) give the raw messages; the few fields used are decoded
 directly by :mod:`.rosraw` (about 4x faster than rosbags' generic deserialiser, no per-bag code generation,
@@ -223,73 +223,21 @@ def rosbags_errors() -> tuple[type[BaseException], ...]:
     return _ROSBAGS_ERRORS
 
 
-_METADATA_TYPES: dict[str, tuple[type, ...]] = {
-    "version": (int,),
-    "storage_identifier": (str,),
-    "relative_file_paths": (list,),
-    "duration": (dict,),
-    "starting_time": (dict,),
-    "message_count": (int,),
-    "topics_with_message_count": (list,),
-    "compression_format": (str, type(None)),
-    "compression_mode": (str, type(None)),
-    "files": (list, type(None)),
-}
-_TOPIC_TYPES: dict[str, tuple[type, ...]] = {"name": (str,), "type": (str,), "serialization_format": (str,)}
-
-
-def check_metadata(folder: Path) -> None:
-    """Check the types and ranges of the ``metadata.yaml`` values rosbags relies on (it trusts them).
+def check_index(path: Path, reader: Any) -> None:
+    """Check the types and ranges of what rosbags read from a bag's index or ``metadata.yaml`` (it trusts
+    them: a topic named ``1e300`` is a float, a message count a mapping).
 
     Raises:
-        LogFormatError: unreadable YAML, or a key of the wrong type / out of range (the message names it).
+        LogFormatError: a topic name / type that is not text, or a message count that is not a count.
     """
-    from ruamel.yaml import YAML
-    from ruamel.yaml.error import YAMLError
-
-    path = folder / "metadata.yaml"
-    try:
-        doc = YAML(typ="safe").load(path.read_bytes())
-    except (YAMLError, OSError, ValueError, TypeError, RecursionError) as err:
-        raise LogFormatError(f"{path}: not readable YAML: {_describe_error(err)}") from err
-
-    def bad(key: str, why: str) -> LogFormatError:
-        return LogFormatError(f"{path}: key {key}: {why}")
-
-    def kind(v: object) -> str:
-        return "a list" if isinstance(v, list) else ("a mapping" if isinstance(v, dict) else repr(v)[:40])
-
-    info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
-    if not isinstance(info, dict):
-        raise bad("rosbag2_bagfile_information", "missing or not a mapping")
-    for key, types in _METADATA_TYPES.items():
-        if key in info and (not isinstance(info[key], types) or isinstance(info[key], bool)):
-            raise bad(key, f"expected {' or '.join(t.__name__ for t in types)}, got {kind(info[key])}")
-    ints = {
-        "message_count": info.get("message_count", 0),
-        "duration.nanoseconds": (info.get("duration") or {}).get("nanoseconds", 0),
-        "starting_time.nanoseconds_since_epoch": (info.get("starting_time") or {}).get(
-            "nanoseconds_since_epoch", 0
-        ),
-    }
-    for i, t in enumerate(info.get("topics_with_message_count") or []):
-        meta = t.get("topic_metadata") if isinstance(t, dict) else None
-        if not isinstance(meta, dict):
-            raise bad(f"topics_with_message_count[{i}]", "expected a mapping with topic_metadata")
-        where = f"topics_with_message_count[{i}].topic_metadata"
-        for key, types in _TOPIC_TYPES.items():
-            if key in meta and not isinstance(meta[key], types):
-                raise bad(f"{where}.{key}", f"got {kind(meta[key])}")
-        qos = meta.get("offered_qos_profiles", [])
-        if not isinstance(qos, (str, list)):
-            raise bad(f"{where}.offered_qos_profiles", f"got {kind(qos)}")
-        ints[f"topics_with_message_count[{i}].message_count"] = t.get("message_count", 0)
-    for i, f in enumerate(info.get("relative_file_paths") or []):
-        if not isinstance(f, str):
-            raise bad(f"relative_file_paths[{i}]", f"expected a file name, got {kind(f)}")
-    for key, v in ints.items():
-        if not isinstance(v, int) or isinstance(v, bool) or not 0 <= v < 2**63:
-            raise bad(key, f"expected a count or time in ns, got {kind(v)}")
+    where = f"{path / 'metadata.yaml'}" if path.is_dir() else f"{path}: bag index"
+    for i, c in enumerate(reader.connections):
+        if not (isinstance(c.topic, str) and isinstance(c.msgtype, str)):
+            what = f"name {str(c.topic)[:40]!r} and type {str(c.msgtype)[:60]!r}"
+            raise LogFormatError(f"{where}: topic {i + 1}: {what} must be text")
+        n = c.msgcount
+        if not isinstance(n, int) or isinstance(n, bool) or not 0 <= n < 2**63:
+            raise LogFormatError(f"{where}: topic {c.topic}: message_count {str(n)[:40]!r} is not a count")
 
 
 class RosbagReader:
@@ -339,8 +287,6 @@ class RosbagReader:
             else:
                 from rosbags.rosbag2 import Reader as Reader2
 
-                if self.path.is_dir():
-                    check_metadata(self.path)
                 self._reader = Reader2(self.path)
             self._reader.open()
         except rosbags_errors() as err:
@@ -358,6 +304,7 @@ class RosbagReader:
     def _setup(
         self, scan_topic: str | None, odom_topic: str | None, cmd_topic: str | None, truth_topic: str | None
     ) -> None:
+        check_index(self.path, self._reader)
         topics: dict[str, _Topic] = {}
         for c in self._reader.connections:
             t = topics.get(c.topic)

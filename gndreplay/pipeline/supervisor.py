@@ -165,7 +165,7 @@ _SWEEP_MAX_POSES = 48
 
 
 def _sweep_touches(
-    points_xy: NDArray[np.float64], margin_m: NDArray[np.float64] | float, v_mps: float, vy_mps: float,
+    points_xy: NDArray[np.float64], margin_m: float, v_mps: float, vy_mps: float,
     w_radps: float, robot: RobotConfig, params: SupervisorParams,
 ) -> bool:
     """True when the footprint, moved along the constant-twist arc for ``braking_time_s``, comes within
@@ -174,7 +174,13 @@ def _sweep_touches(
     if points_xy.shape[0] == 0:
         return False
     t_end = braking_time_s(v_mps, vy_mps, w_radps, robot, params)
-    reach = (math.hypot(v_mps, vy_mps) + abs(w_radps) * robot.outer_radius_m) * t_end
+    travel = math.hypot(v_mps, vy_mps) * t_end
+    # only points the moving footprint's enclosing circle can reach (the centre moves at most ``travel``)
+    bound = robot.outer_radius_m + travel + margin_m
+    points_xy = points_xy[np.einsum("ij,ij->i", points_xy, points_xy) <= bound * bound]
+    if points_xy.shape[0] == 0:
+        return False
+    reach = travel + abs(w_radps) * robot.outer_radius_m * t_end
     n = min(max(math.ceil(reach / _SWEEP_STEP_M), 1), _SWEEP_MAX_POSES)
     ts = np.linspace(0.0, t_end, n + 1)
     th = w_radps * ts
@@ -283,8 +289,9 @@ def escape_command(
 ) -> tuple[float, bool]:
     """The trap escape: slow straight motion forward, else backward, where the raw scan shows room.
 
-    Returns (v [m/s], possible). The laser sees only the front half on the wheelchair, so "backward"
-    relies on the footprint check alone (the model's memory is not used by the reflexive loop).
+    Returns (v [m/s], possible). The laser sees only the front half on the wheelchair, so "backward" is
+    only as good as the scan; the stack also runs every escape tick through ``safe_command`` (scan and
+    grid) and ends the escape when it would touch.
     """
     v = params.escape_v_frac * robot.vmax_mps
     for direction in (1.0, -1.0):

@@ -39,7 +39,7 @@ from ..pipeline.model import RobotCentredGrid
 from ..pipeline.stack import MODULES, TickResult
 from ..types import Pose2D, Tick
 
-__all__ = ["MCAP_FILE", "TOPICS", "McapSink", "grid_to_occupancy"]
+__all__ = ["MCAP_FILE", "TOPICS", "McapSink", "RosMessages", "grid_to_occupancy"]
 
 MCAP_FILE = "results.mcap"
 TOPICS: dict[str, str] = {
@@ -67,7 +67,7 @@ def grid_to_occupancy(cells: NDArray[np.uint8]) -> NDArray[np.int8]:
     return _OCCUPANCY[c].ravel()
 
 
-class _Msgs:
+class RosMessages:
     """Planar ROS 2 message builders over a rosbags typestore; ``t`` is int ns."""
 
     def __init__(self, ts: Any) -> None:
@@ -201,7 +201,7 @@ class McapSink:
         self._tmp = Path(tempfile.mkdtemp(prefix="gndreplay-mcap-", dir=self.staging_dir))
         self._cleanup = weakref.finalize(self, shutil.rmtree, self._tmp, True)
         self._ts = get_typestore(Stores.ROS2_HUMBLE)
-        self._m = _Msgs(self._ts)
+        self._m = RosMessages(self._ts)
         writer = Writer(self._tmp / "results", version=9, storage_plugin=StoragePlugin.MCAP)
         if self.compress:
             writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)

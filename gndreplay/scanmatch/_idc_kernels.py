@@ -807,12 +807,11 @@ def _idc_polish(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, 
 def match_scan(kf_xy, kf_n, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend_m, seg_abs_m, seg_rel,
                gap_bins, normal_chord_m, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r,
                max_cp_bins, stride, mrp_every, polish_iter, w_t, w_r, pa, coarse_bins, coarse_step,
-               coarse_every, coarse_tol_abs, coarse_tol_rel, coarse_min_gain, coarse_margin):
+               coarse_every, coarse_tol_abs, coarse_tol_rel, coarse_min_gain):
     """The whole match in one call (one dispatch instead of four): render the reference at (ox, oy, oth),
     its segments, IDC from the prediction, then the point-to-line polish (``polish_iter`` > 0) or just the
-    quality of the IDC pose. With ``coarse_bins`` > 0, the correlative rotation search (coarse_rotation)
-    may start a second IDC in another basin; that one wins when its mean truncated pair distance is
-    ``coarse_margin`` lower.
+    quality of the IDC pose. With ``coarse_bins`` > 0, IDC starts from the rotation the correlative search
+    (coarse_rotation) prefers, when it agrees better than the prediction's by ``coarse_min_gain``.
 
     Returns (x, y, th, iterations, pairs, mean pair distance [m], 3x3 point-to-line information, smallest
     eigenvalue of its translational 2x2 block).
@@ -820,28 +819,16 @@ def match_scan(kf_xy, kf_n, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend
     ref_x, ref_y, ref_r, ref_a, ok, nxt = render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r,
                                                            blend_m, seg_abs_m, seg_rel, gap_bins)
     ex, ey, il, nx, ny, cover = segments(ref_x, ref_y, ok, nxt, normal_chord_m)
-    x, y, th, iters, pairs, resid, info = _idc_polish(
-        px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, 0.0, max_iter, win0,
-        win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every, polish_iter, w_t,
-        w_r)
+    th0 = 0.0
     if coarse_bins > 0:
-        # IDC only follows its bearing window: when the correlative search sees a better-agreeing rotation
-        # elsewhere in the window, IDC starts from there too and the match with more pairs wins
         th1, s1, s0 = coarse_rotation(pa, pr, ref_r, ok, coarse_bins, coarse_step, coarse_every,
                                       coarse_tol_abs, coarse_tol_rel)
-        if s1 >= s0 + coarse_min_gain and abs(_pm_pi(th1 - th)) > win_min:
-            x2, y2, t2, it2, p2, r2, i2 = _idc_polish(
-                px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, th1, max_iter,
-                win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every,
-                polish_iter, w_t, w_r)
-            iters += it2
-            # another basin than the prior's must be clearly better (a symmetric room has many equal ones):
-            # mean truncated pair distance (gate_min for an unpaired point) lower by coarse_margin
-            n = px.shape[0]
-            cost1 = (resid * pairs + gate_min * (n - pairs)) / n
-            cost2 = (r2 * p2 + gate_min * (n - p2)) / n
-            if cost2 < (1.0 - coarse_margin) * cost1:
-                x, y, th, pairs, resid, info = x2, y2, t2, p2, r2, i2
+        if s1 >= s0 + coarse_min_gain:
+            th0 = th1
+    x, y, th, iters, pairs, resid, info = _idc_polish(
+        px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, th0, max_iter, win0,
+        win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every, polish_iter, w_t,
+        w_r)
     # smallest eigenvalue of the symmetric 2x2 block [[a, b], [b, c]]
     a = info[0, 0]
     b = info[0, 1]

@@ -299,27 +299,40 @@ class IdcMatcher:
             self._still_n = 0
         iterations = 0
         outcomes: list[_Outcome] = []
+        plausible: list[_Outcome] = []  # accepted and near its own prior or near the odometry's prediction
         for h, (hyp, incr) in enumerate(priors[: max(compete, 1 + p.fallback_priors)]):
             out = self._match(px, py, pr, pa, _compose(hyp, sensor), incr)
-            if not fresh and not out.reason and self._suspicious(out.laser, _compose(hyp, sensor), incr):
-                # no odometry to ask (stalled): a match far from its own prior is not believed
-                out = out._replace(reason="correction too far from the prior (odometry stalled)")
             iterations += out.iterations
             outcomes.append(out)
+            if not out.reason:
+                if not self._suspicious(out.laser, _compose(hyp, sensor), incr) or (
+                        fresh and not self._suspicious(out.laser, odo_laser, priors[0][1])):
+                    plausible.append(out)
+                elif not fresh:  # no odometry to ask (stalled): a match far from its prior is not believed
+                    outcomes[-1] = out._replace(reason="correction too far from the prior (odometry "
+                                                       "stalled)")
             if out.iterations == 0:
                 break  # nothing to match (too few beams): another prior will not help
-            if h + 1 >= compete and any(not o.reason and o.pairs >= p.recheck_pair_ratio * self._last_pairs
-                                        and not (fresh and self._suspicious(o.laser, odo_laser, priors[0][1]))
-                                        for o in outcomes):
+            if h + 1 >= compete and any(o.pairs >= p.recheck_pair_ratio * self._last_pairs
+                                        for o in plausible):
                 break
+        if p.coarse_window_rad > 0.0 and not any(o.pairs >= p.recheck_pair_ratio * self._last_pairs
+                                                 for o in plausible):
+            # no plausible match with the usual overlap: the prior may be outside IDC's bearing window (a
+            # fast turn the odometry missed); start IDC where the correlative rotation search points
+            hyp, incr = priors[0]
+            out = self._match(px, py, pr, pa, _compose(hyp, sensor), incr, coarse=True)
+            iterations += out.iterations
+            outcomes.append(out)
+            if not out.reason and (not fresh or not self._suspicious(out.laser, odo_laser, incr)):
+                plausible.append(out)
         accepted = [o for o in outcomes if not o.reason]
-        # the accepted match with most pairs (then the smallest residual), else the first failure. Fallbacks
-        # only run when the first match failed or paired suspiciously few points, so a fallback far from
-        # odometry may win (CSAIL's odometry under-reports turns; requiring it to be near odometry too raised
-        # the median relation error over ten start scans from 0.054 to 0.070 m)
-        # the matches within the odometry's error model come first; a suspicious one is only taken (after the
-        # guard's second opinion) when no other hypothesis gives an unsuspicious match
-        plausible = [o for o in accepted if not (fresh and self._suspicious(o.laser, odo_laser, priors[0][1]))]
+        # the plausible match with most pairs (then the smallest residual), else the first failure. Fallbacks
+        # only run when the first match failed, was suspicious or paired suspiciously few points, so a
+        # fallback far from odometry may win (CSAIL's odometry under-reports turns; requiring it to be near
+        # odometry too raised the median relation error over ten start scans from 0.054 to 0.070 m). A match
+        # far from its prior and from the odometry is only taken when no other is plausible. Whichever wins,
+        # far from the odometry it needs the guard's second opinion
         pool = plausible or accepted
         res = min(pool, key=lambda o: (-o.pairs, o.residual_m)) if pool else outcomes[0]
         if fresh and not res.reason:
@@ -434,7 +447,7 @@ class IdcMatcher:
         corr = _compose(_inverse(odo_laser), res.laser)
         z_t, z_r = self._z(res.laser, odo_laser, incr)
         if self._suspicious(res.laser, odo_laser, incr):
-            near = self._match(px, py, pr, pa, odo_laser, incr, p.guard_window_rad, False)
+            near = self._match(px, py, pr, pa, odo_laser, incr, p.guard_window_rad)
             extra = near.iterations
             d = _compose(_inverse(near.laser), res.laser)
             # the near match went most of the way from the odometry to the far one: the map agrees with it
@@ -459,7 +472,7 @@ class IdcMatcher:
         return res, extra
 
     def _match(self, px: F64, py: F64, pr: F64, pa: F64, laser_prior: P3, incr: P3,
-               win0_rad: float | None = None, coarse: bool = True) -> _Outcome:
+               win0_rad: float | None = None, coarse: bool = False) -> _Outcome:
         """Align the scan with the map rendered at ``laser_prior`` and apply the acceptance gates.
 
         The correction gate accepts a pose near the prior itself or near ``gate`` (the laser pose that fresh
@@ -486,7 +499,7 @@ class IdcMatcher:
             p.normal_chord_m, p.max_iterations, win0, p.win_tau, p.win_min_rad, p.gate0_m, p.gate_min_m,
             p.tol_m, p.tol_rad, p.max_cp_bins, stride, max(1, n // (stride * p.mrp_points)),
             p.polish_iterations, w_t, w_r, pa, coarse_bins, coarse_step, max(1, n // p.coarse_points),
-            p.coarse_tol_m, p.coarse_tol_rel, p.coarse_min_gain, p.guard_gain)
+            p.coarse_tol_m, p.coarse_tol_rel, p.coarse_min_gain)
         est = _compose(laser_prior, (x, y, th))
         if pairs < need:
             return _Outcome(est, pairs, resid, iters, f"too few pairs: {pairs} < {need}")

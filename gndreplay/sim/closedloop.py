@@ -60,7 +60,6 @@ class SimParams:
     Attributes:
         dt_s: longest piece of constant velocity [s] (acceleration is applied piece by piece).
         contact_m: a clearance at or below this is a contact [m].
-        dropout_prob: probability that a beam returns nothing although it hits something.
         resolution_m: ranges are rounded to this (the SICK reports millimetres).
         odometry: wheel odometry errors.
         t0_ns: clock of the first scan (the log's time stamps).
@@ -69,7 +68,6 @@ class SimParams:
 
     dt_s: float = 0.01
     contact_m: float = 1e-4
-    dropout_prob: float = 0.002
     resolution_m: float = 0.001
     odometry: OdometryNoise = OdometryNoise()
     t0_ns: int = DEFAULT_T0_NS
@@ -218,7 +216,7 @@ class ClosedLoop:
         lc = cfg.laser
         self.laser = LaserModel(n_beams=lc.beams, fov_rad=math.radians(lc.fov_deg),
                                 max_range_m=lc.max_range_m,
-                                range_sigma_m=lc.noise_std_m, dropout_prob=params.dropout_prob,
+                                range_sigma_m=lc.noise_std_m, dropout_prob=lc.dropout_prob,
                                 resolution_m=params.resolution_m)
         self.angles = self.laser.angles()
         self.angles.flags.writeable = False
@@ -506,7 +504,19 @@ class ClosedLoop:
     # ---- the result ---------------------------------------------------------------------------------
 
     def result(self) -> dict[str, Any]:
-        """result.json: a pure function of (scenario, config, seed) with a fixed latency."""
+        """result.json: a pure function of (scenario, config, seed) with a fixed latency.
+
+        Fields: ``outcome`` success (the true axle within the supervisor's goal tolerance of the goal) /
+        collision / timeout; ``end_time_s``; ``time_to_goal_s``; ``collision``: ``t_s``, ``object`` (the
+        element's or mover's id), ``contact_world`` and ``contact_robot`` (the touching point of the
+        footprint, world and robot frame), ``robot_moving``, ``hit_by_mover`` (the robot stood still and
+        a mover or door leaf moved into it); ``path_length_m`` (true); ``min_clearance_m`` (footprint to
+        any element, exact below the security distance); ``time_inside_security_pct`` (time with the
+        clearance below ``reactor.security_m``); ``mean_abs_dw_dt_radps2`` (commanded turn rate changes
+        per second); ``longest_stall_s`` (see :func:`longest_stall`); ``modes`` and ``flags`` (ticks per
+        name); ``trap_count`` (TRAP_DETECTED onsets); ``stack_goal_reached_s`` (first GOAL_REACHED tick,
+        the stack's own belief); ``ticks``; start, goal, final pose and distance to the goal.
+        """
         rec = self.rec
         truth = np.asarray(rec.truth, dtype=np.float64).reshape(-1, 3)
         tt = np.asarray(rec.truth_t, dtype=np.float64)

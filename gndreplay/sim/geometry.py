@@ -118,7 +118,7 @@ class Shapes:
 
 
 @numba.njit(cache=True)
-def _ray_kernel(ox: float, oy: float, angles: F64, edges: F64, circles: F64, max_range: float,
+def ray_kernel(ox: float, oy: float, angles: F64, edges: F64, circles: F64, max_range: float,
                 out: F64) -> None:  # pragma: no cover - compiled
     for i in range(angles.shape[0]):
         dx = math.cos(angles[i])
@@ -397,7 +397,7 @@ def max_point_speed(local_vertices: F64 | None, vx: float, vy: float, w: float) 
 def cast(origin_xy: tuple[float, float], angles_rad: F64, shapes: Shapes, max_range_m: float) -> F64:
     """Exact ranges along world bearings to the nearest polygon edge or circle (inf beyond max range)."""
     out = np.empty(angles_rad.shape[0], dtype=np.float64)
-    _ray_kernel(float(origin_xy[0]), float(origin_xy[1]), np.ascontiguousarray(angles_rad, dtype=np.float64),
+    ray_kernel(float(origin_xy[0]), float(origin_xy[1]), np.ascontiguousarray(angles_rad, dtype=np.float64),
                 shapes.edges, shapes.circles, float(max_range_m), out)
     return out
 

@@ -112,10 +112,10 @@ def write_sim_mcap(path: Path, loop: ClosedLoop) -> None:
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
-    from ..report.mcap_export import _Msgs
+    from ..report.mcap_export import RosMessages
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
-    m = _Msgs(ts)
+    m = RosMessages(ts)
     T = ts.types
     rec, laser, mount = loop.rec, loop.laser, loop.mount
     n = laser.n_beams

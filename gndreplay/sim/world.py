@@ -15,12 +15,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..geometry import compose
 from ..robot import RobotConfig
+from .geometry import ray_kernel
 
 __all__ = [
     "DynamicElement",
@@ -42,7 +42,7 @@ __all__ = [
 
 F64 = NDArray[np.float64]
 _NO_SEGMENTS: F64 = np.zeros((0, 4), dtype=np.float64)
-_PARALLEL_EPS = 1e-12
+_NO_CIRCLES: F64 = np.zeros((0, 3), dtype=np.float64)
 
 
 # --------------------------------------------------------------------------------------------- building
@@ -230,33 +230,6 @@ class World:
 # --------------------------------------------------------------------------------------------- ray casting
 
 
-@numba.njit(cache=True)
-def _cast_rays_kernel(
-    ox: float, oy: float, angles: F64, segments: F64, max_range: float, out: F64
-) -> None:  # pragma: no cover - compiled
-    for i in range(angles.shape[0]):
-        dx = math.cos(angles[i])
-        dy = math.sin(angles[i])
-        best = math.inf
-        for j in range(segments.shape[0]):
-            px = segments[j, 0]
-            py = segments[j, 1]
-            ex = segments[j, 2] - px
-            ey = segments[j, 3] - py
-            den = dx * ey - dy * ex
-            if abs(den) < _PARALLEL_EPS:
-                continue
-            wx = px - ox
-            wy = py - oy
-            t = (wx * ey - wy * ex) / den
-            if t < 0.0 or t >= best:
-                continue
-            u = (wx * dy - wy * dx) / den
-            if 0.0 <= u <= 1.0:
-                best = t
-        out[i] = best if best < max_range else math.inf
-
-
 def cast_rays(origin_xy: ArrayLike, angles_rad: ArrayLike, segments: ArrayLike, *, max_range_m: float) -> F64:
     """Exact ranges from ``origin_xy`` along world-frame bearings to the nearest segment.
 
@@ -284,7 +257,7 @@ def cast_rays(origin_xy: ArrayLike, angles_rad: ArrayLike, segments: ArrayLike, 
     if not max_range_m > 0.0:
         raise ValueError(f"max_range_m must be > 0, got {max_range_m}")
     out = np.empty(a.shape[0], dtype=np.float64)
-    _cast_rays_kernel(float(o[0]), float(o[1]), a, s, float(max_range_m), out)
+    ray_kernel(float(o[0]), float(o[1]), a, s, _NO_CIRCLES, float(max_range_m), out)
     return out
 
 
