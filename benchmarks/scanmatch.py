@@ -63,6 +63,7 @@ from gndreplay.scanmatch import (  # noqa: E402
     MatcherReport,
     OdomMatcher,
     correct_trajectory,
+    keep_by_travel,
     matcher_report,
 )
 from gndreplay.types import Tick  # noqa: E402
@@ -112,18 +113,9 @@ def _pin_one_cpu() -> None:
             os.sched_setaffinity(0, {cpus[0]})
 
 
-def decimate(ticks: list[Tick], dist_m: float = DECIMATE_M, angle_rad: float = DECIMATE_RAD) -> list[Tick]:
-    """The scans after which the odometry moved ``dist_m`` or turned ``angle_rad`` since the last kept one
-    (the first scan is kept): a log sampled by distance."""
-    kept = [ticks[0]]
-    last = ticks[0].odom.as_array()
-    for tick in ticks[1:]:
-        o = tick.odom.as_array()
-        d = relative(last, o)
-        if math.hypot(d[0], d[1]) >= dist_m or abs(d[2]) >= angle_rad:
-            kept.append(tick)
-            last = o
-    return kept
+def decimate(ticks: list[Tick]) -> list[Tick]:
+    """The decimated variant: one scan per DECIMATE_M of travel or DECIMATE_RAD of turn (odometry)."""
+    return keep_by_travel(ticks, DECIMATE_M, DECIMATE_RAD)
 
 
 def _span(s: RelationStats | None, label: str, field: str) -> float:

@@ -524,6 +524,7 @@ def scanmatch(
         Path | None, typer.Option("--config", help="TOML with [scanmatch.idc] / [scanmatch.kiss].")
     ] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the rows as JSON.")] = False,
+    overwrite: OverwriteOpt = False,
     fmt: FormatOpt = None,
     scan_topic: ScanTopicOpt = None,
     odom_topic: OdomTopicOpt = None,
@@ -560,7 +561,8 @@ def scanmatch(
         pass  # fail fast, before any matcher runs, on an unreadable log or a bad topic
     rows = run_scanmatch(
         ticks, methods, relations=refs, out_dir=out_dir, idc=cfg.scanmatch.idc, kiss=cfg.scanmatch.kiss,
-        relations_name=str(relations),
+        relations_name=str(relations), overwrite=overwrite,
+        inputs=[Path(log)] + ([relations] if relations is not None else []),
     )
     if json_out:
         import json
@@ -743,16 +745,37 @@ def simulate(
 @cli_errors
 def batch(
     inputs: Annotated[
-        list[Path],
+        list[Path] | None,
         typer.Argument(
-            help="Logs, or folders searched for logs (CARMEN, ROS bags, MCAP).", show_default=False
+            help="Logs, folders searched for logs (CARMEN, ROS bags, MCAP), and scenario files (.yaml/.yml).",
+            show_default=False,
         ),
-    ],
+    ] = None,
+    scenarios: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--scenarios",
+            help="Shipped scenarios to run as well: all, or names (comma-separated or repeated; see "
+            "`gndreplay simulate --list`).",
+            show_default=False,
+        ),
+    ] = None,
+    seeds: Annotated[
+        str | None,
+        typer.Option(
+            "--seeds",
+            help="Seeds of every scenario, e.g. 1-20, 1,3,5 or 0-4,10: one run per scenario and seed, "
+            "named <scenario>-s<seed> [default: 0].",
+            show_default=False,
+        ),
+    ] = None,
     jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Worker processes.")] = 1,
     thresholds: Annotated[
         Path | None,
         typer.Option(
-            "--thresholds", help="TOML of pass/fail limits and per-input settings (relations, goal)."
+            "--thresholds",
+            help="TOML of pass/fail limits and per-input settings (relations, goal); for scenarios also "
+            "per-scenario limits over seeds (min_success_rate, ...).",
         ),
     ] = None,
     out: Annotated[
@@ -765,7 +788,8 @@ def batch(
     ] = Path("out/batch"),
     overwrite: OverwriteOpt = False,
     junit: Annotated[
-        Path | None, typer.Option("--junit", help="Also write JUnit XML (one test case per input).")
+        Path | None,
+        typer.Option("--junit", help="Also write JUnit XML (one test case per input, per scenario x seed)."),
     ] = None,
     dask: Annotated[
         str | None,
@@ -776,17 +800,45 @@ def batch(
         ),
     ] = None,
     preset_name: Annotated[
-        str | None, typer.Option("--preset", help="wheelchair (default) or xr4000.", show_default=False)
+        str | None,
+        typer.Option(
+            "--preset",
+            help="wheelchair or xr4000 (default: wheelchair for logs, each scenario's own preset).",
+            show_default=False,
+        ),
     ] = None,
     config: Annotated[Path | None, typer.Option("--config", help="TOML overriding the preset.")] = None,
     planner: PlannerOpt = None,
     goal_ahead: Annotated[
-        float, typer.Option("--goal-ahead", min=0.1, help="Goal distance ahead (m).")
+        float, typer.Option("--goal-ahead", min=0.1, help="Goal distance ahead (m; logs).")
     ] = 5.0,
     until: Annotated[
         float | None, typer.Option("--until", min=0.0, help="Replay only the first T seconds of each log.")
     ] = None,
-    every: Annotated[int, typer.Option("--every", min=1, help="Run the stack on every N-th scan.")] = 1,
+    every: Annotated[
+        int, typer.Option("--every", min=1, help="Run the stack on every N-th scan (logs).")
+    ] = 1,
+    latency: Annotated[
+        str,
+        typer.Option(
+            "--latency",
+            help="Scenarios: seconds from a scan to its command taking effect, or 'measured' (the stack's "
+            "own time: not deterministic).",
+        ),
+    ] = "0",
+    perfect_odometry: Annotated[
+        bool, typer.Option("--perfect-odometry", help="Scenarios: no odometry drift.")
+    ] = False,
+    time_limit: Annotated[
+        float | None,
+        typer.Option(
+            "--time-limit", min=0.1, help="Scenarios: override each scenario's time limit (seconds).",
+            show_default=False,
+        ),
+    ] = None,
+    figures: Annotated[
+        bool, typer.Option("--figures/--no-figures", help="Scenarios: draw each run's figures.")
+    ] = True,
     timeout: Annotated[
         float,
         typer.Option(
@@ -804,26 +856,41 @@ def batch(
     truth_topic: TruthTopicOpt = None,
     strict: StrictOpt = False,
 ) -> None:
-    """Replay many logs in parallel, check thresholds, write summary.csv / summary.md / JUnit.
+    """Replay many logs and run closed-loop scenarios in parallel, check thresholds, write summary.csv /
+    summary.md / JUnit.
 
     Each input runs in its own worker process, so a bad, crashing or hung input (over --timeout) fails
-    alone and is reported. Exit code: 0 all passed, 1 a threshold was exceeded, 2 an input could not be read.
+    alone and is reported. A scenario (a .yaml file, or shipped ones with --scenarios) runs once per seed
+    (--seeds) as `gndreplay simulate` does, each run one row and one JUnit test case: it passes when the
+    robot reaches the goal (a collision or a time-out fails, with the reason); summary.md and scenarios.csv
+    add each scenario's success rate, collisions, time-outs, mean time and minimum clearance over seeds.
+    Exit code: 0 all passed, 1 a threshold was exceeded, 2 an input could not be read.
 
     [bold]Examples[/]
 
       gndreplay batch ../shared/datasets/carmen --jobs 2 --junit out/junit.xml
 
       gndreplay batch logs/ --thresholds ci.toml --until 120
+
+      gndreplay batch --scenarios all --seeds 1-20 --jobs 2 --no-figures
+
+      gndreplay batch my_world.yaml --scenarios u_trap,enclosed --seeds 1,3,5 --preset xr4000
     """
     import os
 
-    from .batch import expand_inputs, load_thresholds, run_batch
+    from .batch import expand_inputs, load_thresholds, parse_latency, parse_seeds, run_batch
+    from .batch.scenarios import SimOptions
     from .batch.thresholds import Thresholds
     from .config import load_config
     from .replay import ReadOptions, RunOptions
 
     cfg = _with_planner(load_config(config, preset_name=preset_name), planner)
-    job_list = expand_inputs(inputs)
+    sim = SimOptions(latency_s=parse_latency(latency), perfect_odometry=perfect_odometry,
+                     time_limit_s=time_limit, figures=figures, config=config, preset=preset_name,
+                     planner=planner)
+    job_list = expand_inputs(
+        inputs or [], scenarios=scenarios or [], seeds=None if seeds is None else parse_seeds(seeds)
+    )
     limits = load_thresholds(thresholds) if thresholds is not None else Thresholds()
     options = RunOptions(goal_ahead_m=goal_ahead, until_s=until, every=every)
     with _progress(enabled=not quiet, label="batch", total=len(job_list), unit="inputs") as progress:
@@ -847,6 +914,7 @@ def batch(
             ),
             timeout_s=timeout,
             overwrite=overwrite,
+            sim=sim,
         )
     if result.out_dir != Path(os.path.abspath(out)):
         typer.echo(f"gndreplay: {out} holds an earlier batch; wrote {result.out_dir} "
@@ -856,6 +924,10 @@ def batch(
             typer.echo(f"gndreplay: error: {r.name}: {r.error}", err=True)
         elif r.status == "fail" and quiet:
             typer.echo(f"gndreplay: fail: {r.name}: {'; '.join(r.failures)}", err=True)
+    for a in result.aggregates:
+        if a.failures:
+            typer.echo(f"gndreplay: fail: {a.scenario} over {a.runs} seeds: {'; '.join(a.failures)}",
+                       err=True)
     if not quiet:
         _print_batch(result)
     raise typer.Exit(result.exit_code)

@@ -246,7 +246,6 @@ RANGES: dict[tuple[type, str], Range] = {
     (SupervisorParams, "rotate_w_frac"): _FRAC,
     (SupervisorParams, "goal_tolerance_m"): _pos(_LEN),
     (SupervisorParams, "stale_scan_s"): _pos(3600.0),
-    (SupervisorParams, "brake_decel_mps2"): _pos(50.0),
     (SupervisorParams, "reaction_s"): _nonneg(_TIME),
     (SupervisorParams, "emergency_margin_m"): _nonneg(10.0),
     (SupervisorParams, "trap_window"): _count(),

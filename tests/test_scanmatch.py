@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gndreplay.errors import ScanMatchError
+from gndreplay.errors import OutputError, ScanMatchError
 from gndreplay.evaluation import Relations
 from gndreplay.geometry import compose, inverse, relative
 from gndreplay.scanmatch import (
@@ -125,7 +125,7 @@ def test_idc_honours_laser_mounting() -> None:
 
 def test_idc_finds_20_deg_from_no_odometry() -> None:
     """IDC's widening window: from a prior that says "no motion" it still finds a 20 deg turn (6 sigmas of
-    the odometry's error model: the guard's second opinion near the odometry fits worse, so it is believed)."""
+    the odometry's error model: the guard's second opinion near the odometry fits worse: it is believed)."""
     move = motion(0.1, 0.05, 20.0)
     res, truth = two_scan_match(room(), move, np.zeros(3), noise_m=0.01)
     assert res.ok, res.reason
@@ -281,8 +281,17 @@ def test_correct_trajectory_and_run_scanmatch(tmp_path: Path) -> None:
     d = idc.to_dict()
     assert d["method"] == "idc" and d["relations"]["matched"] == 21 and d["tum_path"].endswith("idc.tum")
     first = (tmp_path / "out" / "idc.tum").read_bytes()
-    run_scanmatch(lambda: ticks, ("idc",), out_dir=tmp_path / "out")
-    assert (tmp_path / "out" / "idc.tum").read_bytes() == first  # byte-identical rerun
+    again = run_scanmatch(lambda: ticks, ("idc",), out_dir=tmp_path / "out")  # an earlier run is kept
+    assert again[0].tum_path == str(tmp_path / "out-2" / "idc.tum")
+    assert (tmp_path / "out-2" / "idc.tum").read_bytes() == first  # byte-identical rerun
+    assert (tmp_path / "out" / "idc.tum").read_bytes() == first
+    replaced = run_scanmatch(lambda: ticks, ("odom",), out_dir=tmp_path / "out", overwrite=True)
+    assert replaced[0].tum_path == str(tmp_path / "out" / "odom.tum")
+    assert not (tmp_path / "out" / "idc.tum").exists()
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("the user's")
+    with pytest.raises(OutputError, match="not written by gndreplay"):
+        run_scanmatch(lambda: ticks, ("odom",), out_dir=tmp_path / "mine")
     lines = first.decode().splitlines()
     assert lines[1].split()[0] == "1.000000000" and len(lines) == 22
 
@@ -414,8 +423,9 @@ def symmetric_corridor() -> np.ndarray:
     return np.array(segs)
 
 
-def _run(segs: np.ndarray, steps: list[np.ndarray], odo_steps: list[np.ndarray], params: IdcParams | None = None,
-         start: np.ndarray = START, dt_ns: int = 10**8) -> list[tuple[bool, float, float, str]]:
+def _run(segs: np.ndarray, steps: list[np.ndarray], odo_steps: list[np.ndarray],
+         params: IdcParams | None = None, start: np.ndarray = START,
+         dt_ns: int = 10**8) -> list[tuple[bool, float, float, str]]:
     """Drive ``steps`` (odometry reporting ``odo_steps``) and return per scan (ok, translational error [m],
     rotational error [deg], reason) of the corrected pose against the truth."""
     m = IdcMatcher(params)
@@ -435,7 +445,8 @@ def test_fast_turn_in_a_symmetric_corridor_lands_in_the_right_basin() -> None:
     """Odometry that misses a 42 deg turn entirely (stale, as on Intel) puts IDC's start outside its 20 deg
     bearing window; the correlative rotation search over +-45 deg finds the basin first. Without it (the
     cause) the turn is lost and every later scan inherits 42-84 deg of error."""
-    steps = [motion(0.2, 0, 0), motion(0.2, 0, 0), motion(0.05, 0, 42), motion(0.05, 0, 42), motion(0.2, 0, 0)]
+    steps = [motion(0.2, 0, 0), motion(0.2, 0, 0), motion(0.05, 0, 42), motion(0.05, 0, 42),
+             motion(0.2, 0, 0)]
     stale = [motion(0.2, 0, 0), motion(0.2, 0, 0), motion(0.05, 0, 0), motion(0.05, 0, 0), motion(0.2, 0, 0)]
     start = np.array([0.5, 0.1, 0.0])
     fixed = _run(symmetric_corridor(), steps, stale, start=start)

@@ -121,10 +121,15 @@ def test_reflexive_brake_overrides_a_colliding_reactor_command(monkeypatch: pyte
         return dataclasses.replace(real(*args, **kwargs), v_mps=cfg.robot.vmax_mps, w_radps=0.0)
 
     monkeypatch.setattr(stack_module, "nd_step", reckless)
-    world = np.vstack([ROOM, wall(0.95, -3.0, 0.95, 3.0)])
+    # a wall 0.04 m beyond the chair's front edge (0.8 m): no slower arc or turn is safe -> stop
+    world = np.vstack([ROOM, wall(0.84, -3.0, 0.84, 3.0)])
     r = run(cfg, world, Pose2D(0, 0, 0), (4.0, 0.0))[-1]
     assert r.mode is Mode.EMERGENCY and r.flags & Flag.EMERGENCY_STOP
     assert (r.v_mps, r.w_radps) == (0.0, 0.0)
+    # 0.15 m beyond it, half speed still stops in time: the command is slowed, not replaced by a stop
+    world = np.vstack([ROOM, wall(0.95, -3.0, 0.95, 3.0)])
+    r = run(cfg, world, Pose2D(0, 0, 0), (4.0, 0.0))[-1]
+    assert r.mode is Mode.SAFE_SLOW and r.v_mps == pytest.approx(cfg.robot.vmax_mps / 2)
 
 
 def test_stale_scan_stops_the_robot() -> None:

@@ -1,33 +1,59 @@
-"""``gndreplay batch``: many logs (later: closed-loop scenarios) in parallel worker processes, a summary row
-and a JUnit test case per input, pass/fail thresholds, and a CI exit code.
+"""``gndreplay batch``: many logs and closed-loop scenario runs in parallel worker processes, a summary row
+and a JUnit test case per input (a scenario: per scenario and seed), per-scenario aggregates over seeds,
+pass/fail thresholds, and a CI exit code.
 
->>> jobs = expand_inputs(["../shared/datasets/carmen", "run.bag"])        # doctest: +SKIP
+>>> jobs = expand_inputs(["../shared/datasets/carmen", "run.bag", "mine.yaml"], scenarios=["all"],
+...                      seeds=parse_seeds("1-20"))                       # doctest: +SKIP
 >>> res = run_batch(jobs, cfg=cfg, options=RunOptions(until_s=60), thresholds=load_thresholds("ci.toml"),
-...                 out_dir=Path("out/batch"), workers=2, junit=Path("out/batch/junit.xml"))
+...                 out_dir=Path("out/batch"), workers=2, junit=Path("out/batch/junit.xml"),
+...                 sim=SimOptions(time_limit_s=60))
 >>> res.exit_code                                                          # 0 pass, 1 threshold, 2 error
 
 Importing this package is cheap (no numpy / numba / replay code): worker processes import it first and pin
 the numeric libraries to one thread before the replay code is loaded.
 """
 
+from .aggregate import ScenarioAggregate, aggregate_scenarios
 from .jobs import (
     LOG_SUFFIXES,
+    SCENARIO_SUFFIXES,
     Job,
     JobKind,
     expand_inputs,
     find_logs,
     input_stem,
+    parse_seeds,
     safe_name,
+    shipped_names,
     special_file_kind,
     unique_names,
 )
-from .metrics import COUNT_METRICS, LATENCY_METRICS, RELATION_METRICS, metrics_from_summary
-from .report import CSV_COLUMNS, junit_xml, summary_csv, summary_md
+from .metrics import (
+    AGGREGATE_METRICS,
+    COUNT_METRICS,
+    LATENCY_METRICS,
+    RELATION_METRICS,
+    SCENARIO_METRICS,
+    metrics_from_result,
+    metrics_from_summary,
+)
+from .report import CSV_COLUMNS, SCENARIO_CSV_COLUMNS, junit_xml, scenarios_csv, summary_csv, summary_md
 from .run import DASK_EXTRA_HINT, DEFAULT_TIMEOUT_S, BatchResult, make_tasks, run_batch, run_tasks
-from .thresholds import DEFAULT_LIMITS, THRESHOLD_KEYS, InputRule, Thresholds, check_limits, load_thresholds
+from .scenarios import SimOptions, parse_latency, run_scenario, scenario_config
+from .thresholds import (
+    AGGREGATE_KEYS,
+    DEFAULT_LIMITS,
+    THRESHOLD_KEYS,
+    InputRule,
+    Thresholds,
+    check_limits,
+    load_thresholds,
+)
 from .worker import InputResult, Runner, RunOutcome, Status, Task, execute, pin_threads, run_input
 
 __all__ = [
+    "AGGREGATE_KEYS",
+    "AGGREGATE_METRICS",
     "COUNT_METRICS",
     "CSV_COLUMNS",
     "DASK_EXTRA_HINT",
@@ -36,6 +62,9 @@ __all__ = [
     "LATENCY_METRICS",
     "LOG_SUFFIXES",
     "RELATION_METRICS",
+    "SCENARIO_CSV_COLUMNS",
+    "SCENARIO_METRICS",
+    "SCENARIO_SUFFIXES",
     "THRESHOLD_KEYS",
     "BatchResult",
     "InputResult",
@@ -44,9 +73,12 @@ __all__ = [
     "JobKind",
     "RunOutcome",
     "Runner",
+    "ScenarioAggregate",
+    "SimOptions",
     "Status",
     "Task",
     "Thresholds",
+    "aggregate_scenarios",
     "check_limits",
     "execute",
     "expand_inputs",
@@ -55,12 +87,19 @@ __all__ = [
     "junit_xml",
     "load_thresholds",
     "make_tasks",
+    "metrics_from_result",
     "metrics_from_summary",
+    "parse_latency",
+    "parse_seeds",
     "pin_threads",
     "run_batch",
     "run_input",
+    "run_scenario",
     "run_tasks",
     "safe_name",
+    "scenario_config",
+    "scenarios_csv",
+    "shipped_names",
     "special_file_kind",
     "summary_csv",
     "summary_md",

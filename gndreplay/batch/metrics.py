@@ -3,7 +3,8 @@
 Metric names carry their unit: ``<module>_<stat>_ms`` for latencies (module: match, model, planner, reactor,
 stack = model + planner + reactor, total; stat: median, p90, p99, max), plain counts of ticks on which a
 flag fired (``emergency_stops``, ``no_region``, ...), and ``match_*`` relation errors when the input has a
-relations file.
+relations file. A closed-loop scenario run adds the scores of its result.json and sim_timing.json
+(``SCENARIO_METRICS``); the per-scenario aggregates over seeds are ``AGGREGATE_METRICS``.
 """
 
 from __future__ import annotations
@@ -15,10 +16,14 @@ if TYPE_CHECKING:
     from ..evaluation import RelationStats
 
 __all__ = [
+    "AGGREGATE_METRICS",
     "COUNT_METRICS",
     "LATENCY_METRICS",
     "RELATION_METRICS",
+    "SCENARIO_METRICS",
+    "metrics_from_result",
     "metrics_from_summary",
+    "outcome_note",
     "relation_metrics",
 ]
 
@@ -79,3 +84,57 @@ def relation_metrics(stats: RelationStats) -> dict[str, float]:
         "match_rot_err_max_deg": stats.rot_max_deg,
         "relations_matched": stats.matched,
     }
+
+
+#: Scenario run metric -> where it comes from: the outcome (1 or 0), a result.json field, or a
+#: sim_timing.json field (wall clock). A field that is null (no time to goal after a collision, no obstacle
+#: ever in range) gives no metric.
+SCENARIO_METRICS: Mapping[str, str] = {
+    "success": "outcome == success",
+    "collisions": "outcome == collision",
+    "timeouts": "outcome == timeout",
+    "time_to_goal_s": "time_to_goal_s",
+    "clearance_m": "min_clearance_m",
+    "path_length_m": "path_length_m",
+    "security_time_pct": "time_inside_security_pct",
+    "sim_ms_per_step": "sim_ms_per_step",
+    "stack_ms_per_tick": "stack_ms_per_tick",
+}
+_OUTCOME_COUNTS = {"success": "success", "collisions": "collision", "timeouts": "timeout"}
+#: Metrics of one scenario over its seeds (runs that did not end in an error): the fractions of runs that
+#: reached the goal, collided, timed out; the mean time to goal of the successes; the smallest clearance.
+AGGREGATE_METRICS: tuple[str, ...] = (
+    "success_rate",
+    "collision_rate",
+    "timeout_rate",
+    "mean_time_to_goal_s",
+    "min_clearance_m",
+)
+
+
+def metrics_from_result(result: Mapping[str, Any], timing: Mapping[str, Any]) -> dict[str, float]:
+    """The ``SCENARIO_METRICS`` of one closed-loop run from its result.json and sim_timing.json."""
+    outcome = result.get("outcome")
+    out: dict[str, float] = {name: int(outcome == value) for name, value in _OUTCOME_COUNTS.items()}
+    for name, key in SCENARIO_METRICS.items():
+        if name in out:
+            continue
+        value = result.get(key, timing.get(key))
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            out[name] = float(value)
+    return out
+
+
+def outcome_note(result: Mapping[str, Any]) -> str:
+    """How a run ended, in words: ``"collision with door at 12.34 s"``, ``"timeout at 60.0 s"``, ..."""
+    outcome = str(result.get("outcome"))
+    end = result.get("end_time_s")
+    at = f" at {end:.2f} s" if isinstance(end, int | float) else ""
+    contact = result.get("collision")
+    if outcome == "collision" and isinstance(contact, Mapping):
+        who = "hit by" if contact.get("hit_by_mover") else "collision with"
+        t = contact.get("t_s", end)
+        return f"{who} {contact.get('object')}" + (f" at {t:.2f} s" if isinstance(t, int | float) else "")
+    if outcome == "timeout":
+        return f"timeout{at}: goal not reached"
+    return f"{outcome}{at}"

@@ -1,4 +1,6 @@
-"""Batch outputs: summary.csv, summary.md and JUnit XML, one row / test case per input, written atomically."""
+"""Batch outputs: summary.csv, summary.md and JUnit XML, one row / test case per input (a scenario: per
+scenario and seed), plus scenarios.csv and a summary.md table of the per-scenario aggregates over seeds.
+"""
 
 from __future__ import annotations
 
@@ -9,11 +11,14 @@ import re
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 
+from .aggregate import ScenarioAggregate
 from .worker import InputResult
 
 __all__ = [
     "CSV_COLUMNS",
+    "SCENARIO_CSV_COLUMNS",
     "junit_xml",
+    "scenarios_csv",
     "summary_csv",
     "summary_md",
 ]
@@ -35,11 +40,23 @@ METRIC_COLUMNS: tuple[str, ...] = (
     "match_trans_err_mean_m",
     "match_rot_err_mean_deg",
     "relations_matched",
+    "success",
+    "collisions",
+    "timeouts",
+    "time_to_goal_s",
+    "clearance_m",
+    "path_length_m",
+    "security_time_pct",
+    "sim_ms_per_step",
+    "stack_ms_per_tick",
 )
 CSV_COLUMNS: tuple[str, ...] = (
     "name",
     "status",
     "ticks",
+    "scenario",
+    "seed",
+    "outcome",
     *METRIC_COLUMNS,
     "wall_s",
     "failures",
@@ -57,7 +74,38 @@ _MD_METRICS: tuple[tuple[str, str], ...] = (
     ("e-stop", "emergency_stops"),
     ("trans err m", "match_trans_err_mean_m"),
 )
+#: summary.md, scenario runs: (header, metric) after name, status and seed.
+_MD_SCENARIO_METRICS: tuple[tuple[str, str], ...] = (
+    ("time s", "time_to_goal_s"),
+    ("clearance m", "clearance_m"),
+    ("path m", "path_length_m"),
+    ("stack p99 ms", "stack_p99_ms"),
+    ("sim ms/step", "sim_ms_per_step"),
+)
+#: scenarios.csv: the aggregate columns after the counts.
+_AGGREGATE_COLUMNS: tuple[str, ...] = (
+    "success_rate",
+    "collision_rate",
+    "timeout_rate",
+    "mean_time_to_goal_s",
+    "clearance_m",
+    "stack_p99_ms",
+)
+SCENARIO_CSV_COLUMNS: tuple[str, ...] = (
+    "scenario",
+    "status",
+    "runs",
+    "errors",
+    "successes",
+    "collisions",
+    "timeouts",
+    *_AGGREGATE_COLUMNS,
+    "seeds",
+    "failures",
+    "path",
+)
 SUITE = "gndreplay.batch"
+SCENARIO_SUITE = "gndreplay.batch.scenarios"
 _XML_INVALID = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
 
 
@@ -66,10 +114,12 @@ def _cell(metric: str, value: float | None) -> str:
         return ""
     if math.isnan(value):
         return "nan"
-    if metric.endswith("_ms"):
+    if metric.endswith(("_ms", "_rate")) or "_ms_per_" in metric:
         return f"{value:.3f}"
     if metric.endswith(("_m", "_deg")):
         return f"{value:.4f}"
+    if metric.endswith(("_s", "_pct")):
+        return f"{value:.2f}"
     return str(int(value))
 
 
@@ -88,6 +138,9 @@ def summary_csv(results: Sequence[InputResult]) -> str:
                 r.name,
                 r.status,
                 r.ticks,
+                r.group,
+                r.seed if r.group else "",
+                r.outcome,
                 *(_cell(m, r.metrics.get(m)) for m in METRIC_COLUMNS),
                 f"{r.wall_s:.3f}",
                 "; ".join(r.failures),
@@ -103,28 +156,85 @@ def _md_escape(text: str) -> str:
     return text.replace("\\", "\\\\").replace("|", "\\|").replace("\n", " ")
 
 
-def summary_md(results: Sequence[InputResult]) -> str:
-    """summary.md text: a totals line and a Markdown table, one row per input."""
+def _status(status: str) -> str:
+    return status.upper() if status != "pass" else status
+
+
+def _table(header: Sequence[str], align: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(align) + "|"]
+    lines += ["| " + " | ".join(_md_escape(c) for c in cells) + " |" for cells in rows]
+    return lines
+
+
+def _pct(count: int, of: int) -> str:
+    return f"{count}/{of} ({100.0 * count / of:.0f} %)" if of else "-"
+
+
+def summary_md(results: Sequence[InputResult], aggregates: Sequence[ScenarioAggregate] = ()) -> str:
+    """summary.md text: a totals line and a Markdown table, one row per log; then, when there are
+    scenarios, one row per scenario run and a table of the per-scenario aggregates over seeds."""
     n = {s: sum(r.status == s for r in results) for s in ("pass", "fail", "error")}
-    header = ["input", "status", "ticks", *(h for h, _ in _MD_METRICS), "notes"]
     lines = [
         "# gndreplay batch",
         "",
         f"{len(results)} inputs: {n['pass']} pass, {n['fail']} fail, {n['error']} error",
-        "",
-        "| " + " | ".join(header) + " |",
-        "|" + "|".join(["---", "---", "---:", *("---:" for _ in _MD_METRICS), "---"]) + "|",
     ]
-    for r in results:
-        cells = [
-            r.name,
-            r.status.upper() if r.status != "pass" else r.status,
-            str(r.ticks),
-            *(_cell(m, r.metrics.get(m)) for _, m in _MD_METRICS),
-            _note(r),
-        ]
-        lines.append("| " + " | ".join(_md_escape(c) for c in cells) + " |")
+    logs = [r for r in results if not r.group]
+    if logs:
+        lines += ["", *_table(
+            ["input", "status", "ticks", *(h for h, _ in _MD_METRICS), "notes"],
+            ["---", "---", "---:", *("---:" for _ in _MD_METRICS), "---"],
+            [[r.name, _status(r.status), str(r.ticks), *(_cell(m, r.metrics.get(m)) for _, m in _MD_METRICS),
+              _note(r)] for r in logs],
+        )]
+    runs = [r for r in results if r.group]
+    if runs:
+        lines += ["", "## Scenario runs", "", *_table(
+            ["run", "status", "seed", "outcome", *(h for h, _ in _MD_SCENARIO_METRICS), "notes"],
+            ["---", "---", "---:", "---", *("---:" for _ in _MD_SCENARIO_METRICS), "---"],
+            [[r.name, _status(r.status), str(r.seed), r.outcome,
+              *(_cell(m, r.metrics.get(m)) for _, m in _MD_SCENARIO_METRICS), _note(r)] for r in runs],
+        )]
+    if aggregates:
+        lines += ["", "## Scenarios over seeds", "",
+                  "Status: the worst of the scenario's runs and its thresholds over seeds; rates are of the "
+                  "completed runs (errors apart); time: mean of the successes; clearance: the smallest of "
+                  "any run; stack p99: the worst run's.", "", *_table(
+            ["scenario", "status", "runs", "success", "collisions", "time-outs", "errors", "mean time s",
+             "min clearance m", "stack p99 ms", "notes"],
+            ["---", "---", *("---:" for _ in range(8)), "---"],
+            [[a.scenario, _status(a.status), str(a.runs), _pct(a.successes, a.runs - a.errors),
+              str(a.collisions), str(a.timeouts), str(a.errors),
+              _cell("mean_time_to_goal_s", a.metrics.get("mean_time_to_goal_s")),
+              _cell("clearance_m", a.metrics.get("clearance_m")),
+              _cell("stack_p99_ms", a.metrics.get("stack_p99_ms")), "; ".join(a.failures)]
+             for a in aggregates],
+        )]
     return "\n".join(lines) + "\n"
+
+
+def scenarios_csv(aggregates: Sequence[ScenarioAggregate]) -> str:
+    """scenarios.csv text: a ``SCENARIO_CSV_COLUMNS`` header, then one row per scenario."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(SCENARIO_CSV_COLUMNS)
+    for a in aggregates:
+        w.writerow(
+            [
+                a.scenario,
+                a.status,
+                a.runs,
+                a.errors,
+                a.successes,
+                a.collisions,
+                a.timeouts,
+                *(_cell(m, a.metrics.get(m)) for m in _AGGREGATE_COLUMNS),
+                " ".join(str(s) for s in a.seeds),
+                "; ".join(a.failures),
+                a.path,
+            ]
+        )
+    return buf.getvalue()
 
 
 def _x(text: str) -> str:
@@ -132,21 +242,24 @@ def _x(text: str) -> str:
     return _XML_INVALID.sub("\ufffd", text)
 
 
-def junit_xml(results: Sequence[InputResult]) -> str:
-    """JUnit XML: one ``<testsuite name="gndreplay.batch">`` with one ``<testcase>`` per input; a
-    ``<failure>`` lists the thresholds exceeded, an ``<error>`` carries an unreadable input's message."""
-    failures = sum(r.status == "fail" for r in results)
+def junit_xml(results: Sequence[InputResult], aggregates: Sequence[ScenarioAggregate] = ()) -> str:
+    """JUnit XML: one ``<testsuite name="gndreplay.batch">`` with one ``<testcase>`` per input (a scenario:
+    per scenario and seed); a ``<failure>`` lists the thresholds exceeded (a run that did not reach its
+    goal says how it ended), an ``<error>`` carries an unreadable input's message. Scenarios with aggregate
+    thresholds add a ``<testsuite name="gndreplay.batch.scenarios">``, one test case per scenario."""
+    checked = [a for a in aggregates if a.limits]
+    failures = sum(r.status == "fail" for r in results) + sum(bool(a.failures) for a in checked)
     errors = sum(r.status == "error" for r in results)
     total_s = sum(r.wall_s for r in results)
-    counts = {
-        "tests": str(len(results)),
-        "failures": str(failures),
-        "errors": str(errors),
-        "skipped": "0",
-        "time": f"{total_s:.3f}",
-    }
-    root = ET.Element("testsuites", {"name": "gndreplay batch", **counts})
-    suite = ET.SubElement(root, "testsuite", {"name": SUITE, **counts})
+
+    def counts(tests: int, fail: int, err: int, time_s: float) -> dict[str, str]:
+        return {"tests": str(tests), "failures": str(fail), "errors": str(err), "skipped": "0",
+                "time": f"{time_s:.3f}"}
+
+    root = ET.Element("testsuites", {"name": "gndreplay batch",
+                                     **counts(len(results) + len(checked), failures, errors, total_s)})
+    suite = ET.SubElement(root, "testsuite", {"name": SUITE, **counts(
+        len(results), sum(r.status == "fail" for r in results), errors, total_s)})
     for r in results:
         case = ET.SubElement(
             suite, "testcase", {"classname": SUITE, "name": _x(r.name), "time": f"{r.wall_s:.3f}"}
@@ -158,9 +271,30 @@ def junit_xml(results: Sequence[InputResult]) -> str:
             node = ET.SubElement(case, "error", {"message": _x(r.error), "type": r.error_type or "error"})
             node.text = _x(r.detail or r.error)
         out = [f"path: {_x(r.path)}", f"ticks: {r.ticks}"]
+        if r.group:
+            out += [f"scenario: {_x(r.group)}", f"seed: {r.seed}"]
+            if r.outcome:
+                out.append(f"outcome: {_x(r.outcome)}")
         if r.run_dir is not None:
             out.append(f"run_dir: {_x(str(r.run_dir))}")
         out += [f"{m}: {_cell(m, v)}" for m, v in r.metrics.items() if m != "ticks"]
         ET.SubElement(case, "system-out").text = "\n".join(out)
+    if checked:
+        agg_s = {a.scenario: sum(r.wall_s for r in results if r.group == a.scenario) for a in checked}
+        scen = ET.SubElement(root, "testsuite", {"name": SCENARIO_SUITE, **counts(
+            len(checked), sum(bool(a.failures) for a in checked), 0, sum(agg_s.values()))})
+        for a in checked:
+            case = ET.SubElement(scen, "testcase", {"classname": SCENARIO_SUITE, "name": _x(a.scenario),
+                                                    "time": f"{agg_s[a.scenario]:.3f}"})
+            if a.failures:
+                node = ET.SubElement(case, "failure", {"message": _x("; ".join(a.failures)),
+                                                       "type": "threshold"})
+                node.text = _x("\n".join(a.failures))
+            out = [f"path: {_x(a.path)}", f"seeds: {' '.join(str(s) for s in a.seeds)}",
+                   f"runs: {a.runs}", f"errors: {a.errors}", f"successes: {a.successes}",
+                   f"collisions: {a.collisions}", f"timeouts: {a.timeouts}"]
+            out += [f"{m}: {_cell(m, v)}" for m, v in a.metrics.items()]
+            out += [f"limit {k}: {v:g}" for k, v in a.limits.items()]
+            ET.SubElement(case, "system-out").text = "\n".join(out)
     ET.indent(root)
     return ET.tostring(root, encoding="unicode", xml_declaration=True) + "\n"

@@ -1,5 +1,5 @@
-"""Run many inputs, each in its own worker process (or on a dask.distributed cluster), then write the
-summary files.
+"""Run many inputs (logs, scenario runs), each in its own worker process (or on a dask.distributed
+cluster), then write the summary files.
 
 Process pool (:mod:`.pool`): spawned worker processes with one numeric thread each, one input at a time
 per worker. A Python exception inside an input is already a value (see :func:`execute`); a worker that dies
@@ -23,9 +23,11 @@ from typing import TYPE_CHECKING, Any
 from .. import fsutil
 from ..errors import ConfigError, OutputError
 from ..fsutil import atomic_write_text
+from .aggregate import ScenarioAggregate, aggregate_scenarios
 from .jobs import Job, special_files
 from .pool import Emit, run_pool, timeout_result
-from .report import junit_xml, summary_csv, summary_md
+from .report import junit_xml, scenarios_csv, summary_csv, summary_md
+from .scenarios import SimOptions
 from .thresholds import Thresholds
 from .worker import InputResult, Runner, Task, crash_message, error_result, execute, run_input
 
@@ -49,11 +51,12 @@ class BatchResult:
     """What a batch produced.
 
     Attributes:
-        results: one per input, in input order.
-        out_dir: the batch folder (run directories, summary.csv, summary.md).
+        results: one per input (a scenario: per scenario and seed), in input order.
+        out_dir: the batch folder (run directories, summary.csv, summary.md, scenarios.csv).
         summary_csv, summary_md: the summary files.
         junit: the JUnit XML file, if one was asked for.
         wall_s: wall time of the whole batch [s].
+        aggregates: one per scenario, over its seeds (see ``aggregate_scenarios``).
     """
 
     results: tuple[InputResult, ...]
@@ -62,6 +65,7 @@ class BatchResult:
     summary_md: Path
     junit: Path | None
     wall_s: float
+    aggregates: tuple[ScenarioAggregate, ...] = ()
 
     def count(self, status: str) -> int:
         """Inputs with this status ("pass", "fail" or "error")."""
@@ -69,10 +73,11 @@ class BatchResult:
 
     @property
     def exit_code(self) -> int:
-        """0 all inputs passed, 1 a threshold was exceeded, 2 an input could not be read (or crashed)."""
+        """0 all inputs passed, 1 a threshold was exceeded (by an input or a scenario's aggregate over
+        seeds), 2 an input could not be read (or crashed)."""
         if self.count("error"):
             return 2
-        return 1 if self.count("fail") else 0
+        return 1 if self.count("fail") or any(a.failures for a in self.aggregates) else 0
 
 
 def _absolute(path: Path) -> Path:
@@ -88,16 +93,18 @@ def make_tasks(
     thresholds: Thresholds,
     out_dir: Path,
     read: ReadOptions | None = None,
+    sim: SimOptions | None = None,
 ) -> list[Task]:
     """One task per job: per-input settings and limits from ``thresholds``, absolute paths (workers may run
-    elsewhere), run directory ``out_dir / job.name``, and the job's goal folded into the options.
+    elsewhere; also ``sim``'s config file), run directory ``out_dir / job.name``, and the job's goal folded
+    into the options. Scenario jobs get ``sim`` (None: ``SimOptions()``).
 
     Raises:
         ConfigError: duplicate or empty job names, no jobs, or inputs that are FIFOs, devices or sockets
             (reading one could block the batch forever; they are named, never opened).
     """
     if not jobs:
-        raise ConfigError("no inputs: give log files or folders of logs")
+        raise ConfigError("no inputs: give log files, folders of logs, scenario files or shipped scenarios")
     seen: set[str] = set()
     for job in jobs:
         if not job.name or job.name in seen or "/" in job.name or job.name.startswith("."):
@@ -107,6 +114,9 @@ def make_tasks(
     if special:
         raise ConfigError(f"not a log file or folder (never opened): {', '.join(special)}")
     out_dir = _absolute(out_dir)
+    sim = sim if sim is not None else SimOptions()
+    if sim.config is not None:
+        sim = replace(sim, config=_absolute(sim.config))
     tasks = []
     for job in jobs:
         job = thresholds.apply(job)
@@ -124,6 +134,7 @@ def make_tasks(
                 run_dir=out_dir / job.name,
                 limits=thresholds.limits_for(job),
                 read=read,
+                sim=sim if job.kind == "scenario" else None,
             )
         )
     return tasks
@@ -288,9 +299,11 @@ def run_batch(
     runner: Runner = run_input,
     timeout_s: float | None = DEFAULT_TIMEOUT_S,
     overwrite: bool = False,
+    sim: SimOptions | None = None,
 ) -> BatchResult:
     """Run every job in its own worker process and write the batch folder: one run directory per input,
-    ``summary.csv``, ``summary.md`` (and ``junit``).
+    ``summary.csv``, ``summary.md`` (and ``junit``); with scenario jobs also ``scenarios.csv``, the
+    per-scenario aggregates over seeds, checked against the aggregate thresholds.
 
     The batch folder gets the protections of a run directory (``gndreplay.fsutil``), checked before any
     work: never a file, the current folder, a folder holding an input, or a non-empty folder gndreplay did
@@ -300,7 +313,7 @@ def run_batch(
 
     Args:
         jobs: the inputs (``expand_inputs`` makes them from paths); names must be unique.
-        cfg, options, read: stack configuration, replay options and log-reading options for every input.
+        cfg, options, read: stack configuration, replay options and log-reading options for every log.
         thresholds: pass/fail limits and per-input settings (None: ``DEFAULT_LIMITS``).
         out_dir: batch folder; input ``name`` writes its run directory to ``out_dir/name``.
         workers: worker processes (inputs run in parallel).
@@ -312,6 +325,8 @@ def run_batch(
         timeout_s: per-input time limit [s] (None: none); an input over it is an "error" row
             "timed out after N s" and its worker process is killed.
         overwrite: replace an earlier batch folder at ``out_dir``.
+        sim: how scenario jobs run and which configuration they get (None: ``SimOptions()``, each
+            scenario's own preset).
 
     Raises:
         ConfigError: no jobs, bad names, FIFO / device inputs, ``workers`` < 1, bad timeout, dask missing
@@ -321,7 +336,9 @@ def run_batch(
     t0 = time.perf_counter()
     thresholds = thresholds if thresholds is not None else Thresholds()
     out_dir = _absolute(Path(out_dir))
-    tasks = make_tasks(jobs, cfg=cfg, options=options, thresholds=thresholds, out_dir=out_dir, read=read)
+    tasks = make_tasks(
+        jobs, cfg=cfg, options=options, thresholds=thresholds, out_dir=out_dir, read=read, sim=sim
+    )
     _check_run_args(workers, timeout_s)
     fsutil.check_output_dir(out_dir, inputs=[t.job.path for t in tasks], overwrite=overwrite)
     junit_rel, junit_out = _junit_place(junit, out_dir)
@@ -344,17 +361,21 @@ def run_batch(
             )
         )
         fsutil.remove_stale_staging(tmp)  # left by an input whose worker was killed
+        aggregates = aggregate_scenarios(results, thresholds)
         atomic_write_text(tmp / "summary.csv", summary_csv(results))
-        atomic_write_text(tmp / "summary.md", summary_md(results))
+        atomic_write_text(tmp / "summary.md", summary_md(results, aggregates))
+        if aggregates:
+            atomic_write_text(tmp / "scenarios.csv", scenarios_csv(aggregates))
         if junit_rel is not None:
             (tmp / junit_rel).parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(tmp / junit_rel, junit_xml(results))
+            atomic_write_text(tmp / junit_rel, junit_xml(results, aggregates))
     if junit_out is not None:
         junit_out.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(junit_out, junit_xml(results))
+        atomic_write_text(junit_out, junit_xml(results, aggregates))
     junit_path = target / junit_rel if junit_rel is not None else junit_out
     return BatchResult(
-        results, target, target / "summary.csv", target / "summary.md", junit_path, time.perf_counter() - t0
+        results, target, target / "summary.csv", target / "summary.md", junit_path, time.perf_counter() - t0,
+        aggregates,
     )
 
 

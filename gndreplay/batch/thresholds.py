@@ -14,10 +14,21 @@ File format (every key optional; paths relative to the file's folder)::
     goal = [12.0, -3.5]          # fixed goal [m] in the corrected odometry frame
     match_trans_err_mean_m = 0.15
 
+    [inputs."u_trap*"]           # closed-loop scenarios: each run (scenario x seed) ...
+    min_success = false          # ... need not reach the goal (default: every run must, min_success = 1)
+    collisions = 0               # ... must never touch anything
+    min_clearance_m = 0.05
+    min_success_rate = 0.8       # per scenario over its seeds: at least 80 % of the runs reach the goal
+
 Upper-limit keys are the metric names of :mod:`gndreplay.batch.metrics` (``<module>_<stat>_ms``, the flag
-counts, the ``match_*`` relation errors); lower limits are ``min_ticks`` and ``min_relations_matched``.
-A threshold on a metric an input does not have (relation errors without a relations file) is not checked;
-a metric that is nan (relations given but none matched) fails.
+counts, the ``match_*`` relation errors, the scenario scores ``collisions``, ``timeouts``,
+``time_to_goal_s``, ...); lower limits are ``min_ticks``, ``min_relations_matched``, ``min_success`` and
+``min_clearance_m``. A threshold on a metric an input does not have (relation errors without a relations
+file, scenario scores of a log) is not checked; a metric that is nan (relations given but none matched)
+fails. ``AGGREGATE_KEYS`` (``min_success_rate``, ``collision_rate``, ``timeout_rate``,
+``mean_time_to_goal_s``) bound a scenario's aggregate over its seeds; per-input tables match them against
+the scenario's name (``u_trap``) or path. ``relations`` and ``goal`` apply to logs only (a scenario has
+its own goal and ground truth).
 """
 
 from __future__ import annotations
@@ -33,9 +44,10 @@ from typing import Any
 
 from ..errors import ConfigError
 from .jobs import Job
-from .metrics import COUNT_METRICS, LATENCY_METRICS, RELATION_METRICS
+from .metrics import COUNT_METRICS, LATENCY_METRICS, RELATION_METRICS, SCENARIO_METRICS
 
 __all__ = [
+    "AGGREGATE_KEYS",
     "DEFAULT_LIMITS",
     "MIN_KEYS",
     "THRESHOLD_KEYS",
@@ -46,15 +58,34 @@ __all__ = [
 ]
 
 #: Lower-limit keys -> the metric they bound.
-MIN_KEYS: Mapping[str, str] = {"min_ticks": "ticks", "min_relations_matched": "relations_matched"}
+MIN_KEYS: Mapping[str, str] = {
+    "min_ticks": "ticks",
+    "min_relations_matched": "relations_matched",
+    "min_success": "success",
+    "min_clearance_m": "clearance_m",
+    "min_success_rate": "success_rate",
+}
+#: Keys checked on a scenario's aggregate over its seeds (not on single runs).
+AGGREGATE_KEYS: tuple[str, ...] = (
+    "min_success_rate",
+    "collision_rate",
+    "timeout_rate",
+    "mean_time_to_goal_s",
+)
 _MAX_KEYS: tuple[str, ...] = (
     *LATENCY_METRICS,
     *COUNT_METRICS,
     *(m for m in RELATION_METRICS if m != "relations_matched"),
+    *(m for m in SCENARIO_METRICS if m not in ("success", "clearance_m")),
+    *(k for k in AGGREGATE_KEYS if k not in MIN_KEYS),
 )
 #: Every threshold key, in the order failures are listed.
 THRESHOLD_KEYS: tuple[str, ...] = (*MIN_KEYS, *_MAX_KEYS)
-_INTEGER_KEYS = frozenset((*MIN_KEYS, *COUNT_METRICS))
+_INTEGER_KEYS = frozenset(
+    (*(k for k in MIN_KEYS if k not in ("min_clearance_m", "min_success_rate")), *COUNT_METRICS,
+     "collisions", "timeouts")
+)
+_RATE_KEYS = frozenset(("min_success_rate", "collision_rate", "timeout_rate"))
 _INPUT_SETTINGS = ("relations", "goal")
 
 #: Thresholds when no file is given: generous bounds that catch a broken or badly slowed stack, not a tuning
@@ -62,9 +93,11 @@ _INPUT_SETTINGS = ("relations", "goal")
 #: + reactor 300 ms: 2.5x the default supervisor time-outs (20 / 80 / 150 ms) and 10x or more what the
 #: dev logs measure (p99 reactor 0.5-5 ms, planner 2-7 ms, stack 2-9 ms, two workers on two cores).
 #: Flag counts (real logs raise hundreds of emergency stops) and relation errors are only checked when a
-#: thresholds file asks for them.
+#: thresholds file asks for them. Every closed-loop run must reach its goal (``min_success = 1``: a
+#: collision or a time-out fails the run, with the reason).
 DEFAULT_LIMITS: Mapping[str, float] = {
     "min_ticks": 1,
+    "min_success": 1,
     "reactor_p99_ms": 50.0,
     "planner_p99_ms": 200.0,
     "stack_p99_ms": 300.0,
@@ -78,8 +111,8 @@ class InputRule:
     Attributes:
         pattern: ``fnmatch`` glob tested (case-sensitively) against the input name and its path.
         limits: threshold key -> limit, or None to switch that threshold off.
-        relations: relations file for these inputs (absolute, or relative to the current folder).
-        goal_xy: fixed goal [m] for these inputs.
+        relations: relations file for these inputs (absolute, or relative to the current folder; logs only).
+        goal_xy: fixed goal [m] for these inputs (logs only).
     """
 
     pattern: str
@@ -115,8 +148,17 @@ class Thresholds:
                 merged.update(rule.limits)
         return {k: v for k in THRESHOLD_KEYS if (v := merged.get(k)) is not None}
 
+    def aggregate_limits(self, scenario: str, path: Path) -> dict[str, float]:
+        """The ``AGGREGATE_KEYS`` limits of a scenario over its seeds: rules matched against the scenario's
+        name in the batch (a run's ``group``) or its path."""
+        limits = self.limits_for(Job(scenario, path, kind="scenario", group=scenario))
+        return {k: v for k, v in limits.items() if k in AGGREGATE_KEYS}
+
     def apply(self, job: Job) -> Job:
-        """``job`` with the relations file and goal of the matching rules (a job's own settings win)."""
+        """``job`` with the relations file and goal of the matching rules (a job's own settings win;
+        a scenario keeps its own goal and has no relations)."""
+        if job.kind != "log":
+            return job
         relations, goal = job.relations, job.goal_xy
         for rule in self.inputs:
             if not rule.matches(job):
@@ -132,12 +174,16 @@ def _fmt(x: float) -> str:
     return str(int(x)) if float(x).is_integer() else f"{x:.4g}"
 
 
-def check_limits(metrics: Mapping[str, float], limits: Mapping[str, float]) -> tuple[str, ...]:
-    """The thresholds ``metrics`` violate, one message each (``"reactor_p99_ms 63.2 > 50"``).
+def check_limits(
+    metrics: Mapping[str, float], limits: Mapping[str, float], notes: Mapping[str, str] | None = None
+) -> tuple[str, ...]:
+    """The thresholds ``metrics`` violate, one message each (``"reactor_p99_ms 63.2 > 50"``), with
+    ``notes[metric]`` appended in brackets when given (``"success 0 < 1 (collision with door at 3.10 s)"``).
 
     A limit on a metric that is absent is not checked; a nan metric fails (``"... not measured"``).
     """
     failures: list[str] = []
+    notes = notes or {}
     for key in THRESHOLD_KEYS:
         if key not in limits:
             continue
@@ -152,6 +198,10 @@ def check_limits(metrics: Mapping[str, float], limits: Mapping[str, float]) -> t
             failures.append(f"{metric} {_fmt(value)} < {_fmt(limit)}")
         elif key not in MIN_KEYS and value > limit:
             failures.append(f"{metric} {_fmt(value)} > {_fmt(limit)}")
+        else:
+            continue
+        if notes.get(metric):
+            failures[-1] += f" ({notes[metric]})"
     return tuple(failures)
 
 
@@ -170,6 +220,8 @@ def _limit(path: Path, where: str, key: str, value: Any, *, allow_off: bool) -> 
         kind = "a non-negative integer" if integer else "a non-negative number"
         off = " or false" if allow_off else ""
         raise ConfigError(f"{path}: {where} {key} must be {kind}{off}, got {value!r}")
+    if key in _RATE_KEYS and value > 1:
+        raise ConfigError(f"{path}: {where} {key} is a fraction of the runs, from 0 to 1, got {value!r}")
     return value
 
 

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 from ..errors import ConfigError, GndReplayError
 from .jobs import Job
 from .metrics import metrics_from_summary, relation_metrics
+from .scenarios import SimOptions, scenario_scores
 from .thresholds import check_limits
 
 if TYPE_CHECKING:
@@ -66,11 +67,12 @@ class Task:
 
     Attributes:
         job: the input (its per-input goal already folded into ``options``).
-        cfg: the stack configuration.
-        options: replay options.
+        cfg: the stack configuration of a log (a scenario's comes from ``sim`` and its own preset).
+        options: replay options (logs).
         run_dir: the run directory to write (absolute).
         limits: threshold key -> limit for this input.
         read: how to open the log (None: the defaults).
+        sim: how to run a scenario and configure its stack (None: ``SimOptions()``).
     """
 
     job: Job
@@ -79,6 +81,7 @@ class Task:
     run_dir: Path
     limits: Mapping[str, float] = field(default_factory=dict)
     read: ReadOptions | None = None
+    sim: SimOptions | None = None
 
 
 class RunOutcome(Protocol):
@@ -99,11 +102,12 @@ Runner = Callable[[Task], RunOutcome]
 
 
 def run_input(task: Task) -> RunOutcome:
-    """The default runner: replay a log with ``run_log`` (scenarios: not supported yet).
+    """The default runner: replay a log with ``run_log``, or run a scenario in closed loop
+    (``gndreplay.batch.scenarios.run_scenario``).
 
     Raises:
         LogFormatError: the log cannot be read.
-        ConfigError: an input kind this version cannot run.
+        ConfigError: a bad scenario file or configuration, or an unknown input kind.
     """
     job = task.job
     if job.kind == "log":
@@ -112,7 +116,11 @@ def run_input(task: Task) -> RunOutcome:
         return run_log(
             job.path, task.cfg, task.run_dir, options=task.options, read=task.read or ReadOptions()
         )
-    raise ConfigError(f"{job.path}: {job.kind} inputs are not supported yet")
+    if job.kind == "scenario":
+        from .scenarios import run_scenario
+
+        return run_scenario(job, task.run_dir, task.sim or SimOptions())
+    raise ConfigError(f"{job.path}: {job.kind} inputs are not supported")
 
 
 @dataclass(frozen=True, slots=True)
@@ -121,7 +129,8 @@ class InputResult:
 
     Attributes:
         name, path: the input.
-        status: "pass", "fail" (a threshold was exceeded) or "error" (unreadable input or crash).
+        status: "pass", "fail" (a threshold was exceeded, or a scenario run did not reach its goal under
+            the default ``min_success``) or "error" (unreadable input or crash).
         error: one-line error message ("" unless status is "error").
         error_type: exception type name of the error ("" unless status is "error").
         ticks: ticks the stack ran on.
@@ -130,6 +139,8 @@ class InputResult:
         run_dir: the run directory written, or None.
         wall_s: wall time of the input in its worker [s].
         detail: traceback of a crash ("" otherwise).
+        group, seed: a scenario run's scenario (its name in the batch) and seed ("" and 0 for a log).
+        outcome: how a scenario run ended, in words (``"collision with door at 3.10 s"``; "" otherwise).
     """
 
     name: str
@@ -143,6 +154,9 @@ class InputResult:
     run_dir: Path | None = None
     wall_s: float = 0.0
     detail: str = ""
+    group: str = ""
+    seed: int = 0
+    outcome: str = ""
 
 
 def _one_line(err: BaseException) -> str:
@@ -167,10 +181,13 @@ def error_result(
         error_type=error_type,
         wall_s=wall_s,
         detail=detail,
+        group=job.group,
+        seed=job.seed,
     )
 
 
-def _scored_metrics(outcome: RunOutcome, job: Job) -> dict[str, float]:
+def _scored_metrics(outcome: RunOutcome, job: Job) -> tuple[dict[str, float], str]:
+    """The input's metrics and, for a scenario run, how it ended (read back from its run directory)."""
     metrics = metrics_from_summary(outcome.data)
     if job.relations is not None:
         from ..evaluation import load_relations, read_tum, relation_errors
@@ -178,7 +195,11 @@ def _scored_metrics(outcome: RunOutcome, job: Job) -> dict[str, float]:
         t_ns, poses = read_tum(Path(outcome.out_dir) / "trajectory_corrected.tum")
         stats = relation_errors(t_ns, poses, load_relations(job.relations))
         metrics.update(relation_metrics(stats))
-    return metrics
+    if job.kind != "scenario":
+        return metrics, ""
+    scores, note = scenario_scores(Path(outcome.out_dir))
+    metrics.update(scores)
+    return metrics, note
 
 
 def execute(task: Task, runner: Runner = run_input) -> InputResult:
@@ -191,7 +212,7 @@ def execute(task: Task, runner: Runner = run_input) -> InputResult:
     job = task.job
     try:
         outcome = runner(task)
-        metrics = _scored_metrics(outcome, job)
+        metrics, note = _scored_metrics(outcome, job)
     except GndReplayError as err:
         return error_result(
             job,
@@ -208,7 +229,7 @@ def execute(task: Task, runner: Runner = run_input) -> InputResult:
             wall_s=time.perf_counter() - t0,
             detail=traceback.format_exc(),
         )
-    failures = check_limits(metrics, task.limits)
+    failures = check_limits(metrics, task.limits, {"success": note})
     return InputResult(
         name=job.name,
         path=str(job.path),
@@ -218,4 +239,7 @@ def execute(task: Task, runner: Runner = run_input) -> InputResult:
         failures=failures,
         run_dir=Path(outcome.out_dir),
         wall_s=time.perf_counter() - t0,
+        group=job.group,
+        seed=job.seed,
+        outcome=note,
     )

@@ -76,8 +76,6 @@ class SupervisorParams:
         rotate_w_frac: turn rate of ROTATE, as a fraction of wmax (**choice**: 0.5).
         goal_tolerance_m: distance at which the goal counts as reached.
         stale_scan_s: a scan older than this at tick time (gap to the previous scan) stops the robot.
-        brake_decel_mps2: unused since the swept-area check brakes with the robot's own limits
-            (``RobotConfig.accel_mps2`` / ``alpha_radps2``); kept so existing configuration files load.
         reaction_s: time the command is held before braking starts in the swept-area check (**choice**:
             0.3 s, more than a scan period of both presets).
         emergency_margin_m: extra margin around the footprint in the swept-area check.
@@ -98,7 +96,6 @@ class SupervisorParams:
     rotate_w_frac: float = 0.5
     goal_tolerance_m: float = 0.3
     stale_scan_s: float = 1.0
-    brake_decel_mps2: float = 0.5
     reaction_s: float = 0.3
     emergency_margin_m: float = 0.02
     trap_window: int = 40

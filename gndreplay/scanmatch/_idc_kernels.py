@@ -727,8 +727,9 @@ def coarse_rotation(pa, pr, ref_r, ok, half_bins, step_bins, every, tol_abs, tol
     profile agrees best with the reference's, over +-``half_bins`` bins in steps of ``step_bins``.
 
     A scan point of bearing a and range r is *covered* at rotation d when one of the bins around a + d holds
-    a reference point, and *agrees* when r is within tol_abs + tol_rel r of the range interval of those. The score is the
-    fraction of covered points that agree (at least half the points covered): counting agreeing points
+    a reference point, and *agrees* when r is within tol_abs + tol_rel r of the range interval of those.
+    The score is the fraction of covered points that agree (at least half the points covered): counting
+    agreeing points
     alone would favour the rotation that overlaps the map most, in a round hall any rotation back towards
     the map. Unlike IDC, which follows the gradient of its bearing window, this sees the whole window at
     once: it finds the basin, IDC aligns in it. Uses every ``every``-th point.
@@ -807,11 +808,11 @@ def _idc_polish(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, 
 def match_scan(kf_xy, kf_n, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend_m, seg_abs_m, seg_rel,
                gap_bins, normal_chord_m, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r,
                max_cp_bins, stride, mrp_every, polish_iter, w_t, w_r, pa, coarse_bins, coarse_step,
-               coarse_every, coarse_tol_abs, coarse_tol_rel, coarse_min_gain):
+               coarse_every, coarse_tol_abs, coarse_tol_rel, coarse_min_gain, coarse_margin):
     """The whole match in one call (one dispatch instead of four): render the reference at (ox, oy, oth),
     its segments, IDC from the prediction, then the point-to-line polish (``polish_iter`` > 0) or just the
-    quality of the IDC pose. With ``coarse_bins`` > 0, IDC starts from the rotation the correlative search
-    (coarse_rotation) prefers, when it agrees better than the prediction's by ``coarse_min_gain``.
+    quality of the IDC pose. With ``coarse_bins`` > 0, a second IDC may start from the rotation that the
+    correlative search (coarse_rotation) prefers (see the comment below).
 
     Returns (x, y, th, iterations, pairs, mean pair distance [m], 3x3 point-to-line information, smallest
     eigenvalue of its translational 2x2 block).
@@ -819,16 +820,27 @@ def match_scan(kf_xy, kf_n, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend
     ref_x, ref_y, ref_r, ref_a, ok, nxt = render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r,
                                                            blend_m, seg_abs_m, seg_rel, gap_bins)
     ex, ey, il, nx, ny, cover = segments(ref_x, ref_y, ok, nxt, normal_chord_m)
-    th0 = 0.0
-    if coarse_bins > 0:
-        th1, s1, s0 = coarse_rotation(pa, pr, ref_r, ok, coarse_bins, coarse_step, coarse_every,
-                                      coarse_tol_abs, coarse_tol_rel)
-        if s1 >= s0 + coarse_min_gain:
-            th0 = th1
     x, y, th, iters, pairs, resid, info = _idc_polish(
-        px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, th0, max_iter, win0,
+        px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, 0.0, max_iter, win0,
         win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every, polish_iter, w_t,
         w_r)
+    if coarse_bins > 0:
+        # IDC only follows its bearing window: when the correlative search sees a rotation that agrees
+        # better elsewhere in the window, IDC starts from there too, and that match wins when its mean
+        # truncated pair distance (gate_min for an unpaired point) is lower by coarse_margin
+        th1, s1, s0 = coarse_rotation(pa, pr, ref_r, ok, coarse_bins, coarse_step, coarse_every,
+                                      coarse_tol_abs, coarse_tol_rel)
+        if s1 >= s0 + coarse_min_gain and abs(_pm_pi(th1 - th)) > 2.0 * win_min:
+            x2, y2, t2, it2, p2, r2, i2 = _idc_polish(
+                px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, th1, max_iter,
+                win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every,
+                polish_iter, w_t, w_r)
+            iters += it2
+            n = px.shape[0]
+            cost1 = (resid * pairs + gate_min * (n - pairs)) / n
+            cost2 = (r2 * p2 + gate_min * (n - p2)) / n
+            if cost2 < (1.0 - coarse_margin) * cost1:
+                x, y, th, pairs, resid, info = x2, y2, t2, p2, r2, i2
     # smallest eigenvalue of the symmetric 2x2 block [[a, b], [b, c]]
     a = info[0, 0]
     b = info[0, 1]

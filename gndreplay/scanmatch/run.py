@@ -16,13 +16,14 @@ from numpy.typing import NDArray
 
 from ..errors import ScanMatchError
 from ..evaluation import Relations, RelationStats, relation_errors, write_tum
+from ..fsutil import check_output_dir, resolve_output_dir, staging_dir
 from ..types import Tick
 from .base import Matcher, OdomMatcher
 from .idc import IdcMatcher, IdcParams
 from .kiss import KissIcpMatcher, KissParams
 
-__all__ = ["METHODS", "CorrectedTrajectory", "MatcherReport", "correct_trajectory", "make_matcher",
-           "matcher_report", "run_scanmatch"]
+__all__ = ["METHODS", "CorrectedTrajectory", "MatcherReport", "correct_trajectory", "keep_by_travel",
+           "make_matcher", "matcher_report", "run_scanmatch"]
 
 Method = Literal["idc", "kiss-icp", "odom"]
 METHODS: tuple[Method, ...] = ("odom", "idc", "kiss-icp")
@@ -101,6 +102,24 @@ def correct_trajectory(ticks: Iterable[Tick], matcher: Matcher) -> CorrectedTraj
         np.array(iters, dtype=np.int64), np.array(ms, dtype=np.float64), reasons)
 
 
+def keep_by_travel(ticks: Iterable[Tick], dist_m: float, angle_rad: float) -> list[Tick]:
+    """The ticks after which the odometry moved ``dist_m`` or turned ``angle_rad`` since the last kept one
+    (the first is kept): the log as one sampled by distance would hold it (CARMEN robotlaser style)."""
+    kept: list[Tick] = []
+    last = (0.0, 0.0, 0.0)
+    for tick in ticks:
+        o = tick.odom
+        if kept:
+            c, s = math.cos(last[2]), math.sin(last[2])
+            dx, dy = o.x - last[0], o.y - last[1]
+            turn = abs(math.remainder(o.theta - last[2], 2.0 * math.pi))
+            if math.hypot(c * dx + s * dy, -s * dx + c * dy) < dist_m and turn < angle_rad:
+                continue
+        kept.append(tick)
+        last = (o.x, o.y, o.theta)
+    return kept
+
+
 @dataclass(frozen=True)
 class MatcherReport:
     """One row of the ``scanmatch`` table.
@@ -142,34 +161,49 @@ def matcher_report(traj: CorrectedTrajectory, relations: Relations | None = None
 def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence[Method] = METHODS, *,
                   relations: Relations | None = None, out_dir: str | os.PathLike[str] | None = None,
                   idc: IdcParams | None = None, kiss: KissParams | None = None,
-                  tol_s: float = 1e-4, relations_name: str = "relations") -> list[MatcherReport]:
+                  tol_s: float = 1e-4, relations_name: str = "relations", overwrite: bool = False,
+                  inputs: Sequence[str | os.PathLike[str]] = ()) -> list[MatcherReport]:
     """The ``gndreplay scanmatch`` command as a function: each matcher over the same log, one report each.
 
     Args:
         ticks_factory: returns a fresh tick stream of the log (called once per matcher).
         methods: matchers to run, in table order.
         relations: reference relations for the error columns.
-        out_dir: when given, one TUM trajectory per matcher is written there as ``<method>.tum``.
+        out_dir: when given, one TUM trajectory per matcher is written there as ``<method>.tum``. It is
+            checked before any work (``fsutil.check_output_dir``: never a file, the current folder, a folder
+            holding an input or files gndreplay did not write); an earlier output there is replaced only
+            with ``overwrite``, otherwise the run goes beside it (``out_dir-2``, ...; the rows' ``tum_path``
+            say where). The files are written into a staging folder published only when all are complete.
         idc, kiss: matcher parameters.
         tol_s: stamp tolerance for relations [s].
         relations_name: how error messages name the relations (their file).
+        overwrite: replace an earlier gndreplay output at ``out_dir``.
+        inputs: the input files (log, relations), which ``out_dir`` must not contain.
 
     Raises:
         ScanMatchError: unknown method, or relations given of which none matches a scan of the log (a table
             of NaN would hide a wrong relations file or a wrong ``tol_s``).
+        OutputError: ``out_dir`` is unsafe to write.
     """
-    out = None if out_dir is None else Path(out_dir)
+    target = None
+    if out_dir is not None:
+        check_output_dir(Path(out_dir), inputs=[Path(p) for p in inputs if Path(p).exists()],
+                         overwrite=overwrite)
+        target = resolve_output_dir(Path(out_dir), overwrite=overwrite)
     rows: list[MatcherReport] = []
+    trajs: list[CorrectedTrajectory] = []
     for method in methods:
         traj = correct_trajectory(ticks_factory(), make_matcher(method, idc=idc, kiss=kiss))
         row = matcher_report(traj, relations, tol_s=tol_s)
         if relations is not None and row.relations is not None and row.relations.matched == 0:
             raise ScanMatchError(f"{relations_name}: none of its {len(relations)} relations matches two scan "
                                  f"stamps of the log within {tol_s:g} s")
-        if out is not None:
-            out.mkdir(parents=True, exist_ok=True)  # only once a trajectory is worth writing
-            path = out / f"{method}.tum"
-            write_tum(path, traj.t_ns, traj.poses)
-            row = dataclasses.replace(row, tum_path=str(path))
         rows.append(row)
-    return rows
+        trajs.append(traj)
+    if target is None:
+        return rows
+    with staging_dir(target, overwrite=overwrite) as tmp:
+        for method, traj in zip(methods, trajs, strict=True):
+            write_tum(tmp / f"{method}.tum", traj.t_ns, traj.poses)
+    return [dataclasses.replace(row, tum_path=str(target / f"{method}.tum"))
+            for method, row in zip(methods, rows, strict=True)]

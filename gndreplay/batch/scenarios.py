@@ -1,0 +1,157 @@
+"""Closed-loop scenarios as batch inputs: how a scenario run is configured and run in a worker, and the
+scores read back from its run directory.
+
+A scenario job runs ``gndreplay.sim.simulate_scenario`` (the same run directory as ``gndreplay simulate``:
+summary.json, result.json, sim_timing.json, log.mcap, ...). Its stack configuration is resolved in the
+worker, where the scenario file is read, by :func:`scenario_config`: ``--preset`` / ``--config`` apply as to
+logs, and without ``--preset`` the scenario's own ``preset:`` is used (as ``gndreplay simulate`` does).
+A bad scenario file is therefore that scenario's "error" row, never the batch's.
+
+Importing this module is cheap (no numpy / simulator code): the worker imports it before pinning threads.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ..errors import ConfigError
+from .jobs import Job
+from .metrics import metrics_from_result, outcome_note
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+    from ..config import Config
+
+__all__ = [
+    "ScenarioRun",
+    "SimOptions",
+    "parse_latency",
+    "run_scenario",
+    "scenario_config",
+    "scenario_scores",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class SimOptions:
+    """How the scenario inputs of a batch run (picklable; paths absolute once ``make_tasks`` has run).
+
+    Attributes:
+        latency_s: seconds from a scan to its command taking effect; None: the stack's measured time (not
+            deterministic).
+        perfect_odometry: no odometry drift.
+        time_limit_s: overrides every scenario's own time limit (None: the scenario's).
+        figures: draw each run's figures (fig_world.png and the run figures).
+        config: TOML overriding the preset (``--config``), or None.
+        preset: preset of every scenario (``--preset``); None: each scenario's own ``preset:``.
+        planner: planner kind (``--planner``), or None for the configuration's.
+    """
+
+    latency_s: float | None = 0.0
+    perfect_odometry: bool = False
+    time_limit_s: float | None = None
+    figures: bool = True
+    config: Path | None = None
+    preset: str | None = None
+    planner: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ScenarioRun:
+    """What ``run_scenario`` returns (a ``RunOutcome``): the run directory and its summary.json."""
+
+    out_dir: Path
+    ticks: int
+    data: Mapping[str, Any]
+
+
+def parse_latency(text: str) -> float | None:
+    """``--latency``: seconds in [0, 10), or ``"measured"`` (None: the stack's own time).
+
+    Raises:
+        ConfigError: anything else.
+    """
+    if text == "measured":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise ConfigError(f"--latency must be seconds or 'measured', got {text!r}") from None
+    if not (math.isfinite(value) and 0.0 <= value < 10.0):
+        raise ConfigError(f"--latency must be in [0, 10) s, got {text!r}")
+    return value
+
+
+def scenario_config(
+    scenario_preset: str,
+    *,
+    config: Path | None = None,
+    preset: str | None = None,
+    planner: str | None = None,
+) -> Config:
+    """The stack configuration of a scenario run: ``preset`` if given, else the scenario's own, with the
+    ``config`` file over it (``load_config``: a file whose ``preset`` key differs is an error), and the
+    planner kind when given.
+
+    Raises:
+        ConfigError: a bad config file or key (naming the file and the key), or an unknown planner.
+    """
+    from ..config import apply_overrides, load_config
+
+    cfg = load_config(config, preset_name=preset or scenario_preset)
+    return cfg if planner is None else apply_overrides(cfg, {"planner": {"kind": planner.lower()}})
+
+
+def run_scenario(job: Job, run_dir: Path, sim: SimOptions) -> ScenarioRun:
+    """Run one scenario job (a seed of a scenario) in closed loop and write its run directory.
+
+    Raises:
+        ConfigError: a bad scenario file (one line naming the file and the key) or configuration.
+    """
+    from ..sim import load_scenario, resolve_scenario, simulate_scenario
+
+    spec = resolve_scenario(job.scenario) if job.scenario else load_scenario(job.path)
+    cfg = scenario_config(spec.preset, config=sim.config, preset=sim.preset, planner=sim.planner)
+    out = simulate_scenario(
+        spec,
+        out_dir=run_dir,
+        cfg=cfg,
+        seed=job.seed,
+        latency_s=sim.latency_s,
+        perfect_odometry=sim.perfect_odometry,
+        time_limit_s=sim.time_limit_s,
+        figures=sim.figures,
+    )
+    data = _read_json(Path(out.out_dir) / "summary.json")
+    return ScenarioRun(Path(out.out_dir), int(data.get("ticks", out.ticks)), data)
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: missing from the scenario's run directory") from None
+    except (OSError, ValueError) as err:
+        raise ConfigError(f"{path}: cannot read it: {err}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a JSON object")
+    return data
+
+
+def scenario_scores(run_dir: Path) -> tuple[dict[str, float], str]:
+    """A scenario run's metrics (``SCENARIO_METRICS``) and how it ended in words, from the result.json and
+    sim_timing.json of its run directory.
+
+    Raises:
+        ConfigError: either file is missing or not a JSON object.
+    """
+    from ..sim.runner import RESULT_FILE, TIMING_FILE
+
+    result = _read_json(run_dir / RESULT_FILE)
+    timing = _read_json(run_dir / TIMING_FILE)
+    return metrics_from_result(result, timing), outcome_note(result)
