@@ -51,7 +51,6 @@ from gndreplay.evaluation import (  # noqa: E402
     relation_errors,
     relations_from_trajectory,
 )
-from gndreplay.geometry import relative  # noqa: E402
 from gndreplay.io import read_ticks  # noqa: E402
 from gndreplay.scanmatch import (  # noqa: E402
     CorrectedTrajectory,

@@ -29,16 +29,23 @@ from typing import Any
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
-from gndreplay.config import preset
+from gndreplay.config import Config, apply_overrides, preset
 from gndreplay.sim import shipped_scenarios, simulate_scenario
 
+Task = tuple[str, str, str, int, str]  # scenario, preset, planner, seed, output folder
 
-def one(args: tuple[str, str, int, str]) -> dict[str, Any]:
+
+def config(preset_name: str, planner: str) -> Config:
+    """The preset with the planner chosen."""
+    return apply_overrides(preset(preset_name), {"planner": {"kind": planner}})
+
+
+def one(args: Task) -> dict[str, Any]:
     """One run (in this process or a worker): the outcome and the timings."""
-    name, preset_name, seed, out = args
+    name, preset_name, planner, seed, out = args
     t0 = time.perf_counter()
-    o = simulate_scenario(name, out_dir=Path(out) / f"{name}-{preset_name}-{seed}", cfg=preset(preset_name),
-                          seed=seed, figures=False, overwrite=True)
+    o = simulate_scenario(name, out_dir=Path(out) / f"{name}-{preset_name}-{planner}-{seed}",
+                          cfg=config(preset_name, planner), seed=seed, figures=False, overwrite=True)
     c = o.collision or {}
     return {
         "outcome": o.outcome, "t": o.end_time_s, "clear": o.min_clearance_m, "stall": o.longest_stall_s,
@@ -48,12 +55,13 @@ def one(args: tuple[str, str, int, str]) -> dict[str, Any]:
     }
 
 
-def warm(out: str, presets: list[str]) -> None:
-    """Compile and warm every stage once per preset (a short run)."""
+def warm(out: str, presets: list[str], planners: list[str]) -> None:
+    """Compile and warm every stage once per preset and planner (a short run)."""
     name = next(iter(shipped_scenarios()))
     for p in presets:
-        simulate_scenario(name, out_dir=Path(out) / f"warm-{p}", cfg=preset(p), seed=0, figures=False,
-                          time_limit_s=2.0, overwrite=True)
+        for k in planners:
+            simulate_scenario(name, out_dir=Path(out) / f"warm-{p}-{k}", cfg=config(p, k), seed=0,
+                              figures=False, time_limit_s=2.0, overwrite=True)
 
 
 def main() -> None:
@@ -61,6 +69,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=20, help="seeds 0 .. N-1")
     ap.add_argument("--scenarios", default="", help="comma-separated names (default: every shipped one)")
     ap.add_argument("--presets", default="wheelchair,xr4000")
+    ap.add_argument("--planners", default="nf1,tunnel", help="planners side by side (nf1, tunnel)")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes (timings are per process)")
     ap.add_argument("--out", default="", help="keep the run directories here (default: a temporary dir)")
     ap.add_argument("--jsonl", default="", help="append each run's numbers to this file as it finishes")
@@ -68,60 +77,61 @@ def main() -> None:
     a = ap.parse_args()
     names = [s for s in a.scenarios.split(",") if s] or list(shipped_scenarios())
     presets = [p for p in a.presets.split(",") if p]
+    planners = [p for p in a.planners.split(",") if p]
     out = a.out or tempfile.mkdtemp(prefix="gndreplay-bench-scenarios-")
     if a.table_from:
         rows = [json.loads(line) for line in Path(a.table_from).read_text().splitlines() if line.strip()]
-        tasks = [(r["scenario"], r["preset"], r["seed"], "") for r in rows]
-        table(names, presets, tasks, rows, f"from {a.table_from}: {len(rows)} runs")
+        tasks = [(r["scenario"], r["preset"], r.get("planner", "nf1"), r["seed"], "") for r in rows]
+        table(names, presets, planners, tasks, rows, f"from {a.table_from}: {len(rows)} runs")
         return
-    warm(out, presets)
+    warm(out, presets, planners)
     # seed-major order: stopped early, the runs so far cover every row equally
-    tasks = [(n, p, s, out) for s in range(a.seeds) for n in names for p in presets]
+    tasks = [(n, p, k, s, out) for s in range(a.seeds) for n in names for p in presets for k in planners]
     t0 = time.perf_counter()
     log = open(a.jsonl, "a") if a.jsonl else None  # noqa: SIM115
     if a.jobs > 1:
-        with ProcessPoolExecutor(a.jobs, initializer=warm, initargs=(out, presets)) as ex:
+        with ProcessPoolExecutor(a.jobs, initializer=warm, initargs=(out, presets, planners)) as ex:
             results = list(ex.map(one, tasks))
     else:
         results = []
         for k, t in enumerate(tasks):
             results.append(one(t))
             if log is not None:
-                row = {"scenario": t[0], "preset": t[1], "seed": t[2], **results[-1]}
+                row = {"scenario": t[0], "preset": t[1], "planner": t[2], "seed": t[3], **results[-1]}
                 log.write(json.dumps(row) + "\n")
                 log.flush()
-            print(f"\r{k + 1}/{len(tasks)} {t[0]} {t[1]} seed {t[2]}: {results[-1]['outcome']}    ",
+            print(f"\r{k + 1}/{len(tasks)} {t[0]} {t[1]} {t[2]} seed {t[3]}: {results[-1]['outcome']}    ",
                   end="", file=sys.stderr, flush=True)
         print(file=sys.stderr)
     wall = time.perf_counter() - t0
-    table(names, presets, tasks, results,
+    table(names, presets, planners, tasks, results,
           f"{a.seeds} seeds per row, latency 0 s, {a.jobs} process(es), total wall {wall:.0f} s")
 
 
-def table(names: list[str], presets: list[str], tasks: list[tuple[str, str, int, str]],
+def table(names: list[str], presets: list[str], planners: list[str], tasks: list[Task],
           results: list[dict[str, Any]], head: str) -> None:
-    """Print the Markdown table (one row per scenario x preset)."""
+    """Print the Markdown table (one row per scenario x preset x planner, the planners side by side)."""
     print(head + "\n")
-    print("| scenario | preset | runs | success | collisions (hit by mover) | time-outs "
+    print("| scenario | preset | planner | runs | success | collisions (hit by mover) | time-outs "
           "| mean time to goal s | min clearance m | longest stall s | traps | sim ms/step | stack ms/tick |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for n in names:
-        for p in presets:
-            rows = [r for (tn, tp, _, _), r in zip(tasks, results, strict=True) if tn == n and tp == p]
-            if not rows:
-                continue
-            ok = [r for r in rows if r["outcome"] == "success"]
-            col = [r for r in rows if r["outcome"] == "collision"]
-            clear = [r["clear"] for r in rows if r["clear"] is not None]
-            ticks = sum(r["ticks"] for r in rows)
-            sim = sum(r["sim"] * r["ticks"] for r in rows) / max(ticks, 1)
-            stack = sum(r["stack"] * r["ticks"] for r in rows) / max(ticks, 1)
-            mean_t = f"{statistics.mean(r['t'] for r in ok):.1f}" if ok else "-"
-            print(f"| {n} | {p} | {len(rows)} | {100 * len(ok) / len(rows):.0f} % | {len(col)} "
-                  f"({sum(r['hit_by_mover'] for r in col)}) | "
-                  f"{sum(r['outcome'] == 'timeout' for r in rows)} | {mean_t} | "
-                  f"{min(clear) if clear else math.nan:.3f} | {max(r['stall'] for r in rows):.1f} | "
-                  f"{sum(r['traps'] for r in rows)} | {sim:.2f} | {stack:.2f} |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for n, p, k in ((n, p, k) for n in names for p in presets for k in planners):
+        rows = [r for (tn, tp, tk, _, _), r in zip(tasks, results, strict=True)
+                if (tn, tp, tk) == (n, p, k)]
+        if not rows:
+            continue
+        ok = [r for r in rows if r["outcome"] == "success"]
+        col = [r for r in rows if r["outcome"] == "collision"]
+        clear = [r["clear"] for r in rows if r["clear"] is not None]
+        ticks = sum(r["ticks"] for r in rows)
+        sim = sum(r["sim"] * r["ticks"] for r in rows) / max(ticks, 1)
+        stack = sum(r["stack"] * r["ticks"] for r in rows) / max(ticks, 1)
+        mean_t = f"{statistics.mean(r['t'] for r in ok):.1f}" if ok else "-"
+        print(f"| {n} | {p} | {k} | {len(rows)} | {100 * len(ok) / len(rows):.0f} % | {len(col)} "
+              f"({sum(r['hit_by_mover'] for r in col)}) | "
+              f"{sum(r['outcome'] == 'timeout' for r in rows)} | {mean_t} | "
+              f"{min(clear) if clear else math.nan:.3f} | {max(r['stall'] for r in rows):.1f} | "
+              f"{sum(r['traps'] for r in rows)} | {sim:.2f} | {stack:.2f} |")
 
 
 if __name__ == "__main__":
