@@ -564,6 +564,10 @@ def scanmatch(
         relations_name=str(relations), overwrite=overwrite,
         inputs=[Path(log)] + ([relations] if relations is not None else []),
     )
+    written = Path(rows[0].tum_path).parent if rows and rows[0].tum_path else out_dir
+    if written != out_dir:
+        typer.echo(f"gndreplay: {out_dir} holds an earlier run; wrote {written} (--overwrite replaces it)",
+                   err=True)
     if json_out:
         import json
 
@@ -578,7 +582,8 @@ def _print_scanmatch(rows: Sequence[MatcherReport], with_relations: bool) -> Non
     table = Table(title="scan matching, side by side in one run", title_justify="left")
     cols = ["matcher", "ms median", "ms p99", "failures"]
     if with_relations:
-        cols += ["trans err (m)", "trans max", "rot err (deg)", "rot max", "relations"]
+        cols += ["trans err (m)", "trans max", "rot err (deg)", "rot max", "relations",
+                 "<1 s m", "1-10 s m", ">10 s m", "<1 s rot max"]
     for c in cols:
         table.add_column(c, justify="left" if c == "matcher" else "right")
     for r in rows:
@@ -593,6 +598,10 @@ def _print_scanmatch(rows: Sequence[MatcherReport], with_relations: bool) -> Non
                 f"{rel['rot_max_deg']:.2f}",
                 f"{rel['matched']}/{rel['matched'] + rel['unmatched']}",
             ]
+            spans = {sp["label"]: sp for sp in rel["by_span"]}
+            spans_m = [spans.get(k, {}).get("trans_mean_m") for k in ("<1 s", "1-10 s", ">10 s")]
+            cells += [_num(m, "{:.3f}") for m in spans_m]
+            cells.append(_num(spans.get("<1 s", {}).get("rot_max_deg"), "{:.2f}"))
         table.add_row(*cells)
     console = _console()
     console.print(table)
@@ -964,7 +973,8 @@ def _print_batch(result: object) -> None:
 
 
 def _num(value: object, fmt: str = "{:.2f}") -> str:
-    return fmt.format(value) if isinstance(value, int | float) else "-"
+    """A number for a table cell; "-" when there is none (missing, or NaN: nothing to average)."""
+    return fmt.format(value) if isinstance(value, int | float) and math.isfinite(value) else "-"
 
 
 def _with_planner(cfg: Config, planner: str | None) -> Config:

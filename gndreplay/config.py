@@ -287,6 +287,11 @@ RANGES: dict[tuple[type, str], Range] = {
     (IdcParams, "min_pair_fraction"): _UNIT,
     (IdcParams, "max_residual_m"): _pos(_LEN),
     (IdcParams, "degenerate_min_info"): _nonneg(1e9),
+    (IdcParams, "odo_sigma_m"): _pos(_LEN),
+    (IdcParams, "odo_sigma_rel"): _nonneg(100.0),
+    (IdcParams, "odo_sigma_rad"): _TURN,
+    (IdcParams, "odo_sigma_rel_rad"): _nonneg(100.0),
+    (IdcParams, "coarse_margin"): _UNIT,
     (IdcParams, "guard_sigmas"): _pos(100.0),
     (IdcParams, "odo_learn_rate"): _UNIT,
     (IdcParams, "odo_learn_clip"): _pos(1000.0),
@@ -294,7 +299,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (IdcParams, "guard_gain"): _UNIT,
     (IdcParams, "guard_agree_m"): _nonneg(_LEN),
     (IdcParams, "guard_agree_rad"): Range(0.0, 2.0 * math.pi),
-    (IdcParams, "coarse_window_rad"): Range(0.0, 2.0 * math.pi),  # 0: no coarse rotation search
+    (IdcParams, "coarse_window_rad"): Range(0.0, math.pi),  # 0: no coarse rotation search; half a turn
     (IdcParams, "coarse_step_rad"): _TURN,
     (IdcParams, "coarse_points"): _count(),
     (IdcParams, "coarse_tol_m"): _nonneg(_LEN),
