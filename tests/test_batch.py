@@ -268,7 +268,8 @@ def test_thresholds_file_overrides_defaults_and_matches_inputs_by_name_or_path(t
     )
     th = load_thresholds(p)
     assert th.source == p
-    base = {"min_ticks": 1, "reactor_p99_ms": 20, "planner_p99_ms": 200.0, "emergency_stops": 0}
+    base = {"min_ticks": 1, "min_success": 1, "reactor_p99_ms": 20, "planner_p99_ms": 200.0,
+            "emergency_stops": 0}  # min_success: scenario runs only (a log has no such metric)
     assert th.limits_for(Job("aces", Path("d/aces.clf"))) == base
     mit = Job("mit-csail", Path("d/mit-csail.clf.bz2"))
     assert th.limits_for(mit) == {**base, "reactor_p99_ms": 35.5, "match_trans_err_mean_m": 0.2}

@@ -71,3 +71,23 @@ def test_scanmatch_relations_that_match_no_scan_are_an_error(tmp_path: Path) -> 
     assert result.exit_code == 2, result.output
     assert "other.relations: none of its 2 relations matches" in result.stderr
     assert "Traceback" not in result.output and not out.exists()
+
+
+def test_scanmatch_keeps_an_earlier_run_and_overwrites_on_request(tmp_path: Path) -> None:
+    out = tmp_path / "sm"
+    runner = CliRunner()
+    first = runner.invoke(app, ["scanmatch", str(SAMPLE), "--matcher", "odom", "--out", str(out)])
+    assert first.exit_code == 0 and (out / "odom.tum").is_file()
+    again = runner.invoke(app, ["scanmatch", str(SAMPLE), "--matcher", "odom", "--out", str(out)])
+    assert again.exit_code == 0 and "holds an earlier run" in again.stderr
+    assert (tmp_path / "sm-2" / "odom.tum").read_bytes() == (out / "odom.tum").read_bytes()
+    over = runner.invoke(app, ["scanmatch", str(SAMPLE), "--matcher", "odom", "--out", str(out),
+                               "--overwrite"])
+    assert over.exit_code == 0 and "earlier run" not in over.stderr and not (tmp_path / "sm-3").exists()
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("the user's")
+    refused = runner.invoke(app, ["scanmatch", str(SAMPLE), "--matcher", "odom", "--out", str(mine)])
+    assert refused.exit_code == 2 and "not written by gndreplay" in refused.stderr
+    assert (mine / "notes.txt").read_text() == "the user's"
+    assert sorted(p.name for p in mine.iterdir()) == ["notes.txt"]

@@ -252,3 +252,20 @@ def test_raw_scan_points_count_as_well() -> None:
     scan = np.array([[0.95, 0.0]])
     assert check(grid, Pose2D(0.0, 0.0, 0.0), 0.3, 0.0, scan=scan).rule is not None
     assert check(grid, Pose2D(0.0, 0.0, 0.0), 0.0, 0.0, scan=scan).rule is None  # standing still
+
+
+def test_trap_detector_counts_dithering_in_any_mode() -> None:
+    """w flipping sign every tick while the robot stays put is a trap in mpND and the safety modes too,
+    not only in ROTATE; the same turning with progress (or steady one-way turning) is not."""
+    params = SupervisorParams(trap_window=20, trap_count=6)
+    wmax = WHEELCHAIR_ROBOT.wmax_radps
+    modes = (Mode.MPND, Mode.SAFE_SLOW, Mode.SAFE_TURN, Mode.MND)
+    det = TrapDetector(params, wmax)
+    seen = [det.update(modes[i % 4], 0.5 * (-1) ** i, (1.0, 2.0, 0.3 + 0.01 * (-1) ** i)) for i in range(20)]
+    assert seen[-1] and not any(seen[:-1])  # fires once the window is full
+    moving = TrapDetector(params, wmax)
+    assert not any(moving.update(Mode.MPND, 0.5 * (-1) ** i, (0.03 * i, 0.0, 0.0)) for i in range(40))
+    steady = TrapDetector(params, wmax)
+    assert not any(steady.update(Mode.SAFE_SLOW, 0.2, (0.0, 0.0, 0.0)) for _ in range(40))
+    tiny = TrapDetector(params, wmax)  # small steering corrections are not dithering
+    assert not any(tiny.update(Mode.MPND, 0.01 * (-1) ** i, (0.0, 0.0, 0.0)) for i in range(40))

@@ -97,9 +97,9 @@ def _log_suffix(path: Path) -> str | None:
 
 
 def is_scenario_file(path: Path) -> bool:
-    """True for a path with a scenario suffix (``.yaml``/``.yml``; a ROS2 bag folder's metadata.yaml is
-    only ever found inside a bag folder, which is taken as a whole)."""
-    return path.suffix.lower() in SCENARIO_SUFFIXES
+    """True for a path with a scenario suffix (``.yaml``/``.yml``) that is not a folder (a ROS2 bag folder's
+    metadata.yaml is only ever found inside a bag folder, which is taken as a whole)."""
+    return path.suffix.lower() in SCENARIO_SUFFIXES and not path.is_dir()
 
 
 def _is_ros2_bag(path: Path) -> bool:

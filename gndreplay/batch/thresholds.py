@@ -14,7 +14,8 @@ File format (every key optional; paths relative to the file's folder)::
     goal = [12.0, -3.5]          # fixed goal [m] in the corrected odometry frame
     match_trans_err_mean_m = 0.15
 
-    [inputs."u_trap*"]           # closed-loop scenarios: each run (scenario x seed) ...
+    [inputs."u_trap"]            # closed-loop scenarios (a table matches the scenario's name, its runs'
+                                 # names u_trap-s1, ..., or its path): each run (scenario x seed) ...
     min_success = false          # ... need not reach the goal (default: every run must, min_success = 1)
     collisions = 0               # ... must never touch anything
     min_clearance_m = 0.05
@@ -26,9 +27,8 @@ counts, the ``match_*`` relation errors, the scenario scores ``collisions``, ``t
 ``min_clearance_m``. A threshold on a metric an input does not have (relation errors without a relations
 file, scenario scores of a log) is not checked; a metric that is nan (relations given but none matched)
 fails. ``AGGREGATE_KEYS`` (``min_success_rate``, ``collision_rate``, ``timeout_rate``,
-``mean_time_to_goal_s``) bound a scenario's aggregate over its seeds; per-input tables match them against
-the scenario's name (``u_trap``) or path. ``relations`` and ``goal`` apply to logs only (a scenario has
-its own goal and ground truth).
+``mean_time_to_goal_s``) bound a scenario's aggregate over its seeds. ``relations`` and ``goal`` apply to
+logs only (a scenario has its own goal and ground truth).
 """
 
 from __future__ import annotations
@@ -109,7 +109,8 @@ class InputRule:
     """Settings and threshold overrides for the inputs matching ``pattern``.
 
     Attributes:
-        pattern: ``fnmatch`` glob tested (case-sensitively) against the input name and its path.
+        pattern: ``fnmatch`` glob tested (case-sensitively) against the input name (and a scenario run's
+            scenario name) and its path.
         limits: threshold key -> limit, or None to switch that threshold off.
         relations: relations file for these inputs (absolute, or relative to the current folder; logs only).
         goal_xy: fixed goal [m] for these inputs (logs only).
@@ -121,8 +122,10 @@ class InputRule:
     goal_xy: tuple[float, float] | None = None
 
     def matches(self, job: Job) -> bool:
-        """True when the pattern matches the job's name or its path (as written, with ``/``)."""
-        return fnmatchcase(job.name, self.pattern) or fnmatchcase(job.path.as_posix(), self.pattern)
+        """True when the pattern matches the job's name, its scenario's name (a scenario run: ``u_trap``
+        for ``u_trap-s3``) or its path (as written, with ``/``)."""
+        names = (job.name, job.group, job.path.as_posix()) if job.group else (job.name, job.path.as_posix())
+        return any(fnmatchcase(n, self.pattern) for n in names)
 
 
 @dataclass(frozen=True, slots=True)

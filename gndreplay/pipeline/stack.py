@@ -134,7 +134,7 @@ class NavigationStack:
         self.params = params
         self.grid = RobotCentredGrid(params.grid)
         self._planner = make_planner(params)
-        self._trap = TrapDetector(params.supervisor)
+        self._trap = TrapDetector(params.supervisor, params.robot.wmax_radps)
         self._escape_left = 0
         self._escape_v = 0.0
         self._prev_t_ns: int | None = None
@@ -253,7 +253,7 @@ class NavigationStack:
                 mode, v, vy, w = safe.rule, safe.v_mps, safe.vy_mps, safe.w_radps
                 if safe.rule is Mode.EMERGENCY:
                     flags |= Flag.EMERGENCY_STOP
-        if self._trap.update(mode, w):
+        if self._trap.update(mode, w, (pose.x, pose.y, pose.theta)):
             flags |= Flag.TRAP_DETECTED
             v_esc, possible = escape_command(raw, p.robot, p.supervisor)
             if possible and check(v_esc, 0.0, 0.0).rule is None:

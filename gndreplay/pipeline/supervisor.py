@@ -81,7 +81,13 @@ class SupervisorParams:
         emergency_margin_m: extra margin around the footprint in the swept-area check.
         trap_window: number of recent ticks inspected for a trap.
         trap_count: stopped rotations with alternating sign, or emergencies, within the window that
-            make a trap (the multi-loop paper's "repetitive stopped rotation").
+            make a trap (the multi-loop paper's "repetitive stopped rotation"); also, in any mode, this
+            many turn-direction reversals within a full window without progress (dithering).
+        trap_progress_m, trap_turn_rad: progress that clears a dithering window: the robot moved at least
+            this far, or turned at least this much net, between the window's first and last tick
+            (**choice**: 0.2 m and 45 deg, the issue's stall definition).
+        trap_w_frac: a tick counts as turning for the dithering rule when |w| >= this fraction of wmax
+            (**choice**: 0.1; smaller steering corrections are not dithering).
         escape_ticks: how many ticks the escape motion lasts once triggered.
         escape_v_frac: escape speed, and speed of the safety check's short reverse, as a fraction of vmax
             (**choice**: 0.3).
@@ -100,6 +106,9 @@ class SupervisorParams:
     emergency_margin_m: float = 0.02
     trap_window: int = 40
     trap_count: int = 6
+    trap_progress_m: float = 0.2
+    trap_turn_rad: float = 0.785
+    trap_w_frac: float = 0.1
     escape_ticks: int = 10
     escape_v_frac: float = 0.3
     escape_clearance_m: float = 0.6
@@ -306,33 +315,59 @@ def escape_command(
 
 
 class TrapDetector:
-    """Counts stopped rotations with alternating sign and emergency stops over a sliding window.
+    """Trap conditions over a sliding window of ticks.
 
-    Holds only the recent history; ``update`` returns True when the multi-loop paper's trap condition
-    holds (repeated stopped rotations to the left and right, or frequent imminent collisions).
+    The multi-loop paper's: repeated stopped rotations (ROTATE) to the left and right, or frequent
+    imminent collisions (EMERGENCY). And dithering, whatever the mode (mpND, mND, the safety rules):
+    within a full window, the turn direction (|w| >= trap_w_frac * wmax) reverses at least trap_count
+    times while the robot neither moved trap_progress_m nor turned trap_turn_rad net. ``update`` returns
+    True when a trap holds and then starts a new window.
     """
 
-    def __init__(self, params: SupervisorParams) -> None:
+    def __init__(self, params: SupervisorParams, wmax_radps: float = 1.0) -> None:
         self._p = params
+        self._w_min = params.trap_w_frac * wmax_radps
         self._events: deque[int] = deque(maxlen=params.trap_window)  # -1/+1 rotation, 2 emergency, 0 else
+        self._turns: deque[int] = deque(maxlen=params.trap_window)  # -1/+1 turning in any mode, 0 else
+        self._poses: deque[tuple[float, float, float]] = deque(maxlen=params.trap_window)
 
-    def update(self, mode: Mode, w_radps: float) -> bool:
+    def update(self, mode: Mode, w_radps: float, pose: tuple[float, float, float] | None = None) -> bool:
+        """Record one tick (its final mode, turn rate and, for the dithering rule, the robot pose
+        (x, y, theta) in any fixed frame); True when the window holds a trap."""
         if mode is Mode.ROTATE:
             self._events.append(1 if w_radps >= 0 else -1)
         elif mode is Mode.EMERGENCY:
             self._events.append(2)
         else:
             self._events.append(0)
+        turning = abs(w_radps) >= self._w_min and mode is not Mode.GOAL
+        self._turns.append((1 if w_radps > 0 else -1) if turning else 0)
+        if pose is not None:
+            self._poses.append(pose)
         ev = np.fromiter(self._events, dtype=np.int8)
         emergencies = int(np.count_nonzero(ev == 2))
         rot = ev[(ev == 1) | (ev == -1)]
         sign_changes = int(np.count_nonzero(np.diff(rot) != 0)) if rot.size > 1 else 0
         trapped = emergencies >= self._p.trap_count or (
             rot.size >= self._p.trap_count and sign_changes >= 2
-        )
+        ) or self._dithering()
         if trapped:
             self._events.clear()
+            self._turns.clear()
+            self._poses.clear()
         return trapped
+
+    def _dithering(self) -> bool:
+        """A full window of poses with trap_count turn reversals and no progress."""
+        if len(self._poses) < self._p.trap_window:
+            return False
+        turns = np.fromiter(self._turns, dtype=np.int8)
+        turns = turns[turns != 0]
+        if turns.size < 2 or int(np.count_nonzero(np.diff(turns) != 0)) < self._p.trap_count:
+            return False
+        (x0, y0, th0), (x1, y1, th1) = self._poses[0], self._poses[-1]
+        net_turn = abs(math.remainder(th1 - th0, math.tau))
+        return math.hypot(x1 - x0, y1 - y0) < self._p.trap_progress_m and net_turn < self._p.trap_turn_rad
 
 
 def budget_flags(timings_s: dict[str, float], params: SupervisorParams) -> Flag:
