@@ -717,20 +717,12 @@ def simulate(
         return
     import json
 
-    from .config import load_config
     from .sim import resolve_scenario, simulate_scenario
+    from .sim.runner import parse_latency, scenario_config
 
-    if latency == "measured":
-        latency_s: float | None = None
-    else:
-        try:
-            latency_s = float(latency)
-        except ValueError:
-            raise typer.BadParameter(f"--latency must be seconds or 'measured', got {latency!r}") from None
-        if not 0.0 <= latency_s < 10.0:
-            raise typer.BadParameter(f"--latency must be in [0, 10) s, got {latency!r}")
+    latency_s = parse_latency(latency)
     spec = resolve_scenario(scenario)
-    cfg = _with_planner(load_config(config, preset_name=preset_name or spec.preset), planner)
+    cfg = scenario_config(spec.preset, config=config, preset=preset_name, planner=planner)
     out_dir = out if out is not None else Path("out") / "sim" / f"{spec.name}-{cfg.preset}-{seed}"
     result = simulate_scenario(spec, out_dir=out_dir, cfg=cfg, seed=seed, latency_s=latency_s,
                                perfect_odometry=perfect_odometry, time_limit_s=time_limit, figures=figures,
@@ -887,11 +879,12 @@ def batch(
     """
     import os
 
-    from .batch import expand_inputs, load_thresholds, parse_latency, parse_seeds, run_batch
+    from .batch import expand_inputs, load_thresholds, parse_seeds, run_batch
     from .batch.scenarios import SimOptions
     from .batch.thresholds import Thresholds
     from .config import load_config
     from .replay import ReadOptions, RunOptions
+    from .sim.runner import parse_latency
 
     cfg = _with_planner(load_config(config, preset_name=preset_name), planner)
     sim = SimOptions(latency_s=parse_latency(latency), perfect_odometry=perfect_odometry,

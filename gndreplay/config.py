@@ -253,6 +253,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (SupervisorParams, "trap_progress_m"): _nonneg(_LEN),
     (SupervisorParams, "trap_turn_rad"): _TURN,
     (SupervisorParams, "trap_w_frac"): _FRAC,
+    (SupervisorParams, "unreachable_ticks"): _count(),
     (SupervisorParams, "escape_ticks"): _count(),
     (SupervisorParams, "escape_v_frac"): _FRAC,
     (SupervisorParams, "escape_clearance_m"): _nonneg(_LEN),

@@ -27,15 +27,14 @@ from gndreplay.batch import (
     load_thresholds,
     make_tasks,
     metrics_from_result,
-    parse_latency,
     parse_seeds,
     run_batch,
-    scenario_config,
     scenarios_csv,
     summary_md,
 )
 from gndreplay.batch.metrics import outcome_note
 from gndreplay.errors import ConfigError
+from gndreplay.sim.runner import parse_latency, scenario_config
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_LOG = ROOT / "sample_logs" / "office.clf.bz2"

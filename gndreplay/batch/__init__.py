@@ -39,7 +39,7 @@ from .metrics import (
 )
 from .report import CSV_COLUMNS, SCENARIO_CSV_COLUMNS, junit_xml, scenarios_csv, summary_csv, summary_md
 from .run import DASK_EXTRA_HINT, DEFAULT_TIMEOUT_S, BatchResult, make_tasks, run_batch, run_tasks
-from .scenarios import SimOptions, parse_latency, run_scenario, scenario_config
+from .scenarios import SimOptions, run_scenario
 from .thresholds import (
     AGGREGATE_KEYS,
     DEFAULT_LIMITS,
@@ -89,7 +89,6 @@ __all__ = [
     "make_tasks",
     "metrics_from_result",
     "metrics_from_summary",
-    "parse_latency",
     "parse_seeds",
     "pin_threads",
     "run_batch",
@@ -97,7 +96,6 @@ __all__ = [
     "run_scenario",
     "run_tasks",
     "safe_name",
-    "scenario_config",
     "scenarios_csv",
     "shipped_names",
     "special_file_kind",

@@ -13,7 +13,6 @@ Importing this module is cheap (no numpy / simulator code): the worker imports i
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -25,14 +24,11 @@ from .metrics import metrics_from_result, outcome_note
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
-    from ..config import Config
 
 __all__ = [
     "ScenarioRun",
     "SimOptions",
-    "parse_latency",
     "run_scenario",
-    "scenario_config",
     "scenario_scores",
 ]
 
@@ -70,43 +66,6 @@ class ScenarioRun:
     data: Mapping[str, Any]
 
 
-def parse_latency(text: str) -> float | None:
-    """``--latency``: seconds in [0, 10), or ``"measured"`` (None: the stack's own time).
-
-    Raises:
-        ConfigError: anything else.
-    """
-    if text == "measured":
-        return None
-    try:
-        value = float(text)
-    except ValueError:
-        raise ConfigError(f"--latency must be seconds or 'measured', got {text!r}") from None
-    if not (math.isfinite(value) and 0.0 <= value < 10.0):
-        raise ConfigError(f"--latency must be in [0, 10) s, got {text!r}")
-    return value
-
-
-def scenario_config(
-    scenario_preset: str,
-    *,
-    config: Path | None = None,
-    preset: str | None = None,
-    planner: str | None = None,
-) -> Config:
-    """The stack configuration of a scenario run: ``preset`` if given, else the scenario's own, with the
-    ``config`` file over it (``load_config``: a file whose ``preset`` key differs is an error), and the
-    planner kind when given.
-
-    Raises:
-        ConfigError: a bad config file or key (naming the file and the key), or an unknown planner.
-    """
-    from ..config import apply_overrides, load_config
-
-    cfg = load_config(config, preset_name=preset or scenario_preset)
-    return cfg if planner is None else apply_overrides(cfg, {"planner": {"kind": planner.lower()}})
-
-
 def run_scenario(job: Job, run_dir: Path, sim: SimOptions) -> ScenarioRun:
     """Run one scenario job (a seed of a scenario) in closed loop and write its run directory.
 
@@ -116,6 +75,8 @@ def run_scenario(job: Job, run_dir: Path, sim: SimOptions) -> ScenarioRun:
     from ..sim import load_scenario, resolve_scenario, simulate_scenario
 
     spec = resolve_scenario(job.scenario) if job.scenario else load_scenario(job.path)
+    from ..sim.runner import scenario_config
+
     cfg = scenario_config(spec.preset, config=sim.config, preset=sim.preset, planner=sim.planner)
     out = simulate_scenario(
         spec,

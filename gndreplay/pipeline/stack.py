@@ -138,6 +138,9 @@ class NavigationStack:
         self._escape_left = 0
         self._escape_v = 0.0
         self._prev_t_ns: int | None = None
+        self._no_path = 0  # consecutive PLANNER_NO_PATH ticks
+        self._looked_rad = 0.0  # turned in place since the goal was held unreachable
+        self._prev_theta: float | None = None
 
     def step(self, tick: Tick, pose: Pose2D, goal_xy: tuple[float, float], match_ms: float = 0.0,
              match_failed: bool = False) -> TickResult:
@@ -180,6 +183,10 @@ class NavigationStack:
         goal_rel = _to_robot(pose, goal[None, :])[0]
         if mode is Mode.ROTATE:
             v, vy, w = 0.0, 0.0, rotate_command(math.atan2(goal_rel[1], goal_rel[0]), p.robot, p.supervisor)
+        if self._unreachable(planned, pose):
+            mode, v, vy = Mode.ROTATE, 0.0, 0.0
+            w = 0.0 if self._looked_rad >= 2.0 * math.pi else rotate_command(
+                math.atan2(goal_rel[1], goal_rel[0]), p.robot, p.supervisor)
         if p.supervisor.enforce_budgets and over & Flag.REACTOR_OVER_BUDGET:
             v, vy, w = 0.0, 0.0, 0.0
         if math.hypot(goal_rel[0], goal_rel[1]) <= p.supervisor.goal_tolerance_m:
@@ -206,6 +213,21 @@ class NavigationStack:
             planner_length_m=planned.length_m,
             tunnel_width_m=planned.width_m if planned.ok else math.nan,
         )
+
+    def _unreachable(self, planned: PlanResult, pose: Pose2D) -> bool:
+        """True once the planner has found no path (PLANNER_NO_PATH) for unreachable_ticks in a row: the
+        goal is held unreachable (GND: mND did not connect it either; ROTATE, one full turn, then stop).
+        Any plan ends it. Tracks how far the robot turned since, from the corrected pose."""
+        prev, self._prev_theta = self._prev_theta, pose.theta
+        if planned.ok or not planned.flag & Flag.PLANNER_NO_PATH:
+            self._no_path, self._looked_rad = 0, 0.0
+            return False
+        self._no_path += 1
+        if self._no_path <= self.params.supervisor.unreachable_ticks:
+            return False
+        if prev is not None and self._no_path > self.params.supervisor.unreachable_ticks + 1:
+            self._looked_rad += abs(math.remainder(pose.theta - prev, math.tau))
+        return True
 
     def _plan(self, pose: Pose2D, goal: NDArray[np.float64]) -> PlanResult:
         start = self.grid.robot_cell(pose)

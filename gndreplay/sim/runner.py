@@ -23,13 +23,17 @@ from typing import Any
 
 import numpy as np
 
-from ..config import Config, preset
+from ..config import Config, apply_overrides, load_config, preset
+from ..errors import ConfigError
 from .closedloop import ClosedLoop, SimParams
 from .geometry import footprint_vertices
 from .geometry import warm_up as warm_up_geometry
 from .scenario_file import ScenarioSpec, resolve_scenario
 
-__all__ = ["RESULT_FILE", "SimOutcome", "SimSink", "simulate_scenario", "write_sim_mcap"]
+__all__ = [
+    "RESULT_FILE", "SimOutcome", "SimSink", "parse_latency", "scenario_config", "simulate_scenario",
+    "write_sim_mcap",
+]
 
 RESULT_FILE = "result.json"
 LOG_FILE = "log.mcap"
@@ -127,7 +131,8 @@ def write_sim_mcap(path: Path, loop: ClosedLoop) -> None:
         "/ground_truth": "geometry_msgs/msg/PoseStamped",
         "/tf_static": "tf2_msgs/msg/TFMessage",
     }
-    tmp = Path(tempfile.mkdtemp(prefix="gndreplay-simlog-"))
+    # beside the target (the run's staging folder), so a killed run leaves nothing in $TMPDIR
+    tmp = Path(tempfile.mkdtemp(prefix=".simlog-", dir=path.parent))
     try:
         writer = Writer(tmp / "log", version=9, storage_plugin=StoragePlugin.MCAP)
         writer.open()
@@ -162,6 +167,41 @@ def write_sim_mcap(path: Path, loop: ClosedLoop) -> None:
         shutil.move(str(files[0]), str(path))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def parse_latency(text: str) -> float | None:
+    """``--latency``: seconds in [0, 10), or ``"measured"`` (None: the stack's own time).
+
+    Raises:
+        ConfigError: anything else.
+    """
+    if text == "measured":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise ConfigError(f"--latency must be seconds or 'measured', got {text!r}") from None
+    if not (math.isfinite(value) and 0.0 <= value < 10.0):
+        raise ConfigError(f"--latency must be in [0, 10) s, got {text!r}")
+    return value
+
+
+def scenario_config(
+    scenario_preset: str,
+    *,
+    config: Path | None = None,
+    preset: str | None = None,
+    planner: str | None = None,
+) -> Config:
+    """The stack configuration of a scenario run: ``preset`` if given, else the scenario's own, with the
+    ``config`` file over it (``load_config``: a file whose ``preset`` key differs is an error), and the
+    planner kind when given.
+
+    Raises:
+        ConfigError: a bad config file or key (naming the file and the key), or an unknown planner.
+    """
+    cfg = load_config(config, preset_name=preset or scenario_preset)
+    return cfg if planner is None else apply_overrides(cfg, {"planner": {"kind": planner.lower()}})
 
 
 def _outcome(result: dict[str, Any], out_dir: Path, t: dict[str, float]) -> SimOutcome:
