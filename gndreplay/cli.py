@@ -1088,6 +1088,7 @@ class _RunProgress:
         self.ticks = 0
         self.compiled = 0
         self._t0_ns: int | None = None
+        self._fraction: Callable[[], float | None] | None = None
         self._bar: Progress | None = None
         self._task: TaskID | None = None
 
@@ -1128,8 +1129,10 @@ class _RunProgress:
         if self._bar is not None and self._task is not None:
             self._bar.update(self._task, **fields)  # type: ignore[arg-type]
 
-    def on_open(self, desc: object) -> None:
-        """Take the total from the log's description (duration, else scan count) when it knows it."""
+    def on_open(self, reader: object) -> None:
+        """Take the total from the log's description (duration, else scan count) when it knows it, else
+        follow the share of the file read (CARMEN logs do not say their length)."""
+        desc = reader.describe() if hasattr(reader, "describe") else reader
         start, end = getattr(desc, "start_ns", None), getattr(desc, "end_ns", None)
         if start is not None and end is not None and end > start:
             duration = (end - start) / 1e9
@@ -1139,6 +1142,8 @@ class _RunProgress:
             counts = [s.count for s in getattr(desc, "streams", ()) if s.name == scan and s.count]
             if counts:
                 self.total, self.unit = float(counts[0]), "scans"
+            elif callable(fraction := getattr(reader, "fraction_read", None)):
+                self.total, self.unit, self._fraction = 100.0, "%", fraction
 
     def on_stage(self, stage: str) -> None:
         """Switch the bar to the replay's stage."""
@@ -1165,6 +1170,10 @@ class _RunProgress:
         if self._t0_ns is None:
             self._t0_ns = t_ns
         self.ticks += 1
+        if self._fraction is not None:
+            done = 100.0 * (self._fraction() or 0.0)
+            self._show(completed=done, detail=f"{self.ticks} ticks, {(t_ns - self._t0_ns) / 1e9:.0f} s")
+            return
         done = (t_ns - self._t0_ns) / 1e9 if self.unit == "s" else float(self.ticks)
         self._show(completed=done, detail=f"{self.ticks} ticks, {done:.0f} {self.unit}")
 

@@ -21,7 +21,7 @@ from collections import Counter, deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,6 +35,9 @@ from .pipeline.model import RobotCentredGrid
 from .pipeline.stack import MODULES, NavigationStack, TickResult, warm_up
 from .scanmatch import Matcher, make_matcher
 from .types import Flag, Pose2D, Scan, Tick
+
+if TYPE_CHECKING:
+    from .io import LogReader
 
 __all__ = [
     "BUDGET_FLAGS",
@@ -547,14 +550,15 @@ def run_log(
     sinks: Iterable[RunSink] = (),
     on_tick: Callable[[TickResult], None] | None = None,
     overwrite: bool = False,
-    on_open: Callable[[Any], None] | None = None,
+    on_open: Callable[[LogReader], None] | None = None,
     on_stage: Callable[[str], None] | None = None,
     on_compile: Callable[[str], None] | None = None,
 ) -> RunSummary:
     """Open ``log``, replay it and write ``out_dir`` (the whole of ``gndreplay run`` minus the terminal).
 
-    ``out_dir`` is checked before the log is opened; ``on_open`` receives the reader's ``LogDescription``
-    (stream counts, start and end when the format knows them, e.g. for a progress total).
+    ``out_dir`` is checked before the log is opened; ``on_open`` receives the open reader: its
+    ``describe()`` (stream counts, start and end when the format knows them) and ``fraction_read()`` (how
+    far the pass is, for formats that do not know their length) give a progress bar its total.
 
     Raises:
         OutputError: ``out_dir`` is unsafe to write (see ``run_replay``).
@@ -573,7 +577,7 @@ def run_log(
         strict=read.strict,
     ) as reader:
         if on_open is not None:
-            on_open(reader.describe())
+            on_open(reader)
         return run_replay(
             reader.ticks(),
             cfg,

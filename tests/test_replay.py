@@ -302,3 +302,26 @@ def test_run_progress_says_compiling_once_and_takes_its_total_from_the_log(
         p.on_open(SimpleNamespace(start_ns=0, end_ns=90 * 10**9, streams=(), scan_stream="x"))
         assert p.total == 30.0
     assert capsys.readouterr().err == ""
+
+
+def test_carmen_progress_follows_the_share_of_the_file_read(tmp_path: Path) -> None:
+    """A CARMEN log does not say its length: the bar follows the share of the file read (the compressed
+    file for .gz/.bz2, in steps of their blocks), rising steadily to the end, with a total of 100 %."""
+    import bz2
+
+    from gndreplay.cli import _RunProgress
+    from gndreplay.io import open_log
+
+    plain = tmp_path / "office.clf"
+    plain.write_bytes(bz2.decompress(SAMPLE.read_bytes()))
+    with open_log(plain) as reader:
+        desc = reader.describe()
+        assert desc.start_ns is None and desc.end_ns is None
+        with _RunProgress(enabled=True, label="log", until_s=None) as p:
+            p.on_open(reader)
+            assert (p.total, p.unit) == (100.0, "%")
+        seen = [reader.fraction_read() for k, _ in enumerate(reader.ticks()) if k % 50 == 0]
+    fractions = [f for f in seen if f is not None]
+    assert len(fractions) == len(seen) > 10
+    assert fractions == sorted(fractions) and fractions[0] < 0.2 and fractions[-1] > 0.95
+    assert len(set(fractions)) >= len(fractions) - 1  # it moves with the pass, not in one jump

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -299,3 +300,43 @@ def test_warm_up_compiles_what_the_tunnel_planner_needs() -> None:
         goal = (tick.odom.x + 3.0, tick.odom.y) if i % 2 else (tick.odom.x - 4.0, tick.odom.y + 6.0)
         stack.step(tick, tick.odom, goal)
     assert signatures() == before
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_goal_in_enclosed_box_is_held_unreachable(name: str) -> None:
+    """NF1, the goal inside a closed box seen from every side: mND while the planner finds no path, then
+    (after unreachable_ticks) ROTATE for one full turn in place, then standing still; never a trap escape.
+    A plan found again (here: the goal moved out of the box) ends it."""
+    cfg = PRESETS[name]
+    params = dataclasses.replace(
+        cfg.stack_params(), supervisor=dataclasses.replace(cfg.supervisor, unreachable_ticks=5)
+    )
+    world = np.vstack([ROOM, box(4.0, 0.0, 2.0, 2.0)])
+    stack = NavigationStack(params)
+    sensor = Pose2D(cfg.robot.laser_x_m, cfg.robot.laser_y_m, cfg.robot.laser_theta_rad)
+    t = 1_000_000_000
+
+    def step(pose: Pose2D, goal: tuple[float, float]) -> TickResult:
+        nonlocal t
+        t += 200_000_000
+        return stack.step(Tick(index=0, t_ns=t, scan=scan_of(world, pose, sensor, t, AROUND), odom=pose), pose,
+                          goal)
+
+    for a in np.linspace(-math.pi, math.pi, 9):  # look at the box from all around it
+        step(Pose2D(4.0 + 3.0 * math.cos(a), 3.0 * math.sin(a), a + math.pi / 2), (4.0, 0.0))
+    pose = Pose2D(0.0, 0.0, 0.0)
+    results = []
+    for _ in range(150):  # the robot turns as commanded
+        r = step(pose, (4.0, 0.0))
+        results.append(r)
+        pose = Pose2D(pose.x, pose.y, pose.theta + r.w_radps * 0.2)
+    assert all(r.flags & Flag.PLANNER_NO_PATH for r in results)
+    assert not any(r.flags & Flag.TRAP_DETECTED for r in results)
+    held = [i for i, r in enumerate(results) if r.mode is Mode.ROTATE]
+    assert held and held == list(range(held[0], len(results)))  # once held, held for good
+    assert all(r.mode is Mode.MND for r in results[: held[0]])
+    assert all(r.v_mps == 0.0 and r.vy_mps == 0.0 for r in results[held[0]:])
+    turned = sum(abs(r.w_radps) * 0.2 for r in results)
+    assert turned == pytest.approx(2.0 * math.pi, abs=0.2 * cfg.robot.wmax_radps)  # one full look around
+    assert results[-1].w_radps == 0.0 and results[-10].w_radps == 0.0
+    assert step(pose, (0.0, 3.0)).mode is Mode.MPND  # a reachable goal: planning again at once

@@ -212,6 +212,11 @@ class LogReader(Protocol):
         """What the log contains, without a full pass."""
         ...
 
+    def fraction_read(self) -> float | None:
+        """Share of the log read by the pass in progress, when the reader knows it (for progress bars when
+        the description gives no duration); None otherwise."""
+        ...
+
     def ticks(self) -> Iterator[Tick]:
         """Time-ordered ticks (odometry interpolated at each scan stamp).
 

@@ -41,6 +41,7 @@ import gzip
 import itertools
 import logging
 import math
+import os
 import re
 import zlib
 from collections import Counter
@@ -278,21 +279,41 @@ def _compose(a: Pose2D, b: Pose2D) -> Pose2D:
 # opening
 
 
-def _open_binary(path: Path) -> IO[bytes]:
-    """Open plain / .gz / .bz2 by suffix, in binary mode (lines are parsed as bytes: faster)."""
-    suffix = path.suffix.lower()
-    if suffix == ".gz":
-        return gzip.open(path, "rb")  # type: ignore[return-value]
-    if suffix == ".bz2":
-        return bz2.open(path, "rb")
-    return open(path, "rb")
+class _LogFile:
+    """A log's bytes, decompressed by suffix (plain / .gz / .bz2; lines are parsed as bytes: faster), and
+    how far into the file on disk they have been read: the progress of a pass whose length is unknown."""
+
+    def __init__(self, path: Path) -> None:
+        self._raw = open(path, "rb")  # noqa: SIM115 - closed by close()
+        try:
+            self._size = os.fstat(self._raw.fileno()).st_size
+            suffix = path.suffix.lower()
+            self._fh: IO[bytes] = self._raw
+            if suffix == ".gz":
+                self._fh = gzip.GzipFile(fileobj=self._raw, mode="rb")  # type: ignore[assignment]
+            elif suffix == ".bz2":
+                self._fh = bz2.BZ2File(self._raw, "rb")
+        except BaseException:
+            self._raw.close()
+            raise
+        self.readline = self._fh.readline
+
+    def fraction_read(self) -> float | None:
+        """Share of the file on disk read so far, in [0, 1] (None: closed or empty)."""
+        if self._raw.closed or not self._size:
+            return None
+        return min(self._raw.tell() / self._size, 1.0)
+
+    def close(self) -> None:
+        self._fh.close()
+        self._raw.close()
 
 
 #: What reading plain / gzip / bz2 data raises on damaged input (zlib.error is not an OSError).
 _READ_ERRORS = (OSError, EOFError, ValueError, zlib.error, MemoryError)
 
 
-def _lines(path: Path, fh: IO[bytes], lineno: int = 0) -> Iterator[tuple[int, bytes]]:
+def _lines(path: Path, fh: _LogFile, lineno: int = 0) -> Iterator[tuple[int, bytes]]:
     """Numbered lines after line ``lineno``. A line longer than ``_MAX_LINE`` bytes is yielded as
     ``_TOO_LONG`` and its rest skipped in bounded chunks (once the consumer asks for the next line), so a
     binary or decompression-bomb file never holds more than one chunk in memory.
@@ -341,7 +362,7 @@ class _Opened:
     """A file handle positioned after ``lines`` (kept so the first pass does not decompress them again);
     ``resumable`` is False when the head stopped inside an over-long line (the pass then reopens the file)."""
 
-    fh: IO[bytes]
+    fh: _LogFile
     lines: list[tuple[int, bytes]]
     resumable: bool = True
 
@@ -353,7 +374,7 @@ def _peek(path: Path) -> tuple[_Head, _Opened]:
         LogFormatError: missing / unreadable file, or not a CARMEN log.
     """
     try:
-        fh = _open_binary(path)
+        fh = _LogFile(path)
     except OSError as err:
         raise LogFormatError(f"{path}: cannot open: {err.strerror or err}") from err
     opened = _Opened(fh, [])
@@ -541,7 +562,7 @@ class CarmenReader:
         self._strict = strict
         self._sync = sync
         self._stats = SyncStats()
-        self._fh: IO[bytes] | None = None
+        self._fh: _LogFile | None = None
         self._opened: _Opened | None = None
         head, self._opened = _peek(self.path)
         self._head = head
@@ -634,6 +655,11 @@ class CarmenReader:
         if self._fh is not None:
             self._fh.close()
             self._fh = None
+
+    def fraction_read(self) -> float | None:
+        """Share of the log file read by the pass in progress (CARMEN logs do not say their length)."""
+        fh = self._fh if self._fh is not None else self._opened.fh if self._opened is not None else None
+        return None if fh is None else fh.fraction_read()
 
     # -- description -------------------------------------------------------------------------------
     @property
@@ -731,7 +757,7 @@ class CarmenReader:
             )
         else:
             try:
-                self._fh = _open_binary(self.path)
+                self._fh = _LogFile(self.path)
             except OSError as err:
                 raise LogFormatError(f"{self.path}: cannot open: {err.strerror or err}") from err
             lines = _lines(self.path, self._fh)

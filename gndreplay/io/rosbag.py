@@ -513,6 +513,10 @@ class RosbagReader:
     def sensor_pose(self) -> Pose2D:
         return self._sensor_pose
 
+    def fraction_read(self) -> float | None:
+        """None: a bag's description gives its time span, which measures progress instead."""
+        return None
+
     def describe(self) -> LogDescription:
         """Topics, types and counts from the bag's metadata (no message decoded beyond the first few)."""
         roles: dict[str, StreamRole] = {self.scan_topic: "scan"}

@@ -141,6 +141,7 @@ class NavigationStack:
         self._no_path = 0  # consecutive PLANNER_NO_PATH ticks
         self._looked_rad = 0.0  # turned in place since the goal was held unreachable
         self._prev_theta: float | None = None
+        self._rotate_sign = 0.0  # turn direction of the previous tick's ROTATE (0: not rotating)
 
     def step(self, tick: Tick, pose: Pose2D, goal_xy: tuple[float, float], match_ms: float = 0.0,
              match_failed: bool = False) -> TickResult:
@@ -181,19 +182,22 @@ class NavigationStack:
             nd = nd_step(obstacles, target, p.robot, p.reactor)
         v, vy, w = nd.v_mps, nd.vy_mps, nd.w_radps
         goal_rel = _to_robot(pose, goal[None, :])[0]
+        unreachable = self._unreachable(planned, pose)
+        if unreachable:
+            mode = Mode.ROTATE
         if mode is Mode.ROTATE:
-            v, vy, w = 0.0, 0.0, rotate_command(math.atan2(goal_rel[1], goal_rel[0]), p.robot, p.supervisor)
-        if self._unreachable(planned, pose):
-            mode, v, vy = Mode.ROTATE, 0.0, 0.0
-            w = 0.0 if self._looked_rad >= 2.0 * math.pi else rotate_command(
-                math.atan2(goal_rel[1], goal_rel[0]), p.robot, p.supervisor)
+            v, vy, w = 0.0, 0.0, self._rotate_w(goal_rel)
+            if unreachable and self._looked_rad >= 2.0 * math.pi:
+                w = 0.0
         if p.supervisor.enforce_budgets and over & Flag.REACTOR_OVER_BUDGET:
             v, vy, w = 0.0, 0.0, 0.0
         if math.hypot(goal_rel[0], goal_rel[1]) <= p.supervisor.goal_tolerance_m:
             mode, v, vy, w = Mode.GOAL, 0.0, 0.0, 0.0
             flags |= Flag.GOAL_REACHED
 
-        mode, v, vy, w, flags = self._reflexive(tick, pose, mode, v, vy, w, flags)
+        rotating = mode is Mode.ROTATE
+        mode, v, vy, w, flags = self._reflexive(tick, pose, mode, v, vy, w, flags, unreachable)
+        self._rotate_sign = (1.0 if w > 0.0 else -1.0) if rotating and w != 0.0 else 0.0
         path = planned.waypoints_cells
         path_xy = self.grid.cells_to_world(path) if path.shape[0] else np.zeros((0, 2))
         return TickResult(
@@ -213,6 +217,14 @@ class NavigationStack:
             planner_length_m=planned.length_m,
             tunnel_width_m=planned.width_m if planned.ok else math.nan,
         )
+
+    def _rotate_w(self, goal_rel: NDArray[np.float64]) -> float:
+        """ROTATE's turn rate. The direction is chosen towards the goal when ROTATE starts and kept while
+        it lasts (the turn actually executed, also when the safety check reversed it): choosing it afresh
+        every tick flips it each time the goal bearing crosses 0 or +-pi, a turn that never turns."""
+        p = self.params
+        w = rotate_command(math.atan2(goal_rel[1], goal_rel[0]), p.robot, p.supervisor)
+        return abs(w) * self._rotate_sign if self._rotate_sign else w
 
     def _unreachable(self, planned: PlanResult, pose: Pose2D) -> bool:
         """True once the planner has found no path (PLANNER_NO_PATH) for unreachable_ticks in a row: the
@@ -245,10 +257,15 @@ class NavigationStack:
         return _to_robot(pose, goal[None, :])[0]
 
     def _reflexive(
-        self, tick: Tick, pose: Pose2D, mode: Mode, v: float, vy: float, w: float, flags: Flag
+        self, tick: Tick, pose: Pose2D, mode: Mode, v: float, vy: float, w: float, flags: Flag,
+        unreachable: bool = False,
     ) -> tuple[Mode, float, float, float, Flag]:
         """The reflexive loop: stale data, a command whose swept footprint would touch an obstacle of the
-        raw scan or the grid (replaced by ``safe_command``'s rule, recorded as the mode), trap escape."""
+        raw scan or the grid (replaced by ``safe_command``'s rule, recorded as the mode), trap escape.
+
+        With the goal held unreachable the robot only looks around: a turn the check slows down is kept,
+        one it would reverse or replace stops the robot for good (ROTATE at rest: no way, stay still),
+        and there is no trap escape (standing still is the intended behaviour, not a trap)."""
         p = self.params
         prev, self._prev_t_ns = self._prev_t_ns, tick.t_ns
         if prev is not None and (tick.t_ns - prev) / 1e9 > p.supervisor.stale_scan_s:
@@ -271,11 +288,14 @@ class NavigationStack:
             self._escape_left = 0
         if mode is not Mode.GOAL:
             safe = check(v, vy, w)
+            if unreachable and safe.rule not in (None, Mode.SAFE_SLOW):
+                self._looked_rad = 2.0 * math.pi
+                return Mode.ROTATE, 0.0, 0.0, 0.0, flags
             if safe.rule is not None:
                 mode, v, vy, w = safe.rule, safe.v_mps, safe.vy_mps, safe.w_radps
                 if safe.rule is Mode.EMERGENCY:
                     flags |= Flag.EMERGENCY_STOP
-        if self._trap.update(mode, w, (pose.x, pose.y, pose.theta)):
+        if self._trap.update(mode, w, (pose.x, pose.y, pose.theta)) and not unreachable:
             flags |= Flag.TRAP_DETECTED
             v_esc, possible = escape_command(raw, p.robot, p.supervisor)
             if possible and check(v_esc, 0.0, 0.0).rule is None:
