@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import GndReplayError
-from .fsutil import atomic_write_text
+from .fsutil import atomic_write_text, format_stamp
 from .geometry import relative, wrap_angle
 
 __all__ = ["SPANS", "RelationStats", "Relations", "SpanStats", "load_relations", "read_tum",
@@ -265,13 +265,6 @@ def _trajectory_arrays(t_ns: ArrayLike, poses: ArrayLike) -> tuple[I64, F64]:
     return t, p
 
 
-def _fmt_time(t_ns: int) -> str:
-    """Exact decimal seconds with 9 digits (no float rounding)."""
-    sign = "-" if t_ns < 0 else ""
-    a = abs(int(t_ns))
-    return f"{sign}{a // NS_PER_S}.{a % NS_PER_S:09d}"
-
-
 def read_tum(path: str | os.PathLike[str]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Read a planar TUM trajectory (``t x y z qx qy qz qw``, ``#`` comments): exact int-ns stamps and
     (N, 3) poses (x, y [m], yaw [rad] from qz, qw), the inverse of :func:`write_tum`.
@@ -314,7 +307,7 @@ def write_tum(path: str | os.PathLike[str], t_ns: ArrayLike, poses: ArrayLike) -
     t, p = _trajectory_arrays(t_ns, poses)
     half = 0.5 * p[:, 2]
     qz, qw = np.sin(half), np.cos(half)
-    lines = [f"{_fmt_time(int(ti))} {x!r} {y!r} 0.0 0.0 0.0 {z!r} {w!r}\n"
+    lines = [f"{format_stamp(int(ti))} {x!r} {y!r} 0.0 0.0 0.0 {z!r} {w!r}\n"
              for ti, x, y, z, w in zip(t.tolist(), p[:, 0].tolist(), p[:, 1].tolist(), qz.tolist(),
                                        qw.tolist(), strict=True)]
     atomic_write_text(Path(path), "# timestamp tx ty tz qx qy qz qw\n" + "".join(lines))

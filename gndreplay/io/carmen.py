@@ -55,7 +55,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import LogFormatError
-from ..fsutil import atomic_path
+from ..fsutil import atomic_path, format_stamp
 from ..types import NS_PER_S, Odometry, Pose2D, Scan, Tick
 from .base import (
     INDEX_CLOCK_PERIOD_NS,
@@ -166,11 +166,8 @@ def parse_time_ns(token: bytes | str) -> int:
     return check_time(round(value * NS_PER_S))
 
 
-def format_time_s(t_ns: int) -> str:
-    """int ns -> exact decimal seconds (``parse_time_ns`` inverse)."""
-    sign = "-" if t_ns < 0 else ""
-    a = abs(t_ns)
-    return f"{sign}{a // NS_PER_S}.{a % NS_PER_S:09d}"
+#: int ns -> exact decimal seconds (``parse_time_ns`` inverse): the one stamp format of every output file
+format_time_s = format_stamp
 
 
 def flaser_angles(n: int, *, fov_rad: float | None = None, resolution_rad: float | None = None) -> F64:
