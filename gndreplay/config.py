@@ -108,7 +108,8 @@ class Config:
         return StackParams(
             robot=self.robot,
             grid=self.grid,
-            planner=self.planner,
+            # NF1's own settings only: which planner runs is planner_kind, said once
+            planner=Nf1Params(**{f.name: getattr(self.planner, f.name) for f in _NF1_FIELDS}),
             planner_kind=self.planner.kind,
             tunnel=self.planner.tunnel,
             reactor=self.reactor,
@@ -117,6 +118,8 @@ class Config:
             unknown_is_free=self.cspace.unknown_is_free,
         )
 
+
+_NF1_FIELDS = dataclasses.fields(Nf1Params)
 
 PRESETS: dict[str, Config] = {
     # the wheelchair paper: 1.2 x 0.7 m, differential drive, laser 0.72 m ahead of the axle,
@@ -222,6 +225,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (Nf1Params, "lookahead_m"): _pos(_LEN),
     (Nf1Params, "escape_m"): _nonneg(_LEN),
     (Nf1Params, "border_search_m"): _nonneg(_LEN),
+    (Nf1Params, "unknown_cost"): Range(1.0, 100.0),
     (TunnelParams, "margin_m"): _nonneg(10.0),
     (TunnelParams, "n_rays"): _count(8, 100_000),
     (TunnelParams, "jump_m"): _pos(_LEN),
