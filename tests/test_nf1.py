@@ -19,6 +19,7 @@ from gndreplay.pipeline.nf1 import (
     path_direction,
     plan,
     project_goal,
+    reaches_border,
     tighten,
 )
 from gndreplay.types import Flag
@@ -393,3 +394,48 @@ def test_projected_goal_on_blocked_border_moves_to_nearest_free_border_cell() ->
     assert off.flag == Flag.GOAL_IN_OBSTACLE and off.goal_cell == (50, 99)
     inside = plan(free, (50, 50), (50.5, 98.5), cell_m=CELL_M)  # inside the grid: never moved
     assert inside.flag == Flag.GOAL_IN_OBSTACLE and inside.goal_cell == (50, 98)
+
+
+@pytest.mark.parametrize("connectivity", [4, 8])
+def test_unknown_cost_prefers_a_known_route(connectivity: Literal[4, 8]) -> None:
+    """A wall with a short way round through never-seen cells (top) and a longer one through known free
+    cells (bottom): the papers' NF1 (unknown_cost 1) takes the short unknown way, a high enough unknown
+    cost the known one; the wave values are the weighted lengths."""
+    free = np.ones((40, 60), dtype=bool)
+    free[3:38, 20] = False
+    unknown = np.zeros_like(free)
+    unknown[:10, :] = True
+    start, goal = (10, 5), (10.5, 40.5)
+    pure = plan(free, start, goal, cell_m=0.1, params=Nf1Params(connectivity=connectivity, unknown_cost=1.0),
+                unknown=unknown)
+    assert pure.ok and pure.path_cells[:, 0].max() <= 10  # over the top, through the unknown
+    same = plan(free, start, goal, cell_m=0.1, params=Nf1Params(connectivity=connectivity))
+    assert same.cost_m == pytest.approx(pure.cost_m)  # without the mask: the same, pure NF1
+    known = plan(free, start, goal, cell_m=0.1, params=Nf1Params(connectivity=connectivity, unknown_cost=4.0),
+                 unknown=unknown)
+    assert known.ok and known.path_cells[:, 0].max() >= 38  # round the bottom, known free all the way
+    assert not unknown[known.path_cells[:, 0], known.path_cells[:, 1]].any()
+    assert known.cost_m > pure.cost_m and known.length_m > pure.length_m
+
+
+def test_unknown_cost_weights_each_step_into_an_unknown_cell() -> None:
+    free = np.ones((1, 10), dtype=bool)
+    unknown = np.zeros_like(free)
+    unknown[0, 3:6] = True  # three unknown cells between start and goal
+    r = plan(free, (0, 0), (0.5, 9.5), cell_m=1.0, params=Nf1Params(unknown_cost=3.0), unknown=unknown)
+    assert r.cost_m == pytest.approx(6 * 1.0 + 3 * 3.0)
+    with pytest.raises(ValueError, match="unknown_cost"):
+        Nf1Params(unknown_cost=0.5)
+    with pytest.raises(ValueError, match="shape"):
+        plan(free, (0, 0), (0.5, 9.5), cell_m=1.0, unknown=np.zeros((2, 10), dtype=bool))
+
+
+def test_reaches_border_tells_an_enclosed_robot() -> None:
+    free = np.ones((20, 20), dtype=bool)
+    free[5, 5:15] = free[14, 5:15] = free[5:15, 5] = free[5:15, 14] = False  # a closed ring
+    assert not reaches_border(free, (10, 10))
+    assert reaches_border(free, (2, 2))
+    free[5, 9] = True  # a one-cell gap in the ring
+    assert reaches_border(free, (10, 10))
+    free[10, 10] = False  # the robot cell itself need not be free
+    assert reaches_border(free, (10, 10))

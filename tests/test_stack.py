@@ -319,8 +319,8 @@ def test_goal_in_enclosed_box_is_held_unreachable(name: str) -> None:
     def step(pose: Pose2D, goal: tuple[float, float]) -> TickResult:
         nonlocal t
         t += 200_000_000
-        return stack.step(Tick(index=0, t_ns=t, scan=scan_of(world, pose, sensor, t, AROUND), odom=pose), pose,
-                          goal)
+        scan = scan_of(world, pose, sensor, t, AROUND)
+        return stack.step(Tick(index=0, t_ns=t, scan=scan, odom=pose), pose, goal)
 
     for a in np.linspace(-math.pi, math.pi, 9):  # look at the box from all around it
         step(Pose2D(4.0 + 3.0 * math.cos(a), 3.0 * math.sin(a), a + math.pi / 2), (4.0, 0.0))
@@ -340,3 +340,30 @@ def test_goal_in_enclosed_box_is_held_unreachable(name: str) -> None:
     assert turned == pytest.approx(2.0 * math.pi, abs=0.2 * cfg.robot.wmax_radps)  # one full look around
     assert results[-1].w_radps == 0.0 and results[-10].w_radps == 0.0
     assert step(pose, (0.0, 3.0)).mode is Mode.MPND  # a reachable goal: planning again at once
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_enclosed_robot_with_goal_beyond_the_grid_stops_after_one_turn(name: str) -> None:
+    """The robot inside a closed ring, the goal far beyond the grid: no border cell is reachable, so the
+    goal is held unreachable too (ROTATE one full turn, then still), unlike a NO_REGION ROTATE forever."""
+    cfg = PRESETS[name]
+    params = dataclasses.replace(
+        cfg.stack_params(), supervisor=dataclasses.replace(cfg.supervisor, unreachable_ticks=2)
+    )
+    ring = regular_polygon(0.0, 0.0, cfg.robot.outer_radius_m + 0.15, sides=24)
+    world = np.vstack([ROOM, ring])
+    stack = NavigationStack(params)
+    sensor = Pose2D(cfg.robot.laser_x_m, cfg.robot.laser_y_m, cfg.robot.laser_theta_rad)
+    pose, results = Pose2D(0.0, 0.0, 0.0), []
+    for i in range(160):
+        t = 1_000_000_000 + i * 200_000_000
+        tick = Tick(index=i, t_ns=t, scan=scan_of(world, pose, sensor, t, AROUND), odom=pose)
+        r = stack.step(tick, pose, (100.0, 3.0))
+        results.append(r)
+        pose = Pose2D(0.0, 0.0, pose.theta + r.w_radps * 0.2)
+    assert all(r.mode is Mode.ROTATE and r.v_mps == 0.0 for r in results)
+    assert all(r.w_radps >= 0.0 for r in results)  # one direction, no dithering
+    step = 0.2 * cfg.supervisor.rotate_w_frac * cfg.robot.wmax_radps  # one tick's turn
+    turned = sum(r.w_radps * 0.2 for r in results)  # the ticks before the hold turn too (NO_REGION)
+    assert 2.0 * math.pi - step <= turned <= 2.0 * math.pi + (params.supervisor.unreachable_ticks + 3) * step
+    assert results[-1].w_radps == 0.0

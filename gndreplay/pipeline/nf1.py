@@ -52,6 +52,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..geometry import wrap_angle
 from ..types import Flag
 from .cspace import free_cspace
+from .model import UNKNOWN
 
 __all__ = [
     "Nf1Params",
@@ -93,6 +94,12 @@ class Nf1Params:
             beyond the grid, so a wall or a piece of furniture at the border should not make the goal
             "in an obstacle"); 0 disables the search (GOAL_IN_OBSTACLE).
         early_exit: stop the wave when it reaches the robot cell (same path, less work).
+        unknown_cost: cost of a step into an UNKNOWN cell relative to a step into a known FREE one, when
+            unknown space is free to the planner: above 1 a known route wins over a route through
+            never-seen space up to that factor shorter. **Choice**: 1.0, the papers' pure NF1 (unknown =
+            free): 2.0 measured worse in closed loop (benchmarks/scenarios.py, 3 seeds: the wheelchair's
+            u_trap 100 -> 0 %, the XR4000's gnd_exp1_three_traps 100 -> 0 %; the plan then switches
+            between a known and an unseen route as cells get seen, and nothing holds a route yet).
     """
 
     connectivity: Literal[4, 8] = 4
@@ -100,6 +107,7 @@ class Nf1Params:
     escape_m: float = 0.5
     border_search_m: float = 1.0
     early_exit: bool = True
+    unknown_cost: float = 1.0
 
     def __post_init__(self) -> None:
         if self.connectivity not in (4, 8):
@@ -110,6 +118,8 @@ class Nf1Params:
             raise ValueError(f"escape_m must be >= 0, got {self.escape_m!r}")
         if not self.border_search_m >= 0.0:
             raise ValueError(f"border_search_m must be >= 0, got {self.border_search_m!r}")
+        if not self.unknown_cost >= 1.0:
+            raise ValueError(f"unknown_cost must be >= 1, got {self.unknown_cost!r}")
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -301,6 +311,74 @@ def _dijkstra8(
     return dist.reshape(h, w)
 
 
+@njit(cache=True)
+def _dijkstra_cost(
+    free: NDArray[np.bool_], costly: NDArray[np.bool_], cost: float, goal_r: int, goal_c: int, sink_r: int,
+    sink_c: int, early_exit: bool, diagonal: bool,
+) -> NDArray[np.float32]:
+    """Wave where a step into a ``costly`` cell (UNKNOWN) is ``cost`` times as long: exact Dijkstra on
+    four FIFO queues, one per step length (1, sqrt(2)) x (known, costly); as in ``_dijkstra8`` each
+    queue receives increasing values, so the smallest head is always the next cell (no heap)."""
+    h, w = free.shape
+    n = h * w
+    f = free.ravel()
+    u = costly.ravel()
+    dist = np.full(n, np.inf, dtype=np.float32)
+    done = np.zeros(n, dtype=np.bool_)
+    cap = 8 * n + 1
+    qi = np.empty((4, cap), dtype=np.int32)
+    qv = np.empty((4, cap), dtype=np.float32)
+    head = np.zeros(4, dtype=np.int64)
+    tail = np.zeros(4, dtype=np.int64)
+    steps = np.array([1.0, DIAG_LEN, cost, DIAG_LEN * cost], dtype=np.float32)
+    sink = sink_r * w + sink_c if sink_r >= 0 else -1
+    g = goal_r * w + goal_c
+    dist[g] = 0.0
+    qi[0, 0] = g
+    qv[0, 0] = 0.0
+    tail[0] = 1
+    nk = 8 if diagonal else 4
+    while True:
+        best = -1
+        for k in range(4):
+            if head[k] < tail[k] and (best < 0 or qv[k, head[k]] < qv[best, head[best]]):
+                best = k
+        if best < 0:
+            break
+        i = qi[best, head[best]]
+        head[best] += 1
+        if done[i]:
+            continue
+        done[i] = True
+        if i == sink:
+            if early_exit:
+                break
+            if not f[i]:
+                continue
+        r = i // w
+        c = i - r * w
+        for k in range(nk):
+            dr = _DR[k]
+            dc = _DC[k]
+            rr = r + dr
+            cc = c + dc
+            if rr < 0 or rr >= h or cc < 0 or cc >= w:
+                continue
+            j = rr * w + cc
+            if not (f[j] or j == sink):
+                continue
+            if k >= 4 and not (f[i + dr * w] and f[i + dc]):  # no corner cutting
+                continue
+            qk = (1 if k >= 4 else 0) + (2 if u[j] else 0)
+            d = dist[i] + steps[qk]
+            if d < dist[j]:
+                dist[j] = d
+                qi[qk, tail[qk]] = j
+                qv[qk, tail[qk]] = d
+                tail[qk] += 1
+    return dist.reshape(h, w)
+
+
 def _wave(
     free: NDArray[np.bool_],
     goal_r: int,
@@ -309,9 +387,14 @@ def _wave(
     sink_c: int,
     early_exit: bool,
     diagonal: bool,
+    costly: NDArray[np.bool_] | None = None,
+    cost: float = 1.0,
 ) -> NDArray[np.float32]:
     """Wavefront from the goal over free cells (C-contiguous ``free``); the sink (robot) cell, if >= 0, may
-    be labelled although not free but never expands."""
+    be labelled although not free but never expands. With ``costly`` (C-contiguous, UNKNOWN cells) and
+    ``cost`` != 1, a step into a costly cell is that much longer."""
+    if costly is not None and cost != 1.0:
+        return _dijkstra_cost(free, costly, cost, goal_r, goal_c, sink_r, sink_c, early_exit, diagonal)
     kernel = _dijkstra8 if diagonal else _bfs4
     return kernel(free, goal_r, goal_c, sink_r, sink_c, early_exit)
 
@@ -618,6 +701,16 @@ def nf1_wavefront(
     return _wave(f, gr, gc, sr, sc, early_exit and robot_rc is not None, connectivity == 8)
 
 
+def reaches_border(free: ArrayLike, start_rc: tuple[int, int]) -> bool:
+    """True when a 4-connected path of free cells leads from ``start_rc`` (seeded even if not free) to a
+    cell on the grid border: the robot is not enclosed in the model, a goal beyond the grid may be
+    reachable through some border cell."""
+    f = _as_free(free)
+    r, c = _check_cell("start_rc", start_rc, f.shape)
+    reach = np.isfinite(_wave(f, r, c, -1, -1, False, False))
+    return bool(reach[0].any() or reach[-1].any() or reach[:, 0].any() or reach[:, -1].any())
+
+
 def descend(nf: NDArray[np.float32], free: ArrayLike, start_rc: tuple[int, int]) -> NDArray[np.int32]:
     """Steepest-descent path over the 8 neighbours from ``start_rc`` down to the goal (value 0).
 
@@ -766,6 +859,7 @@ def plan(
     *,
     cell_m: float,
     params: Nf1Params = Nf1Params(),
+    unknown: ArrayLike | None = None,
 ) -> PlanResult:
     """Plan from the robot cell to the goal: NF1 wave, steepest descent, string pulling, direction.
 
@@ -776,6 +870,8 @@ def plan(
             outside the grid it is projected onto the border along the robot-goal line.
         cell_m: cell side [m].
         params: planner settings.
+        unknown: (H, W) bool, True on UNKNOWN cells: a step into one costs ``params.unknown_cost`` (None:
+            every step into a free cell costs the same, the papers' NF1).
     Returns:
         PlanResult; ``ok`` False with GOAL_IN_OBSTACLE (goal cell not free) or PLANNER_NO_PATH (the wave
         from the goal does not reach the robot, even through the escape).
@@ -791,7 +887,11 @@ def plan(
     if not f[goal]:
         return _fail(Flag.GOAL_IN_OBSTACLE, goal, projected)
 
-    nf = _wave(f, goal[0], goal[1], start[0], start[1], params.early_exit, params.connectivity == 8)
+    costly = None if unknown is None else _as_free(unknown)
+    if costly is not None and costly.shape != f.shape:
+        raise ValueError(f"unknown has shape {costly.shape}, free has {f.shape}")
+    nf = _wave(f, goal[0], goal[1], start[0], start[1], params.early_exit, params.connectivity == 8,
+               costly, params.unknown_cost)
     entry = start
     prefix = np.zeros((0, 2), dtype=np.int32)
     if not np.isfinite(nf[start]):
@@ -854,4 +954,6 @@ class Nf1Planner:
         free = free_cspace(
             grid_cells, cell_m=self.cell_m, inflate_m=self.inflate_m, unknown_is_free=self.unknown_is_free
         )
-        return plan(free, start_rc, goal_rc_float, cell_m=self.cell_m, params=self.params)
+        weighted = self.unknown_is_free and self.params.unknown_cost != 1.0
+        unknown = (grid_cells == UNKNOWN) if weighted else None
+        return plan(free, start_rc, goal_rc_float, cell_m=self.cell_m, params=self.params, unknown=unknown)

@@ -19,9 +19,10 @@ from numpy.typing import NDArray
 from ..geometry import transform_points, wrap_angle
 from ..robot import RobotConfig
 from ..types import Flag, Pose2D, Scan, Tick
+from .cspace import free_cspace
 from .model import UNKNOWN, GridParams, RobotCentredGrid
 from .nd import NdParams, Situation, nd_step
-from .nf1 import Nf1Params, Nf1Planner, Planner, PlanResult
+from .nf1 import Nf1Params, Nf1Planner, Planner, PlanResult, reaches_border
 from .supervisor import (
     Mode,
     SafeCommand,
@@ -227,11 +228,15 @@ class NavigationStack:
         return abs(w) * self._rotate_sign if self._rotate_sign else w
 
     def _unreachable(self, planned: PlanResult, pose: Pose2D) -> bool:
-        """True once the planner has found no path (PLANNER_NO_PATH) for unreachable_ticks in a row: the
-        goal is held unreachable (GND: mND did not connect it either; ROTATE, one full turn, then stop).
-        Any plan ends it. Tracks how far the robot turned since, from the corrected pose."""
+        """True once the planner has found no path (PLANNER_NO_PATH) to a goal inside the grid for
+        unreachable_ticks in a row: the goal is held unreachable (GND: mND did not connect it either;
+        ROTATE, one full turn, then stop). Any plan ends it. A goal beyond the grid only when the robot
+        cannot reach the grid border at all: no path to the goal's border cell alone says nothing about
+        the goal (GND's mND goes on). Tracks how far the robot turned since, from the corrected pose."""
         prev, self._prev_theta = self._prev_theta, pose.theta
-        if planned.ok or not planned.flag & Flag.PLANNER_NO_PATH:
+        if planned.ok or not planned.flag & Flag.PLANNER_NO_PATH or (
+            planned.goal_projected and self._reaches_border(pose)
+        ):
             self._no_path, self._looked_rad = 0, 0.0
             return False
         self._no_path += 1
@@ -240,6 +245,14 @@ class NavigationStack:
         if prev is not None and self._no_path > self.params.supervisor.unreachable_ticks + 1:
             self._looked_rad += abs(math.remainder(pose.theta - prev, math.tau))
         return True
+
+    def _reaches_border(self, pose: Pose2D) -> bool:
+        """The robot's free region in the NF1 C-space of the grid touches the grid border (only asked on
+        ticks without a path to a goal beyond the grid)."""
+        p = self.params
+        free = free_cspace(self.grid.cells, cell_m=p.grid.cell_m, inflate_m=p.robot.inner_radius_m
+                           + p.cspace_margin_m, unknown_is_free=p.unknown_is_free)
+        return reaches_border(free, self.grid.robot_cell(pose))
 
     def _plan(self, pose: Pose2D, goal: NDArray[np.float64]) -> PlanResult:
         start = self.grid.robot_cell(pose)

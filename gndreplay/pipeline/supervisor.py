@@ -88,10 +88,10 @@ class SupervisorParams:
             (**choice**: 0.2 m and 45 deg, the issue's stall definition).
         trap_w_frac: a tick counts as turning for the dithering rule when |w| >= this fraction of wmax
             (**choice**: 0.1; smaller steering corrections are not dithering).
-        unreachable_ticks: consecutive ticks of PLANNER_NO_PATH (the goal's free region and the robot's
-            are not connected in the model, unseen space counting as the planner's settings say) after
-            which the goal is held unreachable: GND's ROTATE for one full turn in place (to look around),
-            then stop, until a plan exists again (**choice**: 25, 5 s for the wheelchair's 5 Hz laser).
+        unreachable_ticks: consecutive ticks of PLANNER_NO_PATH to a goal inside the grid (the goal's free
+            region and the robot's are not connected in the model) after which the goal is held
+            unreachable: GND's ROTATE for one full turn in place (to look around), then stop, until a plan
+            exists again (**choice**: 25, 5 s for the wheelchair's 5 Hz laser).
         escape_ticks: how many ticks the escape motion lasts once triggered.
         escape_v_frac: escape speed, and speed of the safety check's short reverse, as a fraction of vmax
             (**choice**: 0.3).
