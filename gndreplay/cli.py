@@ -713,17 +713,20 @@ def simulate(
     if scenario in SCENARIOS:
         from .sim.scenario import simulate as run_simulation
 
-        typer.echo(str(run_simulation(scenario, seed=seed, out=out or Path(f"{scenario}.clf.bz2"))))
+        typer.echo(str(run_simulation(scenario, seed=seed, out=out or Path(f"{scenario}.clf.bz2"),
+                                      overwrite=overwrite)))
         return
     import json
 
+    from .fsutil import safe_name
     from .sim import resolve_scenario, simulate_scenario
     from .sim.runner import parse_latency, scenario_config
 
     latency_s = parse_latency(latency)
     spec = resolve_scenario(scenario)
     cfg = scenario_config(spec.preset, config=config, preset=preset_name, planner=planner)
-    out_dir = out if out is not None else Path("out") / "sim" / f"{spec.name}-{cfg.preset}-{seed}"
+    run_name = safe_name(f"{spec.name}-{cfg.preset}-{seed}")  # a scenario's name never leaves out/sim
+    out_dir = out if out is not None else Path("out") / "sim" / run_name
     result = simulate_scenario(spec, out_dir=out_dir, cfg=cfg, seed=seed, latency_s=latency_s,
                                perfect_odometry=perfect_odometry, time_limit_s=time_limit, figures=figures,
                                overwrite=overwrite)

@@ -23,7 +23,7 @@ def main() -> None:
     args = parser.parse_args()
     args.out_dir.mkdir(parents=True, exist_ok=True)
     for scenario, name in SAMPLES:
-        out = simulate(scenario, seed=args.seed, out=args.out_dir / name)
+        out = simulate(scenario, seed=args.seed, out=args.out_dir / name, overwrite=True)  # our own log
         print(f"{out}  {out.stat().st_size / 1024:.0f} KiB")
 
 

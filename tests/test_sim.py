@@ -9,10 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gndreplay.errors import ConfigError
+from gndreplay.errors import ConfigError, OutputError
 from gndreplay.geometry import compose, relative, wrap_angle
 from gndreplay.io import read_ticks
-from gndreplay.robot import WHEELCHAIR_ROBOT
+from gndreplay.robot import WHEELCHAIR_ROBOT, RobotConfig
+from gndreplay.sim.geometry import Shapes, footprint_clearance, footprint_vertices
 from gndreplay.sim.scenario import (
     SCENARIOS,
     DriveParams,
@@ -33,11 +34,9 @@ from gndreplay.sim.world import (
     World,
     box,
     cast_rays,
-    footprint_segments,
     polygon,
     quantize,
     regular_polygon,
-    segment_distances,
     simulate_ranges,
     wall,
 )
@@ -176,15 +175,32 @@ def test_swinging_door_and_walking_person() -> None:
         MovingPolygon.person([(1.0, 0.0, 0.0), (1.0, 1.0, 0.0)])
 
 
-def test_segment_distances_and_footprint() -> None:
-    a = np.array([[0.0, 0.0, 1.0, 0.0]])
-    b = np.array([[2.0, 0.0, 3.0, 0.0], [0.5, -1.0, 0.5, 1.0], [0.0, 0.5, 1.0, 0.5]])
-    np.testing.assert_allclose(segment_distances(a, b), [[1.0, 0.0, 0.5]])
-    fp = footprint_segments([0.0, 0.0, math.pi / 2], WHEELCHAIR_ROBOT)
-    pts = fp[:, :2]
-    assert pts[:, 1].max() == pytest.approx(WHEELCHAIR_ROBOT.front_m)
-    assert pts[:, 1].min() == pytest.approx(-WHEELCHAIR_ROBOT.rear_m)
-    assert pts[:, 0].max() == pytest.approx(WHEELCHAIR_ROBOT.width_m / 2)
+def segment_shapes(segments: np.ndarray) -> Shapes:
+    """World segments ``(S, 4)`` as bare two-vertex polygons (the closed-loop geometry's form)."""
+    segs = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    return Shapes.build([s.reshape(2, 2) for s in segs], list(range(len(segs))), [], [])
+
+
+def robot_clearance(pose: np.ndarray, robot: RobotConfig, segments: np.ndarray) -> float:
+    """Exact clearance of ``robot``'s footprint at ``pose`` to world segments (``sim.geometry``)."""
+    rect = robot.shape != "circle"
+    local = footprint_vertices(robot.front_m, robot.rear_m, robot.width_m) if rect else None
+    return footprint_clearance(pose, local, robot.radius_m, segment_shapes(segments)).distance_m
+
+
+def test_footprint_clearance_to_world_segments() -> None:
+    # the wheelchair facing +y: front at y = front_m, rear at y = -rear_m, sides at x = +-width / 2
+    r = WHEELCHAIR_ROBOT
+    pose = np.array([0.0, 0.0, math.pi / 2])
+    ahead = np.array([[-5.0, r.front_m + 1.0, 5.0, r.front_m + 1.0]])
+    behind = np.array([[-5.0, -r.rear_m - 0.25, 5.0, -r.rear_m - 0.25]])
+    side = np.array([[r.width_m / 2 + 0.5, -5.0, r.width_m / 2 + 0.5, 5.0]])
+    assert robot_clearance(pose, r, ahead) == pytest.approx(1.0, abs=1e-12)
+    assert robot_clearance(pose, r, behind) == pytest.approx(0.25, abs=1e-12)
+    assert robot_clearance(pose, r, side) == pytest.approx(0.5, abs=1e-12)
+    assert robot_clearance(pose, r, np.vstack([ahead, behind, side])) == pytest.approx(0.25, abs=1e-12)
+    # a segment crossing the footprint touches it
+    assert robot_clearance(pose, r, np.array([[-5.0, 0.1, 5.0, 0.1]])) == 0.0
     assert polygon([[0, 0], [1, 0], [1, 1]], closed=False).shape == (2, 4)
 
 
@@ -261,8 +277,7 @@ def test_office_run_shape_limits_and_clearance(office_run: SimulatedRun) -> None
     assert 2.4 < office_run.truth[crossing, 1] < 2.6
     # the footprint never touches the world (static and dynamic), every 0.1 s
     clearance = min(
-        segment_distances(footprint_segments(office_run.truth[k], scn.robot),
-                          scn.world.segments_at(office_run.t_ns[k] / 1e9)).min()
+        robot_clearance(office_run.truth[k], scn.robot, scn.world.segments_at(office_run.t_ns[k] / 1e9))
         for k in range(0, len(office_run.t_ns), 10)
     )
     assert 0.08 < clearance <= 0.1 + 1e-9
@@ -342,3 +357,38 @@ def test_bundled_sample_log_matches_the_generator(tmp_path: Path) -> None:
     assert fresh.read_bytes() == SAMPLE.read_bytes(), "regenerate with scripts/make_sample_logs.py"
     read = list(read_ticks(SAMPLE))
     assert len(read) == 570 and all(t.truth is not None for t in read)
+
+
+# --------------------------------------------------------------------------------------------- output safety
+
+
+def test_simulate_refuses_an_existing_file_and_a_folder_before_any_work(tmp_path: Path) -> None:
+    precious = tmp_path / "office.clf.bz2"
+    precious.write_text("precious\n")
+    with pytest.raises(OutputError, match=r"office\.clf\.bz2: already exists"):
+        simulate("office", seed=0, out=precious)
+    # --overwrite replaces only a log gndreplay wrote
+    with pytest.raises(OutputError, match="not a CARMEN log written by gndreplay"):
+        simulate("office", seed=0, out=precious, overwrite=True)
+    assert precious.read_text() == "precious\n"
+    (tmp_path / "d.clf").mkdir()
+    for overwrite in (False, True):
+        with pytest.raises(OutputError, match=r"d\.clf: is a folder"):
+            simulate("office", seed=0, out=tmp_path / "d.clf", overwrite=overwrite)
+    assert list((tmp_path / "d.clf").iterdir()) == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.clf", "office.clf.bz2"]  # no temporary left
+
+
+def test_simulate_overwrite_replaces_its_own_log_with_the_sample(tmp_path: Path) -> None:
+    import bz2
+
+    own = tmp_path / SAMPLE.name
+    own.write_bytes(bz2.compress(b"# CARMEN log written by gndreplay\nODOM 0 0 0 0 0 0 1 h 1\n"))
+    fresh = simulate("office", seed=0, out=own, overwrite=True)
+    assert fresh.read_bytes() == SAMPLE.read_bytes()
+    from typer.testing import CliRunner
+
+    from gndreplay.cli import app
+
+    r = CliRunner().invoke(app, ["simulate", "office", "--out", str(own)])  # no --overwrite: refused
+    assert r.exit_code == 2 and "already exists" in r.stderr and "Traceback" not in r.output

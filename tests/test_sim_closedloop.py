@@ -392,3 +392,123 @@ def test_cli_office_still_writes_carmen_logs_only(tmp_path: Path) -> None:
     r = CliRunner().invoke(app, ["simulate", "office", "--out", str(tmp_path / "office.txt")])
     assert r.exit_code == 2 and "simulated logs are written as CARMEN" in r.stderr
     assert not (tmp_path / "office.txt").exists()
+
+
+# --------------------------------------------------------------------------------------------- review fixes
+
+
+def test_an_instant_door_action_applies_from_its_time_and_over_defaults_to_zero() -> None:
+    s = spec({"walls": {"w": [2.0, -2.0, 2.0, 2.0]}}, events=[{"at": 1.0, "close": "w"},
+                                                               {"at": 3.0, "open": "w", "over": 0}])
+    leaf = next(e for e in s.elements if e.id == "w")
+    assert [(a.t0_s, a.t1_s) for a in leaf.door] == [(1.0, 1.0), (3.0, 3.0)]
+    assert [leaf.closed_fraction(t) for t in (0.999, 1.0, 2.0, 2.999, 3.0, 4.0)] == [0, 1, 1, 1, 0, 0]
+    # a timed motion still starts at its t0 (0 there) and is interpolated
+    slow = spec({"walls": {"w": [2.0, -2.0, 2.0, 2.0]}}, events=[{"at": 1.0, "close": "w", "over": 2.0}])
+    e = slow.elements[0]
+    assert [e.closed_fraction(t) for t in (1.0, 2.0, 3.0)] == [0.0, 0.5, 1.0]
+
+
+@pytest.mark.parametrize("delay_s", [0.0, 0.005])
+def test_a_door_closing_instantly_ahead_of_a_moving_robot_is_hit(delay_s: float) -> None:
+    # the leaf across x = 2 (faces at 1.95 / 2.05) shuts at t = 1 s while the 0.3 m robot drives at
+    # 0.5 m/s from x = 0; a far wall keeps the clearance large before: contact at x = 1.65, t = 3.3 s.
+    # delay_s > 0: the leaf's step falls off the scenario's break times (as when the person moving a leaf
+    # waited); the simulator must see it all the same.
+    s = spec({"walls": {"far": [30.0, -5.0, 30.0, 5.0], "w": [2.0, -2.0, 2.0, 2.0]}},
+             events=[{"at": 1.0, "close": "w"}])
+    loop = ClosedLoop(s, XR4000, seed=0)
+    loop.world.door_delay[[e.id for e in s.elements].index("w")] = delay_s
+    loop.vel = loop.cmd = (0.5, 0.0, 0.0)
+    loop._advance(round(6.0 * 1e9))
+    assert loop.outcome == "collision", loop.pose
+    c = loop.contact
+    assert c is not None and c["object"] == "w" and c["robot_moving"]
+    assert c["t_s"] == pytest.approx(3.3, abs=1e-3) and loop.pose[0] == pytest.approx(1.65, abs=2e-4)
+
+
+def test_a_door_closing_instantly_onto_the_robot_is_a_contact_at_that_time() -> None:
+    s = spec({"walls": {"far": [30.0, -5.0, 30.0, 5.0], "w": [1.0, -2.0, 1.0, 2.0]}},
+             events=[{"at": 1.0, "close": "w"}])
+    loop = drive(s, XR4000, (0.0, 0.0, 0.0), 3.0, pose=(1.0, 0.0, 0.0))
+    assert loop.outcome == "collision"
+    c = loop.contact
+    assert c is not None and c["object"] == "w" and c["t_s"] == 1.0 and c["hit_by_mover"]
+
+
+@pytest.mark.parametrize("name", ["/tmp/x/abs", "../../../escaped", "a/b", ".hidden", "-opt", "", "a b", 3])
+def test_a_scenario_name_must_be_a_plain_name(name: Any) -> None:
+    with pytest.raises(ConfigError, match=r"^test\.yaml: name: expected a plain name"):
+        spec({"walls": {"w": [2.0, -2.0, 2.0, 2.0]}}, name=name)
+
+
+def test_cli_a_scenario_name_cannot_escape_the_output_folder(tmp_path: Path, monkeypatch: Any) -> None:
+    cwd = tmp_path / "a" / "b" / "c"  # deep enough that even an escaping name stays inside tmp_path
+    cwd.mkdir(parents=True)
+    monkeypatch.chdir(cwd)
+    f = cwd / "esc.yaml"
+    f.write_text("name: ../../../escaped\nstart: [0, 0, 0]\ngoal: [1, 0]\ntime_limit: 1\n"
+                 "world: {walls: {w: [3, -2, 3, 2]}}\n")
+    r = CliRunner().invoke(app, ["simulate", str(f), "--no-figures"])
+    assert r.exit_code == 2 and isinstance(r.exception, SystemExit)
+    assert "esc.yaml: name: expected a plain name" in r.stderr and "Traceback" not in r.output
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == [
+        "a", "a/b", "a/b/c", "a/b/c/esc.yaml"]
+
+
+def test_result_flags_are_deterministic_and_match_commands_csv(tmp_path: Path) -> None:
+    from gndreplay.config import apply_overrides
+
+    tiny = {f"budget_{m}_s": 1e-6 for m in ("match", "model", "planner", "reactor")}
+    cfg = apply_overrides(XR4000, {"supervisor": tiny})
+    out = simulate_scenario("u_trap", out_dir=tmp_path / "run", cfg=cfg, seed=0, time_limit_s=1.0,
+                            figures=False)
+    res = json.loads((out.out_dir / "result.json").read_text())
+    timing = (out.out_dir / "timing.csv").read_text()
+    assert "OVER_BUDGET" in timing  # the budgets were exceeded (wall clock) ...
+    assert not any("OVER_BUDGET" in k for k in res["flags"])  # ... which result.json does not count
+    counts: dict[str, int] = {}
+    for line in (out.out_dir / "commands.csv").read_text().splitlines()[1:]:
+        for name in filter(None, line.split(",")[-1].split("|")):
+            counts[name] = counts.get(name, 0) + 1
+    assert res["flags"] == dict(sorted(counts.items()))
+
+
+def test_the_run_directory_is_published_with_its_figures_and_report(tmp_path: Path, monkeypatch: Any) -> None:
+    import gndreplay.fsutil as fsutil
+
+    seen: list[set[str]] = []
+    publish = fsutil.publish_dir
+
+    def spy(tmp: Path, out: Path, **kw: Any) -> None:
+        seen.append({p.name for p in Path(tmp).iterdir()})
+        publish(tmp, out, **kw)
+
+    monkeypatch.setattr(fsutil, "publish_dir", spy)
+    out = simulate_scenario("u_trap", out_dir=tmp_path / "run", seed=0, time_limit_s=0.5, figures=True)
+    assert len(seen) == 1
+    assert {"report.md", "fig_world.png", "result.json", "log.mcap"} <= seen[0]
+    assert seen[0] == {p.name for p in out.out_dir.iterdir()}  # nothing written after publishing
+
+
+def test_odom_twist_in_the_log_is_the_measured_velocity(tmp_path: Path) -> None:
+    from rosbags.highlevel import AnyReader
+
+    out = simulate_scenario("gnd_fig2_person_crossing", out_dir=tmp_path / "run", seed=0, time_limit_s=3.0,
+                            figures=False)
+    odom, truth = [], []
+    with AnyReader([out.out_dir / "log.mcap"]) as reader:
+        for conn, _, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            if conn.topic == "/odom":
+                odom.append(math.hypot(msg.twist.twist.linear.x, msg.twist.twist.linear.y))
+            elif conn.topic == "/ground_truth":
+                truth.append((msg.pose.position.x, msg.pose.position.y))
+    v = np.asarray(odom)
+    xy = np.asarray(truth)
+    assert v[0] == 0.0 and v.max() > 0.2  # starts at rest, then drives
+    # the speed changes monotonically between scans (acceleration-limited toward one command): the mean
+    # speed over a scan period lies between the velocities reported at its two ends
+    mean = np.hypot(*np.diff(xy, axis=0).T) / 0.15
+    lo, hi = np.minimum(v[:-1], v[1:]), np.maximum(v[:-1], v[1:])
+    assert np.all((mean >= lo - 2e-3) & (mean <= hi + 2e-3)), np.column_stack([lo, mean, hi])

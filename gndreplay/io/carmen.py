@@ -87,6 +87,7 @@ from .sync import (
 )
 
 __all__ = [
+    "CARMEN_HEADER",
     "DEFAULT_MAX_RANGE_M",
     "SCAN_MESSAGES",
     "CarmenReader",
@@ -165,6 +166,9 @@ def parse_time_ns(token: bytes | str) -> int:
         raise ValueError(f"timestamp {tok[:30]!r} is not finite or out of range")
     return check_time(round(value * NS_PER_S))
 
+
+#: The first line of every CARMEN log gndreplay writes (how it recognises its own logs before replacing one)
+CARMEN_HEADER = "# CARMEN log written by gndreplay"
 
 #: int ns -> exact decimal seconds (``parse_time_ns`` inverse): the one stamp format of every output file
 format_time_s = format_stamp
@@ -1032,7 +1036,7 @@ def _write_body(
     decimals: int | None,
 ) -> None:
     out.write(
-        "# CARMEN log written by gndreplay\n"
+        f"{CARMEN_HEADER}\n"
         "# message_name [message contents] ipc_timestamp ipc_hostname logger_timestamp\n"
         "# PARAM param_name param_value\n"
         "# ODOM x y theta tv rv accel\n"

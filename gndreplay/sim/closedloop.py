@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 from ..config import Config
 from ..geometry import compose, relative
 from ..pipeline.stack import TickResult
+from ..replay import recorded_flags
 from ..types import Command, Flag, Pose2D, Scan, Tick
 from .geometry import (
     Clearance,
@@ -106,6 +107,7 @@ class SimRecord:
     scan_ranges: list[F64] = field(default_factory=list)
     scan_truth: list[tuple[float, float, float]] = field(default_factory=list)
     scan_odom: list[tuple[float, float, float]] = field(default_factory=list)
+    scan_vel: list[tuple[float, float, float]] = field(default_factory=list)  # true body twist at each scan
     cmd: list[tuple[int, float, float, float]] = field(default_factory=list)  # t_ns, v, vy, w per tick
     modes: Counter[str] = field(default_factory=Counter)
     flags: Counter[str] = field(default_factory=Counter)
@@ -177,6 +179,12 @@ class _World:
         if not self.movers:
             return self._static(t_s)
         return self._static(t_s).with_circles(np.column_stack([mover_xy, self._mover_r]), self._mover_elem)
+
+    def step_key(self, t_s: float) -> tuple[Any, ...]:
+        """What changes the world by a step at ``t_s`` (appear / remove, instant door actions): equal keys
+        mean the world differs only by bounded-speed motion."""
+        return (tuple(e.present(t_s) for e in self.elements),
+                tuple(self.elements[i].steps_done(t_s - self.door_delay[i]) for i in self._dynamic))
 
     def leaf_speed(self, t_s: float) -> float:
         return max((self.elements[i].leaf_speed(t_s - self.door_delay[i]) for i in self._dynamic
@@ -250,7 +258,8 @@ class ClosedLoop:
                    default=0.0)
         self._vmax = robot.vmax_mps + robot.wmax_radps * reach + leaf + max(
             (m.speed_mps for m in spec.movers), default=0.0)
-        self._last_exact: tuple[int, float] | None = None
+        # (time ns, clearance m, the world's step key then)
+        self._last_exact: tuple[int, float, tuple[Any, ...]] | None = None
         self._breaks = set(self.world.breaks_ns)
 
     # ---- the two halves of the loop -------------------------------------------------------------------
@@ -284,7 +293,8 @@ class ClosedLoop:
         rec = self.rec
         rec.cmd.append((r.t_ns, cmd[0], cmd[1], cmd[2]))
         rec.modes[r.mode.value] += 1
-        for name in r.flags.names():
+        # as commands.csv: the wall-clock budget flags only when they act (result.json is deterministic)
+        for name in recorded_flags(r.flags, enforce_budgets=self.cfg.supervisor.enforce_budgets).names():
             rec.flags[name] += 1
         if r.flags & Flag.TRAP_DETECTED and not self._prev_flags & Flag.TRAP_DETECTED:
             rec.trap_count += 1
@@ -322,6 +332,7 @@ class ClosedLoop:
         rec.scan_truth.append((truth.x, truth.y, truth.theta))
         rec.scan_odom.append((odom.x, odom.y, odom.theta))
         v, vy, w = self.vel
+        rec.scan_vel.append((v, vy, w))
         return Tick(index=k, t_ns=t, scan=scan, odom=odom, cmd=Command(t, v, w, vy), truth=truth)
 
     def _record_movers(self, t_s: float) -> None:
@@ -432,8 +443,10 @@ class ClosedLoop:
             moving = robot_speed > 0.0
             start_pose = self.pose
             tau, it = 0.0, 0
-            if self.t_ns in self._breaks:
-                self._last_exact = None
+            key = self.world.step_key(t_s)
+            if self.t_ns in self._breaks or (self._last_exact is not None and (
+                    self._last_exact[2] != key or self.world.step_key((t1 - 1) / NS) != key)):
+                self._last_exact = None  # the world changed by a step: the old clearance bounds nothing
             sec = self.cfg.reactor.security_m
             if self._last_exact is not None:
                 lb = self._last_exact[1] - self._vmax * (t1 - self._last_exact[0]) / NS
@@ -446,7 +459,7 @@ class ClosedLoop:
                 xy = start_xy + (end_xy - start_xy) * f
                 self.world.mover_xy = xy
                 c = self._clearance(t_s + tau, xy)
-                self._last_exact = (self.t_ns + round(tau * NS), c.distance_m)
+                self._last_exact = (self.t_ns + round(tau * NS), c.distance_m, key)
                 if it == 0:
                     self.rec.clearance.append((h, c.distance_m))
                     self.rec.min_clearance_m = min(self.rec.min_clearance_m, c.distance_m)

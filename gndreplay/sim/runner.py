@@ -152,15 +152,17 @@ def write_sim_mcap(path: Path, loop: ClosedLoop) -> None:
                 intensities=np.zeros(0, dtype=np.float32))
             put("/scan", t, scan)
             ox, oy, oth = rec.scan_odom[k]
-            v, vy, w = (rec.cmd[k][1:] if k < len(rec.cmd) else (0.0, 0.0, 0.0))
+            # the twist odometry reports: the robot's actual velocity at the scan, not the command
+            mv, mvy, mw = rec.scan_vel[k]
             odom = T["nav_msgs/msg/Odometry"](
                 header=m.hdr(t, "odom"), child_frame_id="base_link",
                 pose=m["PoseWithCovariance"](pose=m.pose(ox, oy, oth), covariance=zero),
-                twist=m["TwistWithCovariance"](twist=m.twist(v, vy, w), covariance=zero))
+                twist=m["TwistWithCovariance"](twist=m.twist(mv, mvy, mw), covariance=zero))
             put("/odom", t, odom)
             gx, gy, gth = rec.scan_truth[k]
             put("/ground_truth", t, m["PoseStamped"](header=m.hdr(t, "map"), pose=m.pose(gx, gy, gth)))
             if k < len(rec.cmd):
+                _, v, vy, w = rec.cmd[k]
                 put("/cmd_vel", t, m["TwistStamped"](header=m.hdr(t, "base_link"), twist=m.twist(v, vy, w)))
         writer.close()
         files = sorted((tmp / "log").glob("*.mcap"))
@@ -260,16 +262,13 @@ def simulate_scenario(
 
     sinks: list[Any] = [SimSink(loop, figure=figures)]
     if figures:
-        from ..report import MapSink
+        from ..report import MapSink, ReportSink
 
-        sinks.insert(0, MapSink())
+        # the report last, inside the staging folder: the run directory appears with every figure
+        sinks = [MapSink(), *sinks, ReportSink()]
     summary = run_replay(loop.ticks(), cfg, Path(out_dir), log=Path(spec.source),
                          options=RunOptions(goal_xy=spec.goal), on_tick=tick_done, sinks=sinks,
                          overwrite=overwrite, **(run_kwargs or {}))
-    if figures:
-        from ..report import build_report
-
-        build_report(summary.out_dir)
     return _outcome(loop.result(), summary.out_dir, timings(loop))
 
 

@@ -17,12 +17,13 @@ import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.signal import lfilter
 
-from ..errors import ConfigError
+from ..errors import ConfigError, OutputError
 from ..geometry import compose, wrap_angle
 from ..robot import WHEELCHAIR_ROBOT, RobotConfig
 from ..types import Command, Odometry, Pose2D, Scan, Tick
@@ -48,8 +49,10 @@ __all__ = [
     "SimulatedRun",
     "Trajectory",
     "carmen_params",
+    "check_log_output",
     "corrupt_odometry",
     "follow_route",
+    "is_own_carmen",
     "iter_odometry",
     "iter_ticks",
     "office_scenario",
@@ -519,7 +522,44 @@ def carmen_params(scenario: Scenario, *, seed: int) -> dict[str, str]:
     }
 
 
-def simulate(scenario: str, *, seed: int, out: Path, t0_ns: int = DEFAULT_T0_NS) -> Path:
+def is_own_carmen(path: Path) -> bool:
+    """``path`` is a CARMEN log gndreplay wrote: its first line (decompressed by content) is the header
+    ``write_carmen`` puts there."""
+    import bz2
+    import gzip
+
+    from ..io.carmen import CARMEN_HEADER
+
+    try:
+        with open(path, "rb") as f:
+            magic = f.read(3)
+        opener: Any = bz2.open if magic == b"BZh" else gzip.open if magic[:2] == b"\x1f\x8b" else open
+        with opener(path, "rb") as f:
+            first = f.readline(len(CARMEN_HEADER) + 2)
+    except (OSError, EOFError, ValueError):
+        return False
+    return first.rstrip(b"\r\n") == CARMEN_HEADER.encode()
+
+
+def check_log_output(out: Path, *, overwrite: bool = False) -> None:
+    """Refuse to write a simulated log over a folder, over any existing file without ``overwrite``, and
+    over a file gndreplay did not write even with it.
+
+    Raises:
+        OutputError: one line naming ``out``.
+    """
+    out = Path(out)
+    if out.is_dir():
+        raise OutputError(f"{out}: is a folder; --out names the log file to write")
+    if out.exists() or out.is_symlink():
+        if not overwrite:
+            raise OutputError(f"{out}: already exists (--overwrite replaces a log gndreplay wrote)")
+        if out.is_symlink() or not out.is_file() or not is_own_carmen(out):
+            raise OutputError(f"{out}: exists and is not a CARMEN log written by gndreplay; not replacing it")
+
+
+def simulate(scenario: str, *, seed: int, out: Path, t0_ns: int = DEFAULT_T0_NS,
+             overwrite: bool = False) -> Path:
     """Simulate the named scenario and write it as a CARMEN log (``.bz2`` / ``.gz`` compress by suffix).
 
     Args:
@@ -527,6 +567,7 @@ def simulate(scenario: str, *, seed: int, out: Path, t0_ns: int = DEFAULT_T0_NS)
         seed: fixes every random draw: the same seed gives a byte-identical log.
         out: the log to write.
         t0_ns: time of the first record [ns].
+        overwrite: replace ``out`` if it is a CARMEN log gndreplay wrote (see :func:`check_log_output`).
 
     Returns:
         ``out``.
@@ -534,6 +575,7 @@ def simulate(scenario: str, *, seed: int, out: Path, t0_ns: int = DEFAULT_T0_NS)
     Raises:
         ConfigError: unknown scenario, or ``out`` not named like a CARMEN log (``.clf``/``.log``/``.carmen``,
             optionally ``.gz``/``.bz2``).
+        OutputError: ``out`` is a folder, exists (without ``overwrite``) or is not gndreplay's.
     """
     if scenario not in SCENARIOS:
         raise ConfigError(f"unknown scenario {scenario!r}; expected one of {sorted(SCENARIOS)}")
@@ -543,6 +585,7 @@ def simulate(scenario: str, *, seed: int, out: Path, t0_ns: int = DEFAULT_T0_NS)
     if inner not in CARMEN_SUFFIXES:
         raise ConfigError(f"{out}: simulated logs are written as CARMEN; name them "
                          f"{'/'.join(CARMEN_SUFFIXES)} (optionally + .gz/.bz2)")
+    check_log_output(out, overwrite=overwrite)
     from ..io import write_carmen  # io is imported only when writing
 
     scn = SCENARIOS[scenario]()

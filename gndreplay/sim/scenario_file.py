@@ -18,21 +18,24 @@ Schema (unknown keys are errors; every error is one line naming the file and the
       - {at: 20.0, add: {walls: {door: [x1, y1, x2, y2]}}}   # appears at t = 20 s
       - {at: 45.0, remove: door}
       - {at: 10.0, close: door, over: 2.0}                    # a wall's leaf slides shut from (x1, y1)
+      - {at: 10.0, close: door}                               # over: 0 (default): shut at once at t = 10 s
       - {at: 10.0, close: door, over: 2.0, swing: 90}         # ... or swings shut about (x1, y1) from +90 deg
       - {at: 30.0, open: door, over: 2.0}
     movers:
       - {id: person, radius: 0.25, speed: 1.0, path: [[x, y], ...], loop: false, start_at: 0.0, yield_m: 0.3}
 
 A wall with ``close`` / ``open`` events is a door leaf: open (absent, or swung away) before its first
-``close``, closed before its first ``open``. Like a person moving it, a leaf waits while its next step
-would bring it closer than 0.3 m to the robot (``DEFAULT_YIELD_M``). A mover stands at its first waypoint
-until ``start_at``, then walks the path at ``speed`` (back to the start and again if ``loop``), and stays
-at its last waypoint.
+``close``, closed before its first ``open``; ``over`` (default 0) is the motion's duration, 0 a step at
+``at``. Like a person moving it, a leaf waits while its next step would bring it closer than 0.3 m to
+the robot (``DEFAULT_YIELD_M``). A mover stands at its first waypoint until ``start_at``, then walks the
+path at ``speed`` (back to the start and again if ``loop``), and stays at its last waypoint. ``name`` is a
+plain name (letters, digits, ``_ . -``, not starting with ``.`` or ``-``): it names the run directory.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -60,15 +63,22 @@ F64 = NDArray[np.float64]
 DEFAULT_WALL_THICKNESS_M = 0.1
 DEFAULT_YIELD_M = 0.3
 _KINDS = ("walls", "boxes", "circles", "polygons")
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 
 
 @dataclass(frozen=True, slots=True)
 class DoorAction:
-    """A leaf moving to ``closed`` (1) or open (0) between ``t0_s`` and ``t1_s``."""
+    """A leaf moving to ``closed`` (1) or open (0) between ``t0_s`` and ``t1_s`` (``t1_s == t0_s``: a step
+    at ``t0_s``)."""
 
     t0_s: float
     t1_s: float
     closed: float
+
+    @property
+    def instant(self) -> bool:
+        """The leaf jumps to its new state at ``t0_s``."""
+        return self.t1_s <= self.t0_s
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -102,19 +112,24 @@ class Element:
         return after and (self.remove_s is None or t_s < self.remove_s)
 
     def closed_fraction(self, t_s: float) -> float:
-        """A door leaf's closure at ``t_s``: 0 open, 1 closed (1 for a fixed element)."""
+        """A door leaf's closure at ``t_s``: 0 open, 1 closed (1 for a fixed element). An instant action
+        applies from its ``t0_s`` on (included)."""
         if not self.door:
             return 1.0
         f = 1.0 - self.door[0].closed
         for a in self.door:
-            if t_s <= a.t0_s:
+            if t_s < a.t0_s or (t_s == a.t0_s and not a.instant):
                 break
-            if t_s >= a.t1_s or a.t1_s <= a.t0_s:
+            if t_s >= a.t1_s or a.instant:
                 f = a.closed
             else:
                 f = f + (a.closed - f) * (t_s - a.t0_s) / (a.t1_s - a.t0_s)
                 break
         return f
+
+    def steps_done(self, t_s: float) -> int:
+        """How many instant door actions have applied by ``t_s`` (a change of the world no speed bounds)."""
+        return sum(1 for a in self.door if a.instant and t_s >= a.t0_s)
 
     def leaf_speed(self, t_s: float) -> float:
         """Upper bound of the speed of any point of a moving door leaf at ``t_s`` [m/s] (0 when still)."""
@@ -306,8 +321,9 @@ def parse_scenario(doc: Any, source: str) -> ScenarioSpec:
     top = ("name", "description", "preset", "start", "goal", "time_limit", "world", "events", "movers")
     d = _table(doc, "", err, top, ("name", "start", "goal", "time_limit", "world"))
     name = d["name"]
-    if not isinstance(name, str) or not name:
-        raise err("name", f"expected a non-empty string, got {name!r}")
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
+        raise err("name", f"expected a plain name (letters, digits, _ . -, not starting with . or -), "
+                          f"got {name!r}")
     description = d.get("description", "")
     if not isinstance(description, str):
         raise err("description", f"expected a string, got {description!r}")

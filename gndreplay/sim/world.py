@@ -18,8 +18,6 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..geometry import compose
-from ..robot import RobotConfig
 from .geometry import ray_kernel
 
 __all__ = [
@@ -31,11 +29,9 @@ __all__ = [
     "add_laser_noise",
     "box",
     "cast_rays",
-    "footprint_segments",
     "polygon",
     "quantize",
     "regular_polygon",
-    "segment_distances",
     "simulate_ranges",
     "wall",
 ]
@@ -347,58 +343,3 @@ def add_laser_noise(exact: F64, laser: LaserModel, rng: np.random.Generator) -> 
     r[(r >= laser.max_range_m) | drop] = np.inf
     r[r < laser.min_range_m] = np.nan
     return r
-
-
-# --------------------------------------------------------------------------------------------- footprints
-
-
-def footprint_segments(pose: ArrayLike, robot: RobotConfig) -> F64:
-    """Outline of ``robot`` at ``pose`` ``(3,)`` as segments: 4 sides of a rectangle or a 16-gon circle."""
-    if robot.shape == "circle":
-        local = regular_polygon(0.0, 0.0, robot.radius_m, sides=16).reshape(-1, 2)
-    else:
-        hw = robot.width_m / 2.0
-        f, r = robot.front_m, -robot.rear_m
-        corners = np.array([[f, hw], [r, hw], [r, -hw], [f, -hw]])
-        local = polygon(corners).reshape(-1, 2)
-    p = np.asarray(pose, dtype=np.float64)
-    pts = compose(p, np.column_stack([local, np.zeros(len(local))]))[:, :2]
-    return pts.reshape(-1, 4)
-
-
-def _point_segment_distance(px: F64, py: F64, seg: F64) -> F64:
-    """Distances from points ``(P,)`` to segments ``(S, 4)``, broadcast to ``(P, S)``."""
-    x0, y0, x1, y1 = (seg[:, k][None, :] for k in range(4))
-    ex, ey = x1 - x0, y1 - y0
-    ll = ex * ex + ey * ey
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.where(ll > 0, ((px[:, None] - x0) * ex + (py[:, None] - y0) * ey) / ll, 0.0)
-    t = np.clip(t, 0.0, 1.0)
-    return np.hypot(px[:, None] - (x0 + t * ex), py[:, None] - (y0 + t * ey))
-
-
-def segment_distances(a: ArrayLike, b: ArrayLike) -> F64:
-    """Minimum distances between every segment of ``a`` ``(A, 4)`` and of ``b`` ``(B, 4)``: ``(A, B)`` [m].
-
-    Zero where two segments cross.
-    """
-    sa = np.asarray(a, dtype=np.float64).reshape(-1, 4)
-    sb = np.asarray(b, dtype=np.float64).reshape(-1, 4)
-    d = np.minimum.reduce([
-        _point_segment_distance(sa[:, 0], sa[:, 1], sb),
-        _point_segment_distance(sa[:, 2], sa[:, 3], sb),
-        _point_segment_distance(sb[:, 0], sb[:, 1], sa).T,
-        _point_segment_distance(sb[:, 2], sb[:, 3], sa).T,
-    ])
-    # proper crossings: endpoints of each on opposite sides of the other
-    ax, ay, bx, by = (sa[:, k][:, None] for k in range(4))
-    cx, cy, dx, dy = (sb[:, k][None, :] for k in range(4))
-
-    def orient(px: F64, py: F64, qx: F64, qy: F64, rx: F64, ry: F64) -> F64:
-        return np.sign((qx - px) * (ry - py) - (qy - py) * (rx - px))
-
-    cross = (orient(ax, ay, bx, by, cx, cy) * orient(ax, ay, bx, by, dx, dy) < 0) & (
-        orient(cx, cy, dx, dy, ax, ay) * orient(cx, cy, dx, dy, bx, by) < 0
-    )
-    d[cross] = 0.0
-    return d
