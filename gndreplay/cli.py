@@ -481,7 +481,12 @@ def run(
             out_dir,
             options=options,
             read=read,
-            sinks=_run_sinks(figures=figures, mcap=mcap, on_draw=progress.on_draw),
+            sinks=_run_sinks(
+                figures=figures,
+                mcap=mcap,
+                enforce_budgets=cfg.supervisor.enforce_budgets,
+                on_draw=progress.on_draw,
+            ),
             overwrite=overwrite,
             on_tick=progress.on_tick,
             on_open=progress.on_open,
@@ -994,9 +999,11 @@ def _with_matcher(cfg: Config, matcher: str) -> Config:
         raise typer.BadParameter(f"--matcher must be idc, kiss-icp or odom, got {matcher!r}") from None
 
 
-def _run_sinks(*, figures: bool, mcap: bool, on_draw: Callable[[], None] | None = None) -> list[RunSink]:
+def _run_sinks(
+    *, figures: bool, mcap: bool, enforce_budgets: bool, on_draw: Callable[[], None] | None = None
+) -> list[RunSink]:
     """The sinks of ``run``: maps + figures + report.md (drawn last, inside the staging directory) and
-    the results MCAP."""
+    the results MCAP (whose flags topic records what commands.csv records)."""
     sinks: list[RunSink] = []
     if figures:
         from .report import MapSink
@@ -1005,7 +1012,7 @@ def _run_sinks(*, figures: bool, mcap: bool, on_draw: Callable[[], None] | None 
     if mcap:
         from .report import McapSink
 
-        sinks.append(McapSink())
+        sinks.append(McapSink(enforce_budgets=enforce_budgets))
     if figures:
         from .report import ReportSink
 

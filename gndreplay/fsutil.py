@@ -34,6 +34,7 @@ __all__ = [
     "add_to_marker",
     "atomic_path",
     "atomic_write_text",
+    "check_may_write",
     "check_output_dir",
     "format_stamp",
     "is_output_dir",
@@ -137,10 +138,42 @@ def add_to_marker(directory: Path, names: Sequence[str]) -> None:
         write_marker(directory, sorted((_owned(directory) - {RUN_MARKER}) | set(names)))
 
 
-def _foreign(directory: Path) -> list[str]:
-    """Entries of a marked directory that gndreplay did not list (sorted)."""
+def _foreign(directory: Path, prefix: str = "") -> list[str]:
+    """Entries of a marked directory that gndreplay did not write (sorted, relative to ``directory``): those
+    its marker does not list, and, recursively, inside each listed folder, everything when that folder has
+    no marker of its own and the entries its marker does not list otherwise (a user's file in a run folder
+    of a batch is foreign too: replacing the batch folder would delete it)."""
+    directory = Path(directory)
     owned = _owned(directory)
-    return sorted(p.name for p in directory.iterdir() if p.name not in owned)
+    out: list[str] = []
+    try:
+        entries = sorted(directory.iterdir())
+    except OSError:
+        return [prefix or str(directory)]
+    for p in entries:
+        rel = f"{prefix}{p.name}"
+        if p.name not in owned:
+            out.append(rel)
+        elif p.is_dir() and not p.is_symlink():
+            out += _foreign(p, f"{rel}/") if is_output_dir(p) else [f"{rel}/"]
+    return out
+
+
+def check_may_write(directory: Path, names: Sequence[str]) -> None:
+    """Refuse to write ``names`` into ``directory`` over a file gndreplay did not write: an existing entry
+    must be listed in the directory's ``RUN_MARKER`` (no marker: no existing entry may be replaced).
+
+    Raises:
+        OutputError: naming the first such entry.
+    """
+    directory = Path(directory)
+    marked = is_output_dir(directory)
+    owned = _owned(directory) if marked else set()
+    why = f"not listed in {directory / RUN_MARKER}" if marked else f"{directory} has no {RUN_MARKER} marker"
+    for name in names:
+        p = directory / name
+        if (p.exists() or p.is_symlink()) and name not in owned:
+            raise OutputError(f"{p}: exists and was not written by gndreplay ({why}); not overwriting it")
 
 
 # ---- checks before any work ------------------------------------------------------------------------------
@@ -148,6 +181,23 @@ def _foreign(directory: Path) -> list[str]:
 
 def _abs(path: Path) -> Path:
     return Path(os.path.abspath(Path(path).expanduser()))
+
+
+def _norm(path: Path) -> Path:
+    """``path`` without ``.``/``..`` components, resolved by name like ``_abs`` (relative stays relative)."""
+    return Path(os.path.normpath(Path(path).expanduser()))
+
+
+def _check_creatable(out: Path, o: Path, anc: Path) -> None:
+    """Refuse ``out`` when its staging folder could not be created (a read-only parent, /proc, /sys): try
+    to make, then remove, an empty staging-named folder in the nearest existing folder on the way."""
+    where = o.parent if anc == o else anc
+    probe = _staging_name(where)
+    try:
+        probe.mkdir(mode=0o700)
+        probe.rmdir()
+    except OSError as err:
+        raise OutputError(f"{out}: cannot create it in {where} ({err.strerror or err})") from err
 
 
 def _real(path: Path) -> Path:
@@ -162,12 +212,16 @@ def check_output_dir(out: Path, *, inputs: Sequence[Path] = (), overwrite: bool 
     """Refuse an output directory that could cost the user a file, before any work is done.
 
     Refused (``OutputError``, one line naming ``out``): ``out`` is a file or lies inside one; ``out`` is
+    a symbolic link; ``out`` cannot be created (its staging folder beside it cannot); ``out`` is
     the current directory or one of its ancestors; ``out`` contains an input (or lies inside an input
     folder); ``out`` exists, is not empty and has no ``RUN_MARKER``; with ``overwrite``, ``out`` holds
-    entries its marker does not list (files the user added). An existing marked directory is accepted:
-    the caller replaces it (``overwrite``) or writes beside it (``resolve_output_dir``).
+    entries its marker does not list, at any depth (files the user added). An existing marked directory is
+    accepted: the caller replaces it (``overwrite``) or writes beside it (``resolve_output_dir``).
     """
     o = _abs(out)
+    if o.is_symlink():
+        raise OutputError(f"{out}: is a symbolic link; give the folder it points to ({_real(o)}) instead")
+    anc = o
     for anc in (o, *o.parents):
         if anc.exists() or anc.is_symlink():
             if not anc.is_dir():
@@ -183,6 +237,7 @@ def check_output_dir(out: Path, *, inputs: Sequence[Path] = (), overwrite: bool 
             raise OutputError(f"{out}: contains the input {p}; choose a folder that holds no input")
         if ip.is_dir() and _within(real, ip):
             raise OutputError(f"{out}: is inside the input folder {p}; choose a folder outside it")
+    _check_creatable(out, o, anc)
     if not o.is_dir():
         return
     if not is_output_dir(o):
@@ -202,8 +257,8 @@ def check_output_dir(out: Path, *, inputs: Sequence[Path] = (), overwrite: bool 
 def resolve_output_dir(out: Path, *, overwrite: bool = False) -> Path:
     """Where to write: ``out`` when it is free, empty or (with ``overwrite``) a gndreplay output directory;
     otherwise the first free ``out-2``, ``out-3``, ... beside it (an earlier run is never replaced
-    silently). Call after ``check_output_dir``."""
-    out = Path(out)
+    silently). Call after ``check_output_dir``. ``..`` components are resolved by name (as the check does)."""
+    out = _norm(out)
     if not out.exists() or (out.is_dir() and (overwrite or not any(out.iterdir()))):
         return out
     k = 2
@@ -259,15 +314,23 @@ def _staging_name(parent: Path) -> Path:
 
 
 def _new_staging(parent: Path) -> Path:
-    parent.mkdir(parents=True, exist_ok=True)
-    while True:
-        tmp = _staging_name(parent)
-        try:
-            tmp.mkdir(mode=0o700)
-        except FileExistsError:
-            continue
-        write_marker(tmp, [])
-        return tmp
+    """A fresh marked staging folder in ``parent`` (created if missing).
+
+    Raises:
+        OutputError: it cannot be created (read-only or special file system), naming the folder.
+    """
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        while True:
+            tmp = _staging_name(parent)
+            try:
+                tmp.mkdir(mode=0o700)
+            except FileExistsError:
+                continue
+            write_marker(tmp, [])
+            return tmp
+    except OSError as err:
+        raise OutputError(f"{parent}: cannot create the output folder there ({err.strerror or err})") from err
 
 
 def publish_dir(tmp: Path, out: Path, *, overwrite: bool = False) -> None:
@@ -279,7 +342,14 @@ def publish_dir(tmp: Path, out: Path, *, overwrite: bool = False) -> None:
     Raises:
         OutputError: ``out`` appeared meanwhile and may not be replaced.
     """
-    tmp, out = Path(tmp), Path(out)
+    tmp, out = Path(tmp), _abs(out)
+    try:
+        _publish(tmp, out, overwrite=overwrite)
+    except OSError as err:
+        raise OutputError(f"{out}: cannot move the finished output there ({err.strerror or err})") from err
+
+
+def _publish(tmp: Path, out: Path, *, overwrite: bool) -> None:
     write_marker(tmp)
     os.chmod(tmp, umask_mode(0o777))
     if out.is_dir() and not out.is_symlink() and not any(out.iterdir()):
@@ -331,9 +401,8 @@ def staging_dir(out: Path, *, overwrite: bool = False) -> Iterator[Path]:
 
     Write everything (figures and report included) inside the block: ``out`` appears only when complete.
     """
-    out = Path(out)
-    parent = _abs(out).parent
-    parent.mkdir(parents=True, exist_ok=True)
+    out = _abs(out)
+    parent = out.parent
     remove_stale_staging(parent)
     with terminate_raises():
         tmp = _new_staging(parent)

@@ -101,11 +101,11 @@ def fake_runner(task: Task) -> FakeOutcome:
         os.kill(os.getpid(), signal.SIGKILL)
     ticks, p99, estops = int(words[1]), float(words[2]), int(words[3])
     xy = [float(w) for w in words[4:]]
-    task.run_dir.mkdir(parents=True, exist_ok=True)
     lines = [f"{100 + k}.0 {xy[2 * k]} {xy[2 * k + 1]} 0 0 0 0 1\n" for k in range(len(xy) // 2)]
-    (task.run_dir / "trajectory_corrected.tum").write_text("# t x y z qx qy qz qw\n" + "".join(lines))
     summary = fake_summary(ticks, p99, estops)
-    (task.run_dir / "summary.json").write_text(json.dumps(summary))
+    with staging_dir(task.run_dir) as tmp:  # as run_log does: the run directory appears marked
+        (tmp / "trajectory_corrected.tum").write_text("# t x y z qx qy qz qw\n" + "".join(lines))
+        (tmp / "summary.json").write_text(json.dumps(summary))
     return FakeOutcome(task.run_dir, ticks, summary)
 
 
@@ -698,7 +698,8 @@ def test_dask_missing_is_a_config_error_naming_the_extra(
 
 
 def deterministic(results: tuple[InputResult, ...]) -> list[tuple[Any, ...]]:
-    """The parts of results that do not depend on timing (latencies and their values in failures)."""
+    """The parts of results that do not depend on timing (latencies, wall-clock over-budget counts, and their
+    values in failures)."""
     return [
         (
             r.name,
@@ -706,7 +707,7 @@ def deterministic(results: tuple[InputResult, ...]) -> list[tuple[Any, ...]]:
             r.ticks,
             r.error,
             tuple(f.split()[0] for f in r.failures),
-            {k: v for k, v in r.metrics.items() if not k.endswith("_ms")},
+            {k: v for k, v in r.metrics.items() if not k.endswith(("_ms", "_over_budget"))},
         )
         for r in results
     ]
@@ -960,3 +961,52 @@ def test_largest_inputs_are_submitted_first(tmp_path: Path) -> None:
     jobs = expand_inputs([tmp_path / n for n in sizes])
     tasks = make_tasks(jobs, cfg=Config(), options=RunOptions(), thresholds=Thresholds(), out_dir=tmp_path)
     assert [tasks[i].job.name for i in largest_first(tasks)] == ["big", "mid", "tie", "small"]
+
+
+# ---------------------------------------------------------------- review F1: --junit, --overwrite, budgets
+
+
+def test_junit_never_replaces_a_file_gndreplay_did_not_write(tmp_path: Path) -> None:
+    mine = tmp_path / "mine.txt"
+    mine.write_text("important\n")
+    with pytest.raises(OutputError, match=r"mine\.txt: exists and is not a JUnit file gndreplay wrote"):
+        fake_batch(tmp_path, {"a": "GOOD 1 1.0 0"}, junit=mine)
+    assert mine.read_text() == "important\n" and not (tmp_path / "out").exists()  # refused before any work
+    log = write_input(tmp_path / "in", "a.clf", "GOOD 1 1.0 0")
+    with pytest.raises(OutputError, match=r"a\.clf: is the input"):
+        fake_batch(tmp_path, {"a": "GOOD 1 1.0 0"}, junit=log)
+    assert log.read_text() == "GOOD 1 1.0 0"
+    junit = tmp_path / "reports" / "junit.xml"
+    first = fake_batch(tmp_path, {"a": "GOOD 1 1.0 0"}, junit=junit)
+    assert first.junit == junit and "<testsuites name=\"gndreplay batch\"" in junit.read_text()
+    with pytest.raises(OutputError, match=r"junit\.xml: exists \(an earlier batch's JUnit file\)"):
+        fake_batch(tmp_path, {"a": "GOOD 2 1.0 0"}, out="o2", junit=junit)
+    third = fake_batch(tmp_path, {"a": "GOOD 7 1.0 0"}, out="o3", junit=junit, overwrite=True)
+    assert third.junit == junit and "ticks: 7" in junit.read_text()
+
+
+def test_overwrite_refuses_a_batch_folder_with_a_user_file_inside_a_run_folder(tmp_path: Path) -> None:
+    fake_batch(tmp_path, {"a": "GOOD 1 1.0 0"}, junit=tmp_path / "out" / "reports" / "junit.xml")
+    notes = tmp_path / "out" / "a" / "my_notes.txt"
+    notes.write_text("notes\n")
+    before = snapshot_files(tmp_path / "out")
+    with pytest.raises(OutputError, match=r"out: holds files gndreplay did not write \(a/my_notes\.txt\)"):
+        fake_batch(tmp_path, {"a": "GOOD 2 1.0 0"}, overwrite=True)
+    assert snapshot_files(tmp_path / "out") == before
+    notes.unlink()  # without it the folder is all gndreplay's (the JUnit subfolder included): replaced
+    again = fake_batch(tmp_path, {"a": "GOOD 3 1.0 0"}, overwrite=True)
+    assert again.out_dir == tmp_path / "out" and again.results[0].ticks == 3
+
+
+def snapshot_files(root: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def test_over_budget_metrics_come_from_the_over_budget_table() -> None:
+    data = {**fake_summary(12, 9.5, 2), "over_budget": {"REACTOR_OVER_BUDGET": 4, "PLANNER_OVER_BUDGET": 1,
+                                                       "MODEL_OVER_BUDGET": 0, "MATCH_OVER_BUDGET": 7}}
+    m = metrics_from_summary(data)
+    assert (m["reactor_over_budget"], m["planner_over_budget"], m["model_over_budget"],
+            m["match_over_budget"]) == (4, 1, 0, 7)
+    assert check_limits(m, {"reactor_over_budget": 3}) == ("reactor_over_budget 4 > 3",)
+    assert metrics_from_summary(fake_summary(1, 1.0, 0))["reactor_over_budget"] == 0  # no table: 0

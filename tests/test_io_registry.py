@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 from gndreplay.errors import LogFormatError
-from gndreplay.io import FORMAT_BY_SUFFIX, READERS, detect_format, open_log
+from gndreplay.io import FORMAT_BY_SUFFIX, READERS, detect_format, open_log, special_file_kind
 
 LINE = "FLASER 3 1 2 3 0 0 0 0 0 0 1.0 h 0\n"
 
@@ -90,3 +93,39 @@ def test_a_bag_read_as_carmen_is_refused(tmp_path: Path) -> None:
     p.write_bytes(b"#ROSBAG V2.0\n\x00\x01\x02" * 20)
     with pytest.raises(LogFormatError, match=r"b\.bag: not a CARMEN log"):
         open_log(p, fmt="carmen")
+
+
+# ---- FIFOs, devices and sockets are refused before anything opens them (review F1 bug 11) ----------------
+
+
+def test_a_fifo_is_refused_by_name_without_being_opened(tmp_path: Path) -> None:
+    fifo = tmp_path / "ff.clf"
+    os.mkfifo(fifo)
+    with pytest.raises(LogFormatError, match=r"ff\.clf: is a FIFO, not a log file"):
+        detect_format(fifo)
+    with pytest.raises(LogFormatError, match=r"ff\.clf: is a FIFO"):
+        open_log(fifo)
+    bag = tmp_path / "bag"  # a ROS2 bag folder whose storage file is a FIFO
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text("")
+    os.mkfifo(bag / "bag_0.db3")
+    with pytest.raises(LogFormatError, match=r"bag_0\.db3: is a FIFO"):
+        open_log(bag)
+    assert special_file_kind(fifo) == "a FIFO" and special_file_kind(bag) is None
+    assert special_file_kind(Path("/dev/null")) == "a character device"
+
+
+@pytest.mark.parametrize("command", ["run", "info", "scanmatch"])
+def test_a_fifo_on_the_command_line_is_one_error_line_not_a_hang(tmp_path: Path, command: str) -> None:
+    fifo = tmp_path / "ff.clf"
+    os.mkfifo(fifo)
+    code = "from gndreplay.cli import main; main()"
+    args = [sys.executable, "-c", code, command, str(fifo)]
+    if command == "run":
+        args += ["--out", str(tmp_path / "out"), "-q"]
+    proc = subprocess.run(args, capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "MPLBACKEND": "Agg"}, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    expected = f"gndreplay: error: {fifo}: is a FIFO, not a log file (never opened)"
+    assert proc.stderr.strip().splitlines() == [expected]
+    assert not (tmp_path / "out").exists()

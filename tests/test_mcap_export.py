@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import shutil
 from pathlib import Path
@@ -202,3 +203,20 @@ def test_started_sink_stages_inside_the_run_staging_dir(tmp_path: Path) -> None:
     assert [p.name.startswith("gndreplay-mcap-") for p in staging.iterdir()] == [True]
     shutil.rmtree(staging)
     sink.abort()
+
+
+def test_flags_topic_leaves_out_wall_clock_budget_flags_unless_enforced(tmp_path: Path) -> None:
+    """/gndreplay/flags records what commands.csv records (``replay.recorded_flags``): the *_OVER_BUDGET
+    flags depend on the machine's speed, so without enforce_budgets they are left out (timing.csv has
+    them)."""
+    over = Flag.REACTOR_OVER_BUDGET | Flag.PLANNER_OVER_BUDGET | Flag.EMERGENCY_STOP
+    for enforce, expected in ((False, "EMERGENCY_STOP"),
+                              (True, "EMERGENCY_STOP|PLANNER_OVER_BUDGET|REACTOR_OVER_BUDGET")):
+        d = tmp_path / f"e{int(enforce)}"
+        d.mkdir()
+        sink = McapSink(staging_dir=d, enforce_budgets=enforce)
+        sink.add_scan(tick(1), corrected(1))
+        sink.add_result(tick(1), dataclasses.replace(result(1), flags=over), grid_at(1))
+        sink.finish(d)
+        data = read_all(d / "results.mcap")["/gndreplay/flags"][0][1].data
+        assert data == expected

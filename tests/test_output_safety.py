@@ -30,6 +30,7 @@ from gndreplay.fsutil import (
     resolve_output_dir,
     safe_name,
     staging_dir,
+    write_marker,
 )
 from gndreplay.replay import RunOptions, run_log
 
@@ -273,3 +274,83 @@ def test_killed_run_leaves_nothing_behind_after_the_next_run(tmp_path: Path, sig
     assert cli("run", SAMPLE, "--out", out, *FAST)[0] == 0  # the next run cleans a killed run's leftovers
     assert not staging_dirs(parent) and is_output_dir(out)
     assert_kept(before, tmp_path)
+
+
+# ---- review F1: nested user files, `..`, unwritable parents, symlinks --------------------------------------
+
+
+def test_overwrite_refuses_a_user_file_anywhere_inside_the_output(tmp_path: Path) -> None:
+    out = tmp_path / "batch"
+    with staging_dir(out / "run") as tmp:  # a marked run folder inside a marked folder (a batch)
+        (tmp / "commands.csv").write_text("t\n")
+    write_marker(out)
+    check_output_dir(out, overwrite=True)  # all gndreplay's: may be replaced
+    (out / "run" / "my_notes.txt").write_text("notes\n")
+    with pytest.raises(OutputError, match=r"holds files gndreplay did not write \(run/my_notes\.txt\)"):
+        check_output_dir(out, overwrite=True)
+    (out / "run" / "my_notes.txt").unlink()
+    (out / "run" / RUN_MARKER).unlink()  # a listed folder without its own marker is not known to be ours
+    with pytest.raises(OutputError, match=r"\(run/\)"):
+        check_output_dir(out, overwrite=True)
+    with pytest.raises(OutputError, match=r"run/"), staging_dir(out, overwrite=True) as tmp:
+        (tmp / "x").write_text("x\n")
+    assert (out / "run" / "commands.csv").read_text() == "t\n" and not staging_dirs(tmp_path)
+
+
+def test_out_through_a_missing_folder_and_dot_dot(tmp_path: Path) -> None:
+    out = tmp_path / "nx" / ".." / "dotdot"
+    check_output_dir(out)
+    assert resolve_output_dir(out) == tmp_path / "dotdot"
+    with staging_dir(out) as tmp:
+        (tmp / "a.txt").write_text("a\n")
+    assert (tmp_path / "dotdot" / "a.txt").read_text() == "a\n" and not (tmp_path / "nx").exists()
+    assert resolve_output_dir(out) == tmp_path / "dotdot-2"  # the earlier one is seen through the `..` too
+    code, text = cli("run", SAMPLE, "--out", tmp_path / "nx" / ".." / "viacli", *FAST)
+    assert code == 0, text
+    assert is_output_dir(tmp_path / "viacli") and not (tmp_path / "nx").exists()
+
+
+@pytest.mark.parametrize("where", ["/proc/gndreplay-test-out", "/sys/gndreplay-test-out"])
+def test_an_out_that_cannot_be_created_is_refused_before_any_work(where: str) -> None:
+    if not Path(where).parent.is_dir():
+        pytest.skip(f"no {Path(where).parent} here")
+    with pytest.raises(OutputError, match=rf"{where}: cannot create it in {Path(where).parent}"):
+        check_output_dir(Path(where))
+    with pytest.raises(OutputError, match=rf"{Path(where).parent}: cannot create the output folder"), \
+            staging_dir(Path(where)):
+        pass
+    code, text = cli("run", SAMPLE, "--out", where, *FAST)
+    lines = text.strip().splitlines()
+    assert code == 2 and len(lines) == 1
+    assert lines[0].startswith(f"gndreplay: error: {where}: cannot create it in {Path(where).parent} (")
+
+
+def test_an_unwritable_parent_is_refused_before_any_work(tmp_path: Path) -> None:
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        probe = ro / "probe"
+        try:
+            probe.mkdir()
+        except PermissionError:
+            pass
+        else:
+            probe.rmdir()
+            pytest.skip("running as root: permissions are not enforced")
+        with pytest.raises(OutputError, match=r"ro/out: cannot create it in .*ro \(Permission denied\)"):
+            check_output_dir(ro / "out")
+    finally:
+        ro.chmod(0o700)
+
+
+def test_a_symlinked_out_is_refused_before_any_work(tmp_path: Path) -> None:
+    target = tmp_path / "empty_target"
+    target.mkdir()
+    link = tmp_path / "linkout"
+    link.symlink_to(target)
+    with pytest.raises(OutputError, match=r"linkout: is a symbolic link; give the folder it points to"):
+        check_output_dir(link)
+    code, text = cli("run", SAMPLE, "--out", link, *FAST)
+    assert code == 2 and "linkout: is a symbolic link" in text and len(text.strip().splitlines()) == 1
+    assert link.is_symlink() and list(target.iterdir()) == [] and not staging_dirs(tmp_path)

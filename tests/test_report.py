@@ -6,10 +6,13 @@ import json
 import math
 import struct
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
+from gndreplay.errors import OutputError
+from gndreplay.fsutil import RUN_MARKER, write_marker
 from gndreplay.geometry import compose, transform_points
 from gndreplay.pipeline.model import FREE, OCCUPIED, UNKNOWN, GridParams, RobotCentredGrid
 from gndreplay.pipeline.nd import Situation
@@ -440,3 +443,72 @@ def test_cli_run_mcap_on_aces_writes_figures_report_and_mcap(datasets: Path, tmp
     again = CliRunner().invoke(app, ["report", str(out)])
     assert again.exit_code == 0, again.output
     assert all((out / name).read_bytes() == data for name, data in before.items())
+
+
+# ---- review F1: never over the user's files; malformed summary.json ---------------------------------------
+
+
+def _copy_run(src: Path, dst: Path) -> Path:
+    dst.mkdir()
+    for name in ("commands.csv", "timing.csv", "trajectory_odom.tum", "trajectory_corrected.tum",
+                 "summary.json"):
+        (dst / name).write_bytes((src / name).read_bytes())
+    return dst
+
+
+def test_report_never_overwrites_a_file_gndreplay_did_not_write(run_dir: Path, tmp_path: Path) -> None:
+    nomark = _copy_run(run_dir, tmp_path / "nomark")  # no marker: any existing target is the user's
+    (nomark / "report.md").write_text("my own report\n")
+    with pytest.raises(OutputError, match=r"nomark/report\.md: exists and was not written by gndreplay"):
+        build_report(nomark)
+    assert (nomark / "report.md").read_text() == "my own report\n"
+    assert not any(nomark.glob("fig_*.png"))  # refused before anything was drawn
+    marked = _copy_run(run_dir, tmp_path / "marked")
+    write_marker(marked)  # the run's files are gndreplay's, a figure added later is not
+    (marked / "fig_raw.png").write_bytes(b"mine")
+    with pytest.raises(OutputError, match=r"fig_raw\.png: exists and was not written by gndreplay"):
+        build_report(marked)
+    assert (marked / "fig_raw.png").read_bytes() == b"mine"
+    (marked / "fig_raw.png").unlink()
+    build_report(marked)
+    build_report(marked)  # its own figures (now listed in the marker) are redrawn
+    assert "fig_raw.png" in (marked / RUN_MARKER).read_text().splitlines()
+
+
+def test_a_failed_figure_leaves_the_previous_file(run_dir: Path, tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    d = _copy_run(run_dir, tmp_path / "r")
+    write_marker(d)
+    build_report(d)
+    before = (d / "fig_model.png").read_bytes()
+
+    def half_then_fail(self: Any, fname: Any, **kw: Any) -> None:
+        Path(fname).write_bytes(b"\x89PNG half")
+        raise OSError("disk full")
+
+    monkeypatch.setattr("matplotlib.figure.Figure.savefig", half_then_fail)
+    with pytest.raises(OSError, match="disk full"):
+        build_report(d)
+    assert (d / "fig_model.png").read_bytes() == before
+    assert sorted(p.name for p in d.iterdir() if p.name.startswith(".")) == [RUN_MARKER]  # no temporaries
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("[1, 2]", r"summary\.json: expected a JSON object, got list"),
+        ('{"ticks": "x"}', r"summary\.json: key 'ticks' must be a count"),
+        ('{"flags": [1]}', r"summary\.json: key 'flags' must be a table of counts"),
+        ('{"options": {"goal": "north"}}', r"summary\.json: key 'options' must be a table"),
+        ('{"config": {"supervisor": 3}}', r"summary\.json: key 'config' must be a table"),
+        ('{"latency_ms": {"match": {"p99": "slow"}}}', r"summary\.json: key 'latency_ms'"),
+        ('{"options": null}', r"summary\.json: key 'options' must be a table"),
+    ],
+)
+def test_a_malformed_summary_is_one_run_dir_error(run_dir: Path, tmp_path: Path, text: str,
+                                                  match: str) -> None:
+    d = _copy_run(run_dir, tmp_path / "r")
+    (d / "summary.json").write_text(text)
+    with pytest.raises(RunDirError, match=match):
+        build_report(d)
+    assert not any(d.glob("fig_*.png")) and not (d / "report.md").exists()

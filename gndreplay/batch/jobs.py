@@ -10,9 +10,7 @@ scenarios by name). A scenario runs once per seed: one job ``<scenario>-s<seed>`
 from __future__ import annotations
 
 import difflib
-import os
 import re
-import stat
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
@@ -21,6 +19,7 @@ from typing import Literal
 
 from .. import fsutil
 from ..errors import ConfigError
+from ..io.base import special_file_kind
 
 __all__ = [
     "COMPRESSED_SUFFIXES",
@@ -162,24 +161,6 @@ def unique_names(paths: Sequence[Path]) -> list[str]:
         used.add(candidate)
         names.append(candidate)
     return names
-
-
-_SPECIAL_KINDS = (
-    (stat.S_ISFIFO, "a FIFO"),
-    (stat.S_ISCHR, "a character device"),
-    (stat.S_ISBLK, "a block device"),
-    (stat.S_ISSOCK, "a socket"),
-)
-
-
-def special_file_kind(path: Path) -> str | None:
-    """``"a FIFO"``, ``"a socket"``, ... for a path that is neither a regular file nor a folder (reading it
-    could block forever or never end); None otherwise, and for a missing path. Never opens the path."""
-    try:
-        mode = os.stat(path).st_mode
-    except OSError:
-        return None
-    return next((what for test, what in _SPECIAL_KINDS if test(mode)), None)
 
 
 def special_files(path: Path) -> list[str]:

@@ -59,7 +59,8 @@ RELATION_METRICS: tuple[str, ...] = (
 
 
 def metrics_from_summary(data: Mapping[str, Any]) -> dict[str, float]:
-    """Flatten summary.json into the batch metrics: ``ticks``, latencies [ms] and flag counts.
+    """Flatten summary.json into the batch metrics: ``ticks``, latencies [ms] and flag counts (the
+    ``*_OVER_BUDGET`` counts from its ``over_budget`` table, the others from ``flags``).
 
     A latency module missing from the summary (no ticks) gives no metric; a flag missing counts 0.
     """
@@ -70,8 +71,9 @@ def metrics_from_summary(data: Mapping[str, Any]) -> dict[str, float]:
         if value is not None:
             out[name] = float(value)
     flags = data.get("flags") or {}
+    over = data.get("over_budget") or {}  # the wall-clock *_OVER_BUDGET counts (always recorded here)
     for name, flag in COUNT_METRICS.items():
-        out[name] = int(flags.get(flag, 0))
+        out[name] = int(over[flag] if flag in over else flags.get(flag, 0))
     return out
 
 

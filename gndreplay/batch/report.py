@@ -10,18 +10,25 @@ import math
 import re
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
+from pathlib import Path
 
 from .aggregate import ScenarioAggregate
 from .worker import InputResult
 
 __all__ = [
     "CSV_COLUMNS",
+    "JUNIT_SUITES_NAME",
     "SCENARIO_CSV_COLUMNS",
+    "is_own_junit",
     "junit_xml",
     "scenarios_csv",
     "summary_csv",
     "summary_md",
 ]
+
+#: ``name`` of the root element of the JUnit files gndreplay writes (how an earlier one is recognised).
+JUNIT_SUITES_NAME = "gndreplay batch"
+_JUNIT_ROOT = f'<testsuites name="{JUNIT_SUITES_NAME}"'
 
 #: Metric columns of summary.csv, after name, status and ticks.
 METRIC_COLUMNS: tuple[str, ...] = (
@@ -256,7 +263,7 @@ def junit_xml(results: Sequence[InputResult], aggregates: Sequence[ScenarioAggre
         return {"tests": str(tests), "failures": str(fail), "errors": str(err), "skipped": "0",
                 "time": f"{time_s:.3f}"}
 
-    root = ET.Element("testsuites", {"name": "gndreplay batch",
+    root = ET.Element("testsuites", {"name": JUNIT_SUITES_NAME,
                                      **counts(len(results) + len(checked), failures, errors, total_s)})
     suite = ET.SubElement(root, "testsuite", {"name": SUITE, **counts(
         len(results), sum(r.status == "fail" for r in results), errors, total_s)})
@@ -298,3 +305,14 @@ def junit_xml(results: Sequence[InputResult], aggregates: Sequence[ScenarioAggre
             ET.SubElement(case, "system-out").text = "\n".join(out)
     ET.indent(root)
     return ET.tostring(root, encoding="unicode", xml_declaration=True) + "\n"
+
+
+def is_own_junit(path: Path) -> bool:
+    """``path`` is a JUnit file gndreplay wrote (its root element, within the first two lines, is
+    ``<testsuites name="gndreplay batch"``): the only kind of existing file ``--junit`` may replace."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(512).decode("utf-8", errors="replace")
+    except OSError:
+        return False
+    return any(line.startswith(_JUNIT_ROOT) for line in head.splitlines()[:2])

@@ -26,7 +26,7 @@ from ..fsutil import atomic_write_text
 from .aggregate import ScenarioAggregate, aggregate_scenarios
 from .jobs import Job, special_files
 from .pool import Emit, run_pool, timeout_result
-from .report import junit_xml, scenarios_csv, summary_csv, summary_md
+from .report import is_own_junit, junit_xml, scenarios_csv, summary_csv, summary_md
 from .scenarios import SimOptions
 from .thresholds import Thresholds
 from .worker import InputResult, Runner, Task, crash_message, error_result, execute, run_input
@@ -340,8 +340,9 @@ def run_batch(
         jobs, cfg=cfg, options=options, thresholds=thresholds, out_dir=out_dir, read=read, sim=sim
     )
     _check_run_args(workers, timeout_s)
-    fsutil.check_output_dir(out_dir, inputs=[t.job.path for t in tasks], overwrite=overwrite)
-    junit_rel, junit_out = _junit_place(junit, out_dir)
+    inputs = [t.job.path for t in tasks]
+    fsutil.check_output_dir(out_dir, inputs=inputs, overwrite=overwrite)
+    junit_rel, junit_out = _junit_place(junit, out_dir, inputs=inputs, overwrite=overwrite)
     target = fsutil.resolve_output_dir(out_dir, overwrite=overwrite)
 
     def final(r: InputResult, tmp: Path) -> InputResult:
@@ -367,8 +368,9 @@ def run_batch(
         if aggregates:
             atomic_write_text(tmp / "scenarios.csv", scenarios_csv(aggregates))
         if junit_rel is not None:
-            (tmp / junit_rel).parent.mkdir(parents=True, exist_ok=True)
+            _mkdirs_marked(tmp, junit_rel.parent)
             atomic_write_text(tmp / junit_rel, junit_xml(results, aggregates))
+            fsutil.add_to_marker((tmp / junit_rel).parent, [junit_rel.name])
     if junit_out is not None:
         junit_out.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(junit_out, junit_xml(results, aggregates))
@@ -379,17 +381,47 @@ def run_batch(
     )
 
 
-def _junit_place(junit: Path | None, out_dir: Path) -> tuple[Path | None, Path | None]:
-    """(path inside the batch folder, or None; path outside it, or None) of the JUnit file.
+def _mkdirs_marked(root: Path, rel: Path) -> None:
+    """Create the folders ``rel`` inside the staging folder ``root``, each marked as gndreplay's (a later
+    ``--overwrite`` of the batch folder may then replace them)."""
+    here = root
+    for part in rel.parts:
+        here = here / part
+        here.mkdir(exist_ok=True)
+        if not fsutil.is_output_dir(here):
+            fsutil.write_marker(here, [])
+        fsutil.add_to_marker(here.parent, [part])
+
+
+def _junit_place(
+    junit: Path | None, out_dir: Path, *, inputs: Sequence[Path] = (), overwrite: bool = False
+) -> tuple[Path | None, Path | None]:
+    """(path inside the batch folder, or None; path outside it, or None) of the JUnit file, checked before
+    any work.
 
     Raises:
-        OutputError: ``junit`` is an existing folder.
+        OutputError: ``junit`` is a folder, a symbolic link, an input (or inside an input folder), or an
+            existing file that is not a JUnit file gndreplay wrote (or is one and ``overwrite`` is not given).
     """
     if junit is None:
         return None, None
     path = _absolute(Path(junit))
     if path.is_dir():
         raise OutputError(f"{junit}: is a folder; --junit must name a file")
+    if path.is_symlink():
+        raise OutputError(f"{junit}: is a symbolic link; --junit must name a file")
+    real = Path(os.path.realpath(path))
+    for p in inputs:
+        ip = Path(os.path.realpath(_absolute(Path(p))))
+        if real == ip or real.is_relative_to(ip):
+            raise OutputError(f"{junit}: is the input {p} or inside it; choose another --junit file")
+    if path == out_dir:
+        raise OutputError(f"{junit}: is the batch folder; --junit must name a file")
     if path.is_relative_to(out_dir):
         return path.relative_to(out_dir), None
+    if path.exists():
+        if not is_own_junit(path):
+            raise OutputError(f"{junit}: exists and is not a JUnit file gndreplay wrote; not overwriting it")
+        if not overwrite:
+            raise OutputError(f"{junit}: exists (an earlier batch's JUnit file); --overwrite replaces it")
     return None, path

@@ -17,7 +17,7 @@ from typing import Any
 
 from ..errors import LogFormatError
 from ..types import Tick
-from .base import LogDescription, LogReader, ReadReport, StreamInfo
+from .base import LogDescription, LogReader, ReadReport, StreamInfo, special_file_kind
 from .carmen import CarmenReader, write_carmen
 from .sync import DEFAULT_SYNC, SyncOptions
 
@@ -32,6 +32,7 @@ __all__ = [
     "detect_format",
     "open_log",
     "read_ticks",
+    "special_file_kind",
     "write_carmen",
 ]
 
@@ -80,15 +81,32 @@ def _ros2_dir(path: Path) -> Path | None:
     return None
 
 
+def _refuse_special(path: Path) -> None:
+    """Refuse a FIFO, device or socket (or a folder holding one, a ROS2 bag's storage file) before anything
+    opens it: reading one could block forever."""
+    kind = special_file_kind(path)
+    if kind is None and path.is_dir():
+        try:
+            kinds = ((e, special_file_kind(e)) for e in sorted(path.iterdir()))
+            entry, kind = next(((e, k) for e, k in kinds if k is not None), (path, None))
+        except OSError:
+            entry = path
+        path = entry
+    if kind is not None:
+        raise LogFormatError(f"{path}: is {kind}, not a log file (never opened)")
+
+
 def detect_format(path: Path, fmt: str | None = None) -> tuple[str, Path]:
     """Format name and the path to open (a ``.db3`` inside a ROS2 bag opens its folder).
 
     Raises:
-        LogFormatError: missing path, unknown suffix or ``fmt`` (the message lists the known formats).
+        LogFormatError: missing path, a FIFO / device / socket (never opened: reading could block), unknown
+            suffix or ``fmt`` (the message lists the known formats).
     """
     path = Path(path)
     if not path.exists():
         raise LogFormatError(f"{path}: no such file or directory")
+    _refuse_special(path)
     if fmt is not None:
         name = fmt.lower()
         if name in _ALIASES:

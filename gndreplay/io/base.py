@@ -8,6 +8,8 @@ the stream is exhausted ``report`` tells what was skipped, reordered, held or dr
 from __future__ import annotations
 
 import math
+import os
+import stat
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -32,7 +34,26 @@ __all__ = [
     "check_pose",
     "check_speed",
     "check_time",
+    "special_file_kind",
 ]
+
+_SPECIAL_KINDS = (
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def special_file_kind(path: Path) -> str | None:
+    """``"a FIFO"``, ``"a socket"``, ... for a path that is neither a regular file nor a folder (reading it
+    could block forever or never end); None otherwise, and for a missing path. Never opens the path."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None
+    return next((what for test, what in _SPECIAL_KINDS if test(mode)), None)
+
 
 #: Period of the index clock given to logs whose timestamps are all zero (10 Hz, a typical laser rate).
 INDEX_CLOCK_PERIOD_NS = 100_000_000

@@ -6,11 +6,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from ..fsutil import add_to_marker, atomic_write_text
+from ..fsutil import add_to_marker, atomic_write_text, check_may_write
 from ..pipeline.model import RobotCentredGrid
 from ..pipeline.stack import TickResult
 from ..types import Pose2D, Tick
-from .figures import build_figures
+from .figures import FIGURE_MAKERS, build_figures
 from .markdown import render_report
 from .rundir import load_run
 
@@ -22,17 +22,20 @@ REPORT_FILE = "report.md"
 def build_report(run_dir: Path, *, name: str | None = None) -> list[Path]:
     """Read ``run_dir`` (commands.csv, timing.csv, the TUM trajectories, summary.json and maps.npz when
     present) and write fig_model.png, fig_raw.png, fig_commands.png, fig_timing.png and report.md into it,
-    overwriting. Deterministic: the same files give the same bytes. ``name`` titles report.md (default:
-    the directory's name).
+    replacing only files gndreplay wrote there (listed in its ``.gndreplay`` marker). Deterministic: the
+    same files give the same bytes. ``name`` titles report.md (default: the directory's name).
 
     Returns:
         The paths written (the four figures, then report.md).
 
     Raises:
         RunDirError: a required file is missing or malformed.
+        OutputError: a figure or report.md exists there and gndreplay did not write it (checked before
+            anything is drawn).
     """
     run_dir = Path(run_dir)
     data = load_run(run_dir)
+    check_may_write(run_dir, [*FIGURE_MAKERS, REPORT_FILE])
     written = build_figures(data, run_dir)
     text = render_report(data, [p.name for p in written], name=name)
     report = run_dir / REPORT_FILE

@@ -6,13 +6,14 @@ switch, no window. PNGs are saved at a fixed dpi without metadata, so the same f
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..fsutil import atomic_path
 from .plots import (
     MODE_COLORS,
     SITUATION_COLORS,
@@ -34,6 +35,7 @@ if TYPE_CHECKING:
 __all__ = [
     "DPI",
     "FIGURES",
+    "FIGURE_MAKERS",
     "budgets_ms",
     "build_figures",
     "figure_commands",
@@ -301,19 +303,26 @@ def figure_timing(data: RunData) -> Figure:
 
 
 def save_figure(fig: Figure, path: Path, *, dpi: int = DPI) -> Path:
-    """Save as PNG at ``dpi`` with no metadata (byte-identical for the same figure)."""
-    fig.savefig(path, dpi=dpi, format="png", metadata={"Software": None})
+    """Save as PNG at ``dpi`` with no metadata (byte-identical for the same figure), atomically: a failure
+    leaves the previous file (or none), never half a PNG."""
+    with atomic_path(Path(path)) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png", metadata={"Software": None})
     return path
 
 
+#: The figures ``build_figures`` draws, by file name.
+FIGURE_MAKERS: Mapping[str, Callable[[RunData], Figure]] = {
+    "fig_model.png": figure_model,
+    "fig_raw.png": figure_raw,
+    "fig_commands.png": figure_commands,
+    "fig_timing.png": figure_timing,
+}
+
+
 def build_figures(data: RunData, out_dir: Path, *, dpi: int = DPI) -> list[Path]:
-    """Draw the four figures of ``data`` into ``out_dir`` under their fixed names (overwriting)."""
-    makers = {
-        "fig_model.png": figure_model,
-        "fig_raw.png": figure_raw,
-        "fig_commands.png": figure_commands,
-        "fig_timing.png": figure_timing,
-    }
+    """Draw the four figures of ``data`` into ``out_dir`` under their fixed names (``FIGURE_MAKERS``),
+    replacing earlier ones (the caller checks they are gndreplay's: ``fsutil.check_may_write``)."""
+    makers = FIGURE_MAKERS
     out = []
     for name, make in makers.items():
         out.append(save_figure(make(data), Path(out_dir) / name, dpi=dpi))

@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 from ..geometry import compose, inverse
 from ..pipeline.model import RobotCentredGrid
 from ..pipeline.stack import MODULES, TickResult
+from ..replay import recorded_flags
 from ..types import Pose2D, Tick
 
 __all__ = ["MCAP_FILE", "TOPICS", "McapSink", "RosMessages", "grid_to_occupancy"]
@@ -172,10 +173,13 @@ class McapSink:
         path_every_s: period of the planned-path messages [s]; 0 = every tick.
         compress: zstd chunk compression.
         staging_dir: where to create the temporary bag folder.
+        enforce_budgets: the run's ``supervisor.enforce_budgets``: /gndreplay/flags records the flags
+            commands.csv records (``replay.recorded_flags``), so without it the wall-clock
+            ``*_OVER_BUDGET`` flags are left out and the bag is a pure function of the log and config.
     """
 
     def __init__(self, *, grid_every_s: float = 1.0, path_every_s: float = 0.0, compress: bool = True,
-                 staging_dir: Path | None = None) -> None:
+                 staging_dir: Path | None = None, enforce_budgets: bool = False) -> None:
         if not grid_every_s >= 0.0 or not path_every_s >= 0.0:
             raise ValueError(f"grid_every_s and path_every_s must be >= 0, got {grid_every_s!r}, "
                              f"{path_every_s!r}")
@@ -183,6 +187,7 @@ class McapSink:
         self.path_every_s = path_every_s
         self.compress = compress
         self.staging_dir = staging_dir
+        self.enforce_budgets = enforce_budgets
         self.counts: dict[str, int] = dict.fromkeys(TOPICS, 0)
         self._writer: Any = None
         self._conns: dict[str, Any] = {}
@@ -279,7 +284,8 @@ class McapSink:
         self._put("/gndreplay/timing", t, m.timing([float(result.timings_ms.get(k, 0.0)) for k in MODULES]))
         self._put("/gndreplay/mode", t, m.string(str(result.mode.value)))
         self._put("/gndreplay/situation", t, m.string(result.situation.name))
-        self._put("/gndreplay/flags", t, m.string("|".join(result.flags.names())))
+        self._put("/gndreplay/flags", t, m.string("|".join(
+            recorded_flags(result.flags, enforce_budgets=self.enforce_budgets).names())))
 
     def finish(self, run_dir: Path) -> None:
         """Close the bag and move its .mcap file to ``run_dir/results.mcap``."""

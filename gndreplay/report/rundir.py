@@ -19,8 +19,8 @@ from ..errors import GndReplayError
 from ..evaluation import read_tum as read_tum_ns
 from .maps import MAPS_FILE, MapsData, load_maps
 
-__all__ = ["Commands", "RunData", "RunDirError", "Timing", "load_run", "read_commands", "read_timing",
-           "read_tum"]
+__all__ = ["Commands", "RunData", "RunDirError", "Timing", "check_summary", "load_run", "read_commands",
+           "read_timing", "read_tum"]
 
 F64 = NDArray[np.float64]
 TIMING_MODULES = ("match", "model", "planner", "reactor")
@@ -178,6 +178,57 @@ def read_tum(path: Path) -> F64:
     return np.column_stack([t_ns / 1e9, poses]) if t_ns.size else np.zeros((0, 4))
 
 
+def _is_num(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool)
+
+
+def _is_count(x: Any) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool) and x >= 0
+
+
+def _table_of(ok: Any) -> Any:
+    return lambda x: isinstance(x, dict) and all(isinstance(k, str) and ok(v) for k, v in x.items())
+
+
+def _opt(ok: Any) -> Any:
+    return lambda x: x is None or ok(x)
+
+
+_COUNTS = _table_of(_is_count)
+#: summary.json key -> (what it must be, a test); keys the report reads, each optional.
+_SUMMARY_FIELDS: Mapping[str, tuple[str, Any]] = {
+    "ticks": ("a count (integer >= 0)", _is_count),
+    "duration_s": ("a number", _opt(_is_num)),
+    "flags": ("a table of counts", _COUNTS),
+    "over_budget": ("a table of counts", _COUNTS),
+    "modes": ("a table of counts", _COUNTS),
+    "situations": ("a table of counts", _COUNTS),
+    "latency_ms": ("a table of {median, p90, p99, max} numbers",
+                   _table_of(_opt(_table_of(_opt(_is_num))))),
+    "agreement": ("a table of numbers", _opt(_table_of(_opt(_is_num)))),
+    "config": ("a table", lambda x: isinstance(x, dict)
+               and all(isinstance(x.get(k), dict | None) for k in ("supervisor", "scanmatch"))),
+    "options": ("a table", lambda x: isinstance(x, dict)
+                and all(_opt(_is_num)(x.get(k)) for k in ("goal_ahead_m", "until_s", "every"))
+                and (x.get("goal") is None or (isinstance(x["goal"], list) and len(x["goal"]) == 2
+                                               and all(map(_is_num, x["goal"]))))),
+}
+
+
+def check_summary(path: Path, summary: Any) -> dict[str, Any]:
+    """``summary`` (summary.json's content) if it has the shape the report reads.
+
+    Raises:
+        RunDirError: not an object, or a key the report uses has the wrong type (named).
+    """
+    if not isinstance(summary, dict):
+        raise RunDirError(f"{path}: expected a JSON object, got {type(summary).__name__}")
+    for key, (what, ok) in _SUMMARY_FIELDS.items():
+        if key in summary and not ok(summary[key]):
+            raise RunDirError(f"{path}: key {key!r} must be {what}, got {json.dumps(summary[key])[:60]}")
+    return summary
+
+
 def load_run(run_dir: Path) -> RunData:
     """Read a run directory.
 
@@ -187,10 +238,11 @@ def load_run(run_dir: Path) -> RunData:
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise RunDirError(f"{run_dir}: not a directory")
+    summary_path = _need(run_dir / "summary.json")
     try:
-        summary = json.loads(_need(run_dir / "summary.json").read_text())
-    except json.JSONDecodeError as err:
-        raise RunDirError(f"{run_dir / 'summary.json'}: not valid JSON: {err}") from err
+        summary = check_summary(summary_path, json.loads(summary_path.read_text(encoding="utf-8")))
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise RunDirError(f"{summary_path}: not valid JSON: {err}") from err
     maps = None
     if (run_dir / MAPS_FILE).is_file():
         try:
