@@ -193,6 +193,25 @@ PlannerOpt = Annotated[
         show_default=False,
     ),
 ]
+# closed-loop options shared by simulate and batch (scenarios)
+LatencyOpt = Annotated[
+    str,
+    typer.Option(
+        "--latency",
+        help="Scenarios: seconds from a scan to its command taking effect, or 'measured' (the stack's own "
+        "time: not deterministic).",
+    ),
+]
+PerfectOdometryOpt = Annotated[
+    bool, typer.Option("--perfect-odometry", help="Scenarios: no odometry drift (scan matching still runs).")
+]
+TimeLimitOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--time-limit", min=0.1, help="Scenarios: override each scenario's time limit (seconds).",
+        show_default=False,
+    ),
+]
 LogArg = Annotated[
     Path,
     typer.Argument(
@@ -675,23 +694,9 @@ def simulate(
             show_default=False,
         ),
     ] = None,
-    latency: Annotated[
-        str,
-        typer.Option(
-            "--latency",
-            help="Seconds from a scan to its command taking effect, or 'measured' (the stack's own time: "
-            "not deterministic).",
-        ),
-    ] = "0",
-    perfect_odometry: Annotated[
-        bool, typer.Option("--perfect-odometry", help="No odometry drift (scan matching still runs).")
-    ] = False,
-    time_limit: Annotated[
-        float | None,
-        typer.Option(
-            "--time-limit", min=0.1, help="Override the scenario's time limit (seconds).", show_default=False
-        ),
-    ] = None,
+    latency: LatencyOpt = "0",
+    perfect_odometry: PerfectOdometryOpt = False,
+    time_limit: TimeLimitOpt = None,
     figures: Annotated[bool, typer.Option("--figures/--no-figures", help="Draw the figures.")] = True,
     overwrite: OverwriteOpt = False,
     list_: Annotated[bool, typer.Option("--list", help="List the shipped scenarios and exit.")] = False,
@@ -827,24 +832,9 @@ def batch(
     every: Annotated[
         int, typer.Option("--every", min=1, help="Run the stack on every N-th scan (logs).")
     ] = 1,
-    latency: Annotated[
-        str,
-        typer.Option(
-            "--latency",
-            help="Scenarios: seconds from a scan to its command taking effect, or 'measured' (the stack's "
-            "own time: not deterministic).",
-        ),
-    ] = "0",
-    perfect_odometry: Annotated[
-        bool, typer.Option("--perfect-odometry", help="Scenarios: no odometry drift.")
-    ] = False,
-    time_limit: Annotated[
-        float | None,
-        typer.Option(
-            "--time-limit", min=0.1, help="Scenarios: override each scenario's time limit (seconds).",
-            show_default=False,
-        ),
-    ] = None,
+    latency: LatencyOpt = "0",
+    perfect_odometry: PerfectOdometryOpt = False,
+    time_limit: TimeLimitOpt = None,
     figures: Annotated[
         bool, typer.Option("--figures/--no-figures", help="Scenarios: draw each run's figures.")
     ] = True,
