@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # the CLI imports its heavy modules lazily, inside the comman
     from rich.progress import Progress, TaskID
 
     from .config import Config
-    from .replay import RunSink
+    from .replay import ReadOptions, RunSink
     from .scanmatch import MatcherReport
     from .scanmatch.run import Method
     from .types import Tick
@@ -470,7 +470,7 @@ def run(
     import dataclasses
 
     from .config import load_config
-    from .replay import ReadOptions, RunOptions, run_log
+    from .replay import RunOptions, run_log
 
     goal_xy = _parse_goal(goal)
     if goal_xy is not None and goal_ahead is not None:
@@ -485,14 +485,7 @@ def run(
     options = RunOptions(
         goal_xy=goal_xy, goal_ahead_m=5.0 if goal_ahead is None else goal_ahead, until_s=until, every=every
     )
-    read = ReadOptions(
-        fmt=fmt,
-        scan_topic=scan_topic,
-        odom_topic=odom_topic,
-        cmd_topic=cmd_topic,
-        truth_topic=truth_topic,
-        strict=strict,
-    )
+    read = _read_options(fmt, scan_topic, odom_topic, cmd_topic, truth_topic, strict)
     with _RunProgress(enabled=not (quiet or json_out), label=log_path.name, until_s=until) as progress:
         summary = run_log(
             log_path,
@@ -881,7 +874,7 @@ def batch(
     from .batch.scenarios import SimOptions
     from .batch.thresholds import Thresholds
     from .config import load_config
-    from .replay import ReadOptions, RunOptions
+    from .replay import RunOptions
     from .sim.runner import parse_latency
 
     cfg = _with_planner(load_config(config, preset_name=preset_name), planner)
@@ -904,14 +897,7 @@ def batch(
             dask_address=dask,
             progress=progress,
             junit=junit,
-            read=ReadOptions(
-                fmt=fmt,
-                scan_topic=scan_topic,
-                odom_topic=odom_topic,
-                cmd_topic=cmd_topic,
-                truth_topic=truth_topic,
-                strict=strict,
-            ),
+            read=_read_options(fmt, scan_topic, odom_topic, cmd_topic, truth_topic, strict),
             timeout_s=timeout,
             overwrite=overwrite,
             sim=sim,
@@ -966,6 +952,21 @@ def _print_batch(result: object) -> None:
 def _num(value: object, fmt: str = "{:.2f}") -> str:
     """A number for a table cell; "-" when there is none (missing, or NaN: nothing to average)."""
     return fmt.format(value) if isinstance(value, int | float) and math.isfinite(value) else "-"
+
+
+def _read_options(
+    fmt: str | None,
+    scan_topic: str | None,
+    odom_topic: str | None,
+    cmd_topic: str | None,
+    truth_topic: str | None,
+    strict: bool,
+) -> ReadOptions:
+    """The shared log-reading options (``--format``, the topic overrides, ``--strict``) as one value."""
+    from .replay import ReadOptions
+
+    return ReadOptions(fmt=fmt, scan_topic=scan_topic, odom_topic=odom_topic, cmd_topic=cmd_topic,
+                       truth_topic=truth_topic, strict=strict)
 
 
 def _with_planner(cfg: Config, planner: str | None) -> Config:
