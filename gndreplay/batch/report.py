@@ -9,7 +9,7 @@ import io
 import math
 import re
 import xml.etree.ElementTree as ET
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from .aggregate import ScenarioAggregate
@@ -136,11 +136,9 @@ def _note(r: InputResult) -> str:
 
 def summary_csv(results: Sequence[InputResult]) -> str:
     """summary.csv text: a ``CSV_COLUMNS`` header, then one row per input (empty cell = not measured)."""
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(CSV_COLUMNS)
-    for r in results:
-        w.writerow(
+    return _csv_text(
+        CSV_COLUMNS,
+        (
             [
                 r.name,
                 r.status,
@@ -155,7 +153,17 @@ def summary_csv(results: Sequence[InputResult]) -> str:
                 r.path,
                 "" if r.run_dir is None else str(r.run_dir),
             ]
-        )
+            for r in results
+        ),
+    )
+
+
+def _csv_text(header: Sequence[str], rows: Iterable[Sequence[object]]) -> str:
+    """CSV text (``\n`` line ends) of a header and rows."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    w.writerows(rows)
     return buf.getvalue()
 
 
@@ -222,11 +230,9 @@ def summary_md(results: Sequence[InputResult], aggregates: Sequence[ScenarioAggr
 
 def scenarios_csv(aggregates: Sequence[ScenarioAggregate]) -> str:
     """scenarios.csv text: a ``SCENARIO_CSV_COLUMNS`` header, then one row per scenario."""
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(SCENARIO_CSV_COLUMNS)
-    for a in aggregates:
-        w.writerow(
+    return _csv_text(
+        SCENARIO_CSV_COLUMNS,
+        (
             [
                 a.scenario,
                 a.status,
@@ -240,8 +246,9 @@ def scenarios_csv(aggregates: Sequence[ScenarioAggregate]) -> str:
                 "; ".join(a.failures),
                 a.path,
             ]
-        )
-    return buf.getvalue()
+            for a in aggregates
+        ),
+    )
 
 
 def _x(text: str) -> str:
