@@ -21,6 +21,8 @@ from pathlib import Path
 from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
 from .errors import ConfigError
+from .pipeline.follow import FollowParams
+from .pipeline.local import LocalParams
 from .pipeline.model import GRID_200, GRID_400, GridParams
 from .pipeline.nd import NdParams
 from .pipeline.nf1 import Nf1Params
@@ -37,6 +39,7 @@ __all__ = [
     "Config",
     "CspaceConfig",
     "LaserConfig",
+    "NavigationConfig",
     "PlannerConfig",
     "Range",
     "RobotConfig",
@@ -81,6 +84,26 @@ class PlannerConfig(Nf1Params):
 
 
 @dataclass(frozen=True, slots=True)
+class NavigationConfig:
+    """The multi-loop architecture: which mode is desired, whether the mode selector arbitrates, and the
+    local navigation and path following settings.
+
+    Attributes:
+        mode: "gnd" (the default: GND to the goal), "teleop" (the recorded or scripted velocity commands),
+            "follow" (path following of subgoals), "local" (local navigation alone).
+        selector: the mode selector: the desired mode's command wins unless the area it sweeps is occupied,
+            then local navigation wins for that tick. False: the desired command goes out unchanged.
+        local: local navigation ([navigation.local]).
+        follow: path following ([navigation.follow]).
+    """
+
+    mode: Literal["gnd", "teleop", "follow", "local"] = "gnd"
+    selector: bool = True
+    local: LocalParams = LocalParams()
+    follow: FollowParams = FollowParams()
+
+
+@dataclass(frozen=True, slots=True)
 class ScanMatchConfig:
     """Which matcher corrects odometry, and its settings."""
 
@@ -102,6 +125,7 @@ class Config:
     reactor: NdParams = NdParams()
     supervisor: SupervisorParams = SupervisorParams()
     scanmatch: ScanMatchConfig = ScanMatchConfig()
+    navigation: NavigationConfig = NavigationConfig()
 
     def stack_params(self) -> StackParams:
         """The sections the navigation stack needs."""
@@ -116,6 +140,10 @@ class Config:
             supervisor=self.supervisor,
             cspace_margin_m=self.cspace.margin_m,
             unknown_is_free=self.cspace.unknown_is_free,
+            nav_mode=self.navigation.mode,
+            selector=self.navigation.selector,
+            local=self.navigation.local,
+            follow=self.navigation.follow,
         )
 
 
@@ -322,6 +350,10 @@ RANGES: dict[tuple[type, str], Range] = {
     (IdcParams, "fallback_priors"): _count(0, 2),  # constant velocity, then no motion
     (IdcParams, "recheck_pair_ratio"): _UNIT,
     (IdcParams, "reset_after_failures"): _count(),
+    # navigation.follow (path following)
+    (FollowParams, "reach_m"): _pos(_LEN),
+    # navigation.local (local navigation strategies)
+    # end of navigation
     (KissParams, "voxel_m"): _pos(_LEN),
     (KissParams, "max_range_m"): _pos(_RANGE_M),
     (KissParams, "min_range_m"): _nonneg(_RANGE_M),

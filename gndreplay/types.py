@@ -1,4 +1,4 @@
-"""The records that flow between stages: Pose2D, Scan, Odometry, Command, Tick.
+"""The records that flow between stages: Pose2D, Scan, Odometry, Command, Subgoal, Tick.
 
 Times are int nanoseconds (``t_ns``) everywhere inside; ``t_s`` properties convert at the edges. Every
 record is a frozen dataclass; arrays inside are not copied, treat them as read-only.
@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .geometry import compose, inverse, wrap_angle
 
-__all__ = ["Command", "Flag", "Odometry", "Pose2D", "Scan", "Tick"]
+__all__ = ["Command", "Flag", "Odometry", "Pose2D", "Scan", "Subgoal", "SubgoalKind", "Tick"]
 
 NS_PER_S = 1_000_000_000
 
@@ -130,6 +131,22 @@ class Command:
     v_mps: float
     w_radps: float
     vy_mps: float = 0.0
+
+
+SubgoalKind = Literal["stop", "forward", "reverse"]
+"""How a subgoal is reached (the multi-loop paper): at rest, or passing with the heading asked, driving
+forwards or backwards."""
+
+
+@dataclass(frozen=True, slots=True)
+class Subgoal:
+    """One subgoal of the functional loop: a pose (x, y [m], theta [rad]) in the corrected odometry frame
+    and how to reach it."""
+
+    x: float
+    y: float
+    theta: float
+    kind: SubgoalKind = "forward"
 
 
 @dataclass(frozen=True, slots=True, eq=False)

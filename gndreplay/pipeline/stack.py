@@ -20,6 +20,8 @@ from ..geometry import transform_points, wrap_angle
 from ..robot import RobotConfig
 from ..types import Flag, Pose2D, Scan, Tick
 from .cspace import free_cspace
+from .follow import FollowParams
+from .local import LocalParams
 from .model import UNKNOWN, GridParams, RobotCentredGrid
 from .nd import NdParams, Situation, nd_step
 from .nf1 import Nf1Params, Nf1Planner, Planner, PlanResult, reaches_border
@@ -37,12 +39,20 @@ from .supervisor import (
 )
 from .tunnel import TunnelParams, TunnelPlanner, warm_up_planners
 
-__all__ = ["MODULES", "PLANNERS", "NavigationStack", "StackParams", "TickResult", "make_planner", "warm_up"]
+__all__ = [
+    "MODULES", "NAV_MODES", "PLANNERS", "NavMode", "NavigationStack", "StackParams", "TickResult",
+    "make_planner", "warm_up",
+]
 
 MODULES = ("match", "model", "planner", "reactor")
 
 PLANNERS = ("nf1", "tunnel")
 """Planner kinds ``make_planner`` builds."""
+
+NavMode = Literal["gnd", "teleop", "follow", "local"]
+NAV_MODES: tuple[str, ...] = ("gnd", "teleop", "follow", "local")
+"""Navigation modes: GND to the goal (the default), the log's or script's teleoperation, path following of
+subgoals, local navigation alone."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,6 +72,10 @@ class StackParams:
     unknown_is_free: bool = True
     planner_kind: Literal["nf1", "tunnel"] = "nf1"
     tunnel: TunnelParams = TunnelParams()
+    nav_mode: NavMode = "gnd"
+    selector: bool = True
+    local: LocalParams = LocalParams()
+    follow: FollowParams = FollowParams()
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -83,6 +97,10 @@ class TickResult:
             expanded), also when it failed.
         planner_length_m: length of the planned path / tunnel polyline [m] (nan when the planner failed).
         tunnel_width_m: width of the tunnel (nan for NF1 or when the planner failed).
+        desired_mode: the navigation mode asked for ("gnd", "teleop", "follow", "local").
+        active_mode: the mode whose command won this tick (the mode selector's choice).
+        takeover_reason: why the active mode is not the desired one ("" when it is).
+        subgoal_index: the path follower's current subgoal (-1 outside path following).
     """
 
     t_ns: int
@@ -100,6 +118,10 @@ class TickResult:
     planner_nodes: int = 0
     planner_length_m: float = math.nan
     tunnel_width_m: float = math.nan
+    desired_mode: str = "gnd"
+    active_mode: str = "gnd"
+    takeover_reason: str = ""
+    subgoal_index: int = -1
 
 
 def make_planner(params: StackParams) -> Planner:
