@@ -13,7 +13,9 @@ furniture blocks; occupied cells are inflated by 0.4 m (what ``cspace.free_cspac
 stands on a random free cell of the central control zone (N/4 square), as in the robot-centred grid. Goals:
 a free cell 5 m away, and a point 30 m away, projected onto the grid border. Prints median and p99 [ms] of
 each NF1 part (wavefront with early exit as ``plan`` runs it, descent, tightening), of the whole ``plan``
-call, of a full-grid wave without early exit for reference, and of the tunnel planner's ``plan``.
+call on the C-space computed beforehand, of a full-grid wave without early exit for reference, and, side by
+side, of the two planners as the stack calls them, the C-space included ("nf1+cspace", "tunnel plan"),
+each the fastest of ``--repeat`` runs (as on the dev logs). Use ``taskset -c 0`` for one core.
 
 Run: ``.venv/bin/python benchmarks/planner.py [--log LOG ...] [--ticks 600] [--repeat 3] [--maps 10]
 [--trials 40]``
@@ -113,7 +115,15 @@ def start_and_goals(
     return None
 
 
-def run(n_maps: int, trials: int, connectivity: Literal[4, 8], seed: int = 1) -> None:
+def nf1_with_cspace(
+    cells: NDArray[np.uint8], start: tuple[int, int], goal: tuple[float, float], params: Nf1Params
+) -> Any:
+    """NF1 as ``Nf1Planner.plan`` runs it: the C-space of the grid, then the plan."""
+    free = free_cspace(cells, cell_m=CELL_M, inflate_m=INFLATE_M)
+    return plan(free, start, goal, cell_m=CELL_M, params=params)
+
+
+def run(n_maps: int, trials: int, connectivity: Literal[4, 8], repeat: int, seed: int = 1) -> None:
     rng = np.random.default_rng(seed)
     params = Nf1Params(connectivity=connectivity)
     times: dict[str, dict[str, list[float]]] = {}
@@ -128,12 +138,18 @@ def run(n_maps: int, trials: int, connectivity: Literal[4, 8], seed: int = 1) ->
                 continue
             start, near, far = sg
             for name, goal in (("goal 5 m", near), ("goal at border", far)):
-                parts = ("wavefront", "descent", "tightening", "plan", "full wave", "tunnel plan")
+                parts = ("wavefront", "descent", "tightening", "plan", "full wave", "nf1+cspace",
+                         "tunnel plan")
                 t = times.setdefault(name, {k: [] for k in parts})
                 res, ms = timed(plan, free, start, goal, cell_m=CELL_M, params=params)
                 t["plan"].append(ms)
-                tun, ms = timed(tunnel_plan, cells, start, goal, cell_m=CELL_M, radius_m=INFLATE_M)
-                t["tunnel plan"].append(ms)
+                # the two planners as the stack calls them, C-space included, fastest of ``repeat`` runs
+                t["nf1+cspace"].append(min(timed(nf1_with_cspace, cells, start, goal, params)[1]
+                                           for _ in range(repeat)))
+                runs = [timed(tunnel_plan, cells, start, goal, cell_m=CELL_M, radius_m=INFLATE_M)
+                        for _ in range(repeat)]
+                tun = runs[0][0]
+                t["tunnel plan"].append(min(ms for _, ms in runs))
                 ft = flags.setdefault(name + " tunnel", {})
                 ft[tun.flag.name or "NONE"] = ft.get(tun.flag.name or "NONE", 0) + 1
                 f = flags.setdefault(name, {})
@@ -238,8 +254,8 @@ def main() -> None:
     for c in (4, 8):
         plan(warm, (N // 2, N // 2), (N / 2, N + 100.5), cell_m=CELL_M, params=Nf1Params(connectivity=c))
     warm_up_planners(TunnelParams())
-    run(args.maps, args.trials, 4)
-    run(args.maps, args.trials, 8)
+    run(args.maps, args.trials, 4, max(args.repeat, 1))
+    run(args.maps, args.trials, 8, max(args.repeat, 1))
 
 
 if __name__ == "__main__":

@@ -7,7 +7,8 @@ For each log (MIT CSAIL, ACES, Intel: CARMEN logs with the SLAM-benchmark relati
 only CSAIL and ACES were used to choose the defaults) it prints one row per matcher: time per scan (median,
 p99), match failures, and the relation errors: translational [m] mean ± std and max, then the mean split by
 relation span (<1 s: the matches' own accuracy; 1-10 s; >10 s: mostly drift, the loop-closing relations),
-rotational [deg] mean and the largest rotational error of a relation < 1 s, relations matched / unmatched.
+rotational [deg] mean and the largest rotational error of a relation < 1 s, relations matched / unmatched
+(for idc from each start the worst relation < 1 s is named: its index in the relations file, its scans).
 Rows: raw odometry; idc (the default matcher); idc without its point-to-line polish (pure IDC); kiss-icp at
 its best setting on the dev logs (KissParams defaults: odometry prior, voxel 0.25 m, range 40 m, initial
 threshold 0.5 m); the same without the odometry prior, as kiss-icp's authors run it.
@@ -136,6 +137,21 @@ HEADER = ("  matcher            ms/scan    p99  fails   trans err [m] mean ± st
           "   rot [deg] mean, max <1 s   matched/unmatched")
 
 
+def _worst_short(s: RelationStats | None, relations: Relations, tick_t: np.ndarray) -> str:
+    """The relation < 1 s with the largest rotational error: its index, its scans (indices into the log)
+    and the error, so that it can be looked at."""
+    if s is None or s.matched == 0:
+        return "-"
+    i = s.index
+    short = np.abs(relations.t2_ns[i] - relations.t1_ns[i]) < 1_000_000_000
+    if not short.any():
+        return "-"
+    k = int(np.argmax(np.where(short, s.rot_err_deg, -1.0)))
+    r = int(i[k])
+    a, b = (int(np.argmin(np.abs(tick_t - t))) for t in (relations.t1_ns[r], relations.t2_ns[r]))
+    return f"{r} (scans {a}-{b}) {s.rot_err_deg[k]:.2f}"
+
+
 def _trans_mean(r: MatcherReport) -> float:
     return r.relations.trans_mean_m if r.relations else float("nan")
 
@@ -217,6 +233,10 @@ def run_log(name: str, datasets: Path, kiss: bool, kiss_sweep: bool, starts: lis
             print(f"  {label:<16s} " + "  ".join(f"{e:6.3f}" for e in errs[label])
                   + f"   median {np.median(errs[label]):.3f}  max {max(errs[label]):.3f};  "
                   + "ms " + " ".join(f"{t:.3f}" for t in times[label]), flush=True)
+            if label == "idc":
+                tick_t = np.array([t.t_ns for t in ticks], dtype=np.int64)
+                print("  idc worst relation < 1 s per start: index (scans) error [deg]: "
+                      + "; ".join(_worst_short(r.relations, relations, tick_t) for r in reports))
         summary.idc_med = float(np.median(errs["idc"]))
         line = f"  medians over the starts: idc / baseline {summary.idc_med / baseline:.2f}"
         if kiss:

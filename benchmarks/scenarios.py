@@ -2,11 +2,16 @@
 
 Per row: success rate, collisions (of which hit-by-mover: the robot was standing still), time-outs, mean
 time to goal of the successes, minimum clearance over all runs, longest stall (no 0.2 m and no 45 deg net
-for that long), trap detections, and the wall time split in two: the simulator (world, robot, laser,
-odometry) per step and the robot side (matcher + stack) per tick, means over all ticks. Every kernel is
+for that long), trap detections, takeovers of the mode selector (onsets of an active mode other than the
+desired teleop / follow one) and the share of ticks local navigation held, and the wall time split in two:
+the simulator (world, robot, laser, odometry) per step and the robot side (matcher + stack) per tick,
+means over all ticks. Every kernel is
 compiled and every stage warmed by one short run per preset before anything is timed; runs are
 sequential in this process (one core). Latency is the fixed default (0 s), so the outcomes are
 reproducible; only the ms columns vary with the machine.
+
+The planner only serves GND: a scenario with another navigation mode (``mode: teleop | follow | local``)
+runs once per preset with the preset's own configuration, its planner column "-".
 
     .venv/bin/python benchmarks/scenarios.py [--seeds 20] [--scenarios a,b] [--presets wheelchair,xr4000]
         [--jobs 1] [--out DIR] [--jsonl FILE]
@@ -30,14 +35,22 @@ from typing import Any
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 from gndreplay.config import Config, apply_overrides, preset
-from gndreplay.sim import shipped_scenarios, simulate_scenario
+from gndreplay.sim import resolve_scenario, shipped_scenarios, simulate_scenario
 
-Task = tuple[str, str, str, int, str]  # scenario, preset, planner, seed, output folder
+Task = tuple[str, str, str, int, str]  # scenario, preset, planner ("-": not GND), seed, output folder
+NO_PLANNER = "-"
 
 
 def config(preset_name: str, planner: str) -> Config:
-    """The preset with the planner chosen."""
+    """The preset with the planner chosen ("-": the preset's own)."""
+    if planner == NO_PLANNER:
+        return preset(preset_name)
     return apply_overrides(preset(preset_name), {"planner": {"kind": planner}})
+
+
+def planners_of(name: str, planners: list[str]) -> list[str]:
+    """The planners a scenario runs with: all of them under GND, only "-" in another navigation mode."""
+    return planners if (resolve_scenario(name).mode or "gnd") == "gnd" else [NO_PLANNER]
 
 
 def one(args: Task) -> dict[str, Any]:
@@ -51,17 +64,22 @@ def one(args: Task) -> dict[str, Any]:
         "outcome": o.outcome, "t": o.end_time_s, "clear": o.min_clearance_m, "stall": o.longest_stall_s,
         "traps": o.trap_count, "hit_by_mover": bool(c.get("hit_by_mover")), "ticks": o.ticks,
         "sim": o.sim_ms_per_step, "stack": o.stack_ms_per_tick, "wall": time.perf_counter() - t0,
-        "object": c.get("object"),
+        "object": c.get("object"), "takeovers": o.takeovers,
+        "local_ticks": o.active_modes.get("local", 0),
     }
 
 
-def warm(out: str, presets: list[str], planners: list[str]) -> None:
-    """Compile and warm every stage once per preset and planner (a short run)."""
-    name = next(iter(shipped_scenarios()))
-    for p in presets:
-        for k in planners:
-            simulate_scenario(name, out_dir=Path(out) / f"warm-{p}-{k}", cfg=config(p, k), seed=0,
-                              figures=False, time_limit_s=2.0, overwrite=True)
+def warm(out: str, presets: list[str], planners: list[str], names: list[str]) -> None:
+    """Compile and warm every stage once per preset and planner, and per navigation mode of ``names``
+    (short runs)."""
+    first: dict[str, str] = {}
+    for n in [*shipped_scenarios(), *names]:
+        first.setdefault(resolve_scenario(n).mode or "gnd", n)
+    for mode, name in first.items():
+        for p in presets:
+            for k in planners if mode == "gnd" else [NO_PLANNER]:
+                simulate_scenario(name, out_dir=Path(out) / f"warm-{mode}-{p}-{k}", cfg=config(p, k), seed=0,
+                                  figures=False, time_limit_s=2.0, overwrite=True)
 
 
 def main() -> None:
@@ -82,15 +100,16 @@ def main() -> None:
     if a.table_from:
         rows = [json.loads(line) for line in Path(a.table_from).read_text().splitlines() if line.strip()]
         tasks = [(r["scenario"], r["preset"], r.get("planner", "nf1"), r["seed"], "") for r in rows]
-        table(names, presets, planners, tasks, rows, f"from {a.table_from}: {len(rows)} runs")
+        table(names, presets, [*planners, NO_PLANNER], tasks, rows, f"from {a.table_from}: {len(rows)} runs")
         return
-    warm(out, presets, planners)
+    warm(out, presets, planners, names)
     # seed-major order: stopped early, the runs so far cover every row equally
-    tasks = [(n, p, k, s, out) for s in range(a.seeds) for n in names for p in presets for k in planners]
+    tasks = [(n, p, k, s, out) for s in range(a.seeds) for n in names for p in presets
+             for k in planners_of(n, planners)]
     t0 = time.perf_counter()
     log = open(a.jsonl, "a") if a.jsonl else None  # noqa: SIM115
     if a.jobs > 1:
-        with ProcessPoolExecutor(a.jobs, initializer=warm, initargs=(out, presets, planners)) as ex:
+        with ProcessPoolExecutor(a.jobs, initializer=warm, initargs=(out, presets, planners, names)) as ex:
             results = list(ex.map(one, tasks))
     else:
         results = []
@@ -104,7 +123,7 @@ def main() -> None:
                   end="", file=sys.stderr, flush=True)
         print(file=sys.stderr)
     wall = time.perf_counter() - t0
-    table(names, presets, planners, tasks, results,
+    table(names, presets, [*planners, NO_PLANNER], tasks, results,
           f"{a.seeds} seeds per row, latency 0 s, {a.jobs} process(es), total wall {wall:.0f} s")
 
 
@@ -113,8 +132,9 @@ def table(names: list[str], presets: list[str], planners: list[str], tasks: list
     """Print the Markdown table (one row per scenario x preset x planner, the planners side by side)."""
     print(head + "\n")
     print("| scenario | preset | planner | runs | success | collisions (hit by mover) | time-outs "
-          "| mean time to goal s | min clearance m | longest stall s | traps | sim ms/step | stack ms/tick |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| mean time to goal s | min clearance m | longest stall s | traps | takeovers | local ticks "
+          "| sim ms/step | stack ms/tick |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for n, p, k in ((n, p, k) for n in names for p in presets for k in planners):
         rows = [r for (tn, tp, tk, _, _), r in zip(tasks, results, strict=True)
                 if (tn, tp, tk) == (n, p, k)]
@@ -131,7 +151,9 @@ def table(names: list[str], presets: list[str], planners: list[str], tasks: list
               f"({sum(r['hit_by_mover'] for r in col)}) | "
               f"{sum(r['outcome'] == 'timeout' for r in rows)} | {mean_t} | "
               f"{min(clear) if clear else math.nan:.3f} | {max(r['stall'] for r in rows):.1f} | "
-              f"{sum(r['traps'] for r in rows)} | {sim:.2f} | {stack:.2f} |")
+              f"{sum(r['traps'] for r in rows)} | {sum(r.get('takeovers', 0) for r in rows)} | "
+              f"{100 * sum(r.get('local_ticks', 0) for r in rows) / max(ticks, 1):.0f} % | "
+              f"{sim:.2f} | {stack:.2f} |")
 
 
 if __name__ == "__main__":

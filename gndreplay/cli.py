@@ -29,7 +29,8 @@ if TYPE_CHECKING:  # the CLI imports its heavy modules lazily, inside the comman
     from .replay import ReadOptions, RunSink
     from .scanmatch import MatcherReport
     from .scanmatch.run import Method
-    from .types import Tick
+    from .sim.scenario_file import ScenarioSpec
+    from .types import Subgoal, Tick
 
 __all__ = ["app", "cli_errors", "main"]
 
@@ -47,6 +48,7 @@ app = typer.Typer(
 )
 
 _LOG_PANEL = "Log reading"
+_MODE_PANEL = "Navigation mode (multi-loop)"
 
 
 def cli_errors(fn: Callable[P, R]) -> Callable[P, R]:
@@ -191,6 +193,46 @@ PlannerOpt = Annotated[
         "--planner",
         help="Global planner: nf1 (GND) or tunnel (the wheelchair paper). Default: the config's, nf1.",
         show_default=False,
+    ),
+]
+# the multi-loop architecture's options, shared by run, batch (logs) and simulate
+ModeOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--mode",
+        help="Desired navigation mode: gnd (GND to the goal), teleop (the recorded velocity commands: a "
+        "Twist topic, CARMEN ODOM tv/rv), follow (path following of --subgoals) or local (local navigation "
+        "alone). Default: the config's [navigation] mode, gnd.",
+        rich_help_panel=_MODE_PANEL,
+        show_default=False,
+    ),
+]
+LocalOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--local",
+        help="Local navigation strategy: nd (ND+, the default), free-space, wall-left, wall-right, contour.",
+        rich_help_panel=_MODE_PANEL,
+        show_default=False,
+    ),
+]
+SubgoalsOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--subgoals",
+        help="Subgoals for --mode follow: one 'x y theta [stop|forward|reverse]' per line, in the corrected "
+        "odometry frame.",
+        rich_help_panel=_MODE_PANEL,
+        show_default=False,
+    ),
+]
+NoSelectorOpt = Annotated[
+    bool,
+    typer.Option(
+        "--no-selector",
+        help="Disable the mode selector: the desired mode's command goes out unchanged (no takeover by "
+        "local navigation, no reflexive override), for comparison.",
+        rich_help_panel=_MODE_PANEL,
     ),
 ]
 # closed-loop options shared by simulate and batch (scenarios)
@@ -453,6 +495,10 @@ def run(
     cmd_topic: CmdTopicOpt = None,
     truth_topic: TruthTopicOpt = None,
     strict: StrictOpt = False,
+    mode: ModeOpt = None,
+    local: LocalOpt = None,
+    subgoals: SubgoalsOpt = None,
+    no_selector: NoSelectorOpt = False,
 ) -> None:
     """Replay a log through scan matching -> model -> NF1 planner -> ND+ reactor -> GND supervisor.
 
@@ -466,6 +512,8 @@ def run(
       gndreplay run aces.clf.bz2 --goal-ahead 3 --out out/aces
 
       gndreplay run run.bag --preset xr4000 --config mine.toml --until 60 --mcap
+
+      gndreplay run run.bag --mode teleop       # where would the stack have taken over from the driver?
     """
     import dataclasses
 
@@ -481,9 +529,11 @@ def run(
         cfg = _with_matcher(cfg, matcher)
     if enforce_budgets:
         cfg = dataclasses.replace(cfg, supervisor=dataclasses.replace(cfg.supervisor, enforce_budgets=True))
+    cfg = _with_navigation(cfg, mode, local, no_selector)
     out_dir = out if out is not None else Path("out") / _log_stem(log_path)
     options = RunOptions(
-        goal_xy=goal_xy, goal_ahead_m=5.0 if goal_ahead is None else goal_ahead, until_s=until, every=every
+        goal_xy=goal_xy, goal_ahead_m=5.0 if goal_ahead is None else goal_ahead, until_s=until, every=every,
+        subgoals=_load_subgoals(subgoals),
     )
     read = _read_options(fmt, scan_topic, odom_topic, cmd_topic, truth_topic, strict)
     with _RunProgress(enabled=not (quiet or json_out), label=log_path.name, until_s=until) as progress:
@@ -645,8 +695,9 @@ def report(
         Path, typer.Argument(help="A run directory written by `gndreplay run`.", show_default=False)
     ],
 ) -> None:
-    """Redraw the figures (fig_model, fig_raw, fig_commands, fig_timing) and report.md of a finished run
-    from its files alone (commands.csv, timing.csv, trajectories, summary.json, maps.npz); no log needed.
+    """Redraw the figures (fig_model, fig_raw, fig_commands, fig_timing, fig_modes) and report.md of a
+    finished run from its files alone (commands.csv, timing.csv, trajectories, summary.json, maps.npz); no
+    log needed.
 
     [bold]Example[/]
 
@@ -694,6 +745,10 @@ def simulate(
     overwrite: OverwriteOpt = False,
     list_: Annotated[bool, typer.Option("--list", help="List the shipped scenarios and exit.")] = False,
     json_out: Annotated[bool, typer.Option("--json", help="Print result.json to stdout.")] = False,
+    mode: ModeOpt = None,
+    local: LocalOpt = None,
+    subgoals: SubgoalsOpt = None,
+    no_selector: NoSelectorOpt = False,
 ) -> None:
     """Drive the navigation stack in closed loop through a simulated world and score it.
 
@@ -726,8 +781,9 @@ def simulate(
     from .sim.runner import parse_latency, scenario_config
 
     latency_s = parse_latency(latency)
-    spec = resolve_scenario(scenario)
-    cfg = scenario_config(spec.preset, config=config, preset=preset_name, planner=planner)
+    spec = _with_scenario_navigation(resolve_scenario(scenario), mode, local, _load_subgoals(subgoals))
+    cfg = _with_navigation(scenario_config(spec.preset, config=config, preset=preset_name, planner=planner),
+                           None, None, no_selector)
     run_name = safe_name(f"{spec.name}-{cfg.preset}-{seed}")  # a scenario's name never leaves out/sim
     out_dir = out if out is not None else Path("out") / "sim" / run_name
     result = simulate_scenario(spec, out_dir=out_dir, cfg=cfg, seed=seed, latency_s=latency_s,
@@ -847,6 +903,10 @@ def batch(
     cmd_topic: CmdTopicOpt = None,
     truth_topic: TruthTopicOpt = None,
     strict: StrictOpt = False,
+    mode: ModeOpt = None,
+    local: LocalOpt = None,
+    subgoals: SubgoalsOpt = None,
+    no_selector: NoSelectorOpt = False,
 ) -> None:
     """Replay many logs and run closed-loop scenarios in parallel, check thresholds, write summary.csv /
     summary.md / JUnit.
@@ -856,7 +916,8 @@ def batch(
     (--seeds) as `gndreplay simulate` does, each run one row and one JUnit test case: it passes when the
     robot reaches the goal (a collision or a time-out fails, with the reason); summary.md and scenarios.csv
     add each scenario's success rate, collisions, time-outs, mean time and minimum clearance over seeds.
-    Exit code: 0 all passed, 1 a threshold was exceeded, 2 an input could not be read.
+    Exit code: 0 all passed, 1 a threshold was exceeded, 2 an input could not be read. The navigation mode
+    options (--mode, --local, --subgoals, --no-selector) apply to the logs; scenarios carry their own.
 
     [bold]Examples[/]
 
@@ -877,7 +938,8 @@ def batch(
     from .replay import RunOptions
     from .sim.runner import parse_latency
 
-    cfg = _with_planner(load_config(config, preset_name=preset_name), planner)
+    cfg = _with_navigation(_with_planner(load_config(config, preset_name=preset_name), planner), mode, local,
+                           no_selector)
     sim = SimOptions(latency_s=parse_latency(latency), perfect_odometry=perfect_odometry,
                      time_limit_s=time_limit, figures=figures, config=config, preset=preset_name,
                      planner=planner)
@@ -885,7 +947,8 @@ def batch(
         inputs or [], scenarios=scenarios or [], seeds=None if seeds is None else parse_seeds(seeds)
     )
     limits = load_thresholds(thresholds) if thresholds is not None else Thresholds()
-    options = RunOptions(goal_ahead_m=goal_ahead, until_s=until, every=every)
+    options = RunOptions(goal_ahead_m=goal_ahead, until_s=until, every=every,
+                         subgoals=_load_subgoals(subgoals))
     with _progress(enabled=not quiet, label="batch", total=len(job_list), unit="inputs") as progress:
         result = run_batch(
             job_list,
@@ -979,6 +1042,72 @@ def _with_planner(cfg: Config, planner: str | None) -> Config:
         return apply_overrides(cfg, {"planner": {"kind": planner.lower()}})
     except GndReplayError:
         raise typer.BadParameter(f"--planner must be nf1 or tunnel, got {planner!r}") from None
+
+
+def _with_navigation(cfg: Config, mode: str | None, local: str | None, no_selector: bool) -> Config:
+    """``cfg`` with ``[navigation]`` mode, local strategy and selector set from --mode, --local and
+    --no-selector (None / False keep the config's).
+
+    Raises:
+        ConfigError: an unknown mode or strategy (one line naming the option).
+    """
+    from .config import apply_overrides
+
+    mode, local = _nav_choices(mode, local)
+    nav: dict[str, object] = {}
+    if mode is not None:
+        nav["mode"] = mode
+    if local is not None:
+        nav["local"] = {"strategy": local}
+    if no_selector:
+        nav["selector"] = False
+    return apply_overrides(cfg, {"navigation": nav}) if nav else cfg
+
+
+def _nav_choices(mode: str | None, local: str | None) -> tuple[str | None, str | None]:
+    """--mode and --local, lower-cased and checked.
+
+    Raises:
+        ConfigError: an unknown mode or strategy (one line naming the option and the choices).
+    """
+    from .errors import ConfigError
+    from .pipeline.local import LOCAL_STRATEGIES
+    from .pipeline.stack import NAV_MODES
+
+    for option, value, choices in (("--mode", mode, NAV_MODES), ("--local", local, LOCAL_STRATEGIES)):
+        if value is not None and value.lower() not in choices:
+            raise ConfigError(f"{option}: expected one of {', '.join(choices)}, got {value!r}")
+    return (None if mode is None else mode.lower()), (None if local is None else local.lower())
+
+
+def _load_subgoals(path: Path | None) -> tuple[Subgoal, ...]:
+    """The subgoals of --subgoals FILE (none without it).
+
+    Raises:
+        ConfigError: unreadable file or a bad line (named).
+    """
+    if path is None:
+        return ()
+    from .io.subgoals import load_subgoals
+
+    return tuple(load_subgoals(path))
+
+
+def _with_scenario_navigation(spec: ScenarioSpec, mode: str | None, local: str | None,
+                              subgoals: tuple[Subgoal, ...]) -> ScenarioSpec:
+    """The scenario with --mode, --local and --subgoals in place of its own ``mode``, ``local`` and
+    ``subgoals`` (the scenario's keys override [navigation]; the command line overrides the scenario)."""
+    import dataclasses
+
+    mode, local = _nav_choices(mode, local)
+    changes: dict[str, object] = {}
+    if mode is not None:
+        changes["mode"] = mode
+    if local is not None:
+        changes["local"] = local
+    if subgoals:
+        changes["subgoals"] = subgoals
+    return dataclasses.replace(spec, **changes) if changes else spec  # type: ignore[arg-type]
 
 
 def _with_matcher(cfg: Config, matcher: str) -> Config:
@@ -1198,6 +1327,12 @@ def _print_run(data: dict[str, object], out_dir: Path) -> None:
     head.add_row("situations", _counts(data["situations"]))
     flags = {k: v for k, v in data["flags"].items() if v}  # type: ignore[attr-defined]
     head.add_row("flags", _counts(flags) or "none")
+    iv = data.get("interventions")
+    if isinstance(iv, dict):
+        takeovers, emergencies = iv.get("takeovers", []), iv.get("emergencies", [])
+        head.add_row("interventions", f"{len(takeovers)} takeovers ({iv.get('takeover_ticks', 0)} ticks), "
+                     f"{len(emergencies)} reflexive overrides ({iv.get('reflexive_ticks', 0)} ticks); "
+                     f"active modes {_counts(iv.get('active', {}))}")
     if agreement.get("heading_ticks"):
         head.add_row(
             "agreement with the log",

@@ -93,12 +93,20 @@ class NavigationConfig:
             "follow" (path following of subgoals), "local" (local navigation alone).
         selector: the mode selector: the desired mode's command wins unless the area it sweeps is occupied,
             then local navigation wins for that tick. False: the desired command goes out unchanged.
+        selector_margin_m: the mode selector's tolerance [m]: the desired command's swept area counts as
+            occupied when an obstacle comes within this much more than the reflexive loop's
+            emergency_margin_m (**choice**: 0.05 m; the paper estimates the area "within certain
+            tolerances"), so local navigation takes over before the emergency brake would fire.
+        cmd_timeout_s: a teleoperation command older than this at the tick's time is no command: stand
+            still ("teleop: command stale"; **choice**: 0.5 s, a few command periods of a joystick).
         local: local navigation ([navigation.local]).
         follow: path following ([navigation.follow]).
     """
 
     mode: Literal["gnd", "teleop", "follow", "local"] = "gnd"
     selector: bool = True
+    selector_margin_m: float = 0.05
+    cmd_timeout_s: float = 0.5
     local: LocalParams = LocalParams()
     follow: FollowParams = FollowParams()
 
@@ -142,6 +150,8 @@ class Config:
             unknown_is_free=self.cspace.unknown_is_free,
             nav_mode=self.navigation.mode,
             selector=self.navigation.selector,
+            selector_margin_m=self.navigation.selector_margin_m,
+            cmd_timeout_s=self.navigation.cmd_timeout_s,
             local=self.navigation.local,
             follow=self.navigation.follow,
         )
@@ -289,6 +299,8 @@ RANGES: dict[tuple[type, str], Range] = {
     (SupervisorParams, "escape_ticks"): _count(),
     (SupervisorParams, "escape_v_frac"): _FRAC,
     (SupervisorParams, "escape_clearance_m"): _nonneg(_LEN),
+    (NavigationConfig, "selector_margin_m"): _nonneg(10.0),
+    (NavigationConfig, "cmd_timeout_s"): _pos(_TIME),
     (IdcParams, "min_range_m"): _nonneg(_RANGE_M),
     (IdcParams, "max_range_m"): _pos(_RANGE_M),
     (IdcParams, "keyframe_dist_m"): _pos(_LEN),
@@ -352,7 +364,43 @@ RANGES: dict[tuple[type, str], Range] = {
     (IdcParams, "reset_after_failures"): _count(),
     # navigation.follow (path following)
     (FollowParams, "reach_m"): _pos(_LEN),
+    (FollowParams, "heading_tol_rad"): Range(0.0, math.pi, lo_open=True),
+    (FollowParams, "stop_v_mps"): _pos(10.0),
+    (FollowParams, "deviation_m"): _pos(_LEN),
+    (FollowParams, "lookahead_m"): _pos(_LEN),
+    (FollowParams, "sample_m"): Range(0.001, 10.0),
+    (FollowParams, "kappa_max"): _pos(1000.0),
+    (FollowParams, "extend_m"): _pos(_LEN),
+    (FollowParams, "stabilise_m"): _pos(_LEN),
+    (FollowParams, "settle_m"): _nonneg(_LEN),
+    (FollowParams, "brake_frac"): _FRAC,
+    (FollowParams, "creep_frac"): _UNIT,
+    (FollowParams, "k_x"): _nonneg(100.0),
+    (FollowParams, "k_y"): _pos(1000.0),
+    (FollowParams, "k_theta"): _pos(1000.0),
+    (FollowParams, "k_rho"): _pos(100.0),
+    (FollowParams, "k_alpha"): _pos(100.0),
+    (FollowParams, "k_phi"): _pos(100.0),
+    (FollowParams, "k_turn"): _pos(100.0),
+    (FollowParams, "turn_tol_rad"): Range(0.0, math.pi, lo_open=True),
+    (FollowParams, "replace_search_m"): _pos(_LEN),
+    (FollowParams, "horizon_m"): _pos(_LEN),
     # navigation.local (local navigation strategies)
+    (LocalParams, "n_sectors"): _count(8, 3600),
+    (LocalParams, "max_range_m"): _pos(_RANGE_M),
+    (LocalParams, "safety_m"): _nonneg(10.0),
+    (LocalParams, "approach_s"): _pos(_TIME),
+    (LocalParams, "wall_distance_m"): _nonneg(_LEN),
+    (LocalParams, "contour_distance_m"): _nonneg(_LEN),
+    (LocalParams, "distance_gain_per_m"): _pos(100.0),
+    (LocalParams, "max_correction_rad"): Range(0.0, math.pi / 2.0, lo_open=True),
+    (LocalParams, "side_window_rad"): Range(0.0, math.pi, lo_open=True),
+    (LocalParams, "free_margin_m"): _nonneg(10.0),
+    (LocalParams, "deep_ratio"): _FRAC,
+    (LocalParams, "target_weight"): _UNIT,
+    (LocalParams, "clear_m"): _pos(_LEN),
+    (LocalParams, "side_hysteresis_rad"): Range(0.0, math.pi),
+    (LocalParams, "rotation_step_rad"): Range(0.0, 0.1, lo_open=True),
     # end of navigation
     (KissParams, "voxel_m"): _pos(_LEN),
     (KissParams, "max_range_m"): _pos(_RANGE_M),

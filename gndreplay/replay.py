@@ -9,6 +9,11 @@ Records are a pure function of log + config: commands.csv, the trajectories and 
 facts (the ``*_OVER_BUDGET`` flags live in timing.csv unless ``enforce_budgets`` let them change a
 command), every file prints a tick's time with ``fsutil.format_stamp``, and ``until_s`` does not change
 earlier ticks (the goal lookahead reads past it).
+
+The assisted-navigation audit (the multi-loop paper's takeovers) is part of the records: commands.csv
+carries each tick's desired and active navigation mode, the takeover reason and the follower's subgoal, and
+summary.json's ``interventions`` (:func:`interventions`) aggregates them into ticks per active mode, the
+takeovers and the reflexive overrides, each with its start, duration and reason.
 """
 
 from __future__ import annotations
@@ -18,38 +23,46 @@ import json
 import math
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from . import __version__
 from .config import Config, config_to_dict, config_to_toml
+from .errors import ConfigError, LogFormatError
 from .evaluation import write_tum
 from .fsutil import check_output_dir, format_stamp, resolve_output_dir, staging_dir
 from .geometry import relative, wrap_angle
 from .pipeline.model import RobotCentredGrid
 from .pipeline.stack import MODULES, NavigationStack, TickResult, warm_up
+from .pipeline.supervisor import Mode
 from .scanmatch import Matcher, make_matcher
-from .types import Flag, Pose2D, Scan, Tick
+from .types import Flag, Pose2D, Scan, Subgoal, Tick
 
 if TYPE_CHECKING:
     from .io import LogReader
 
 __all__ = [
     "BUDGET_FLAGS",
+    "COMMAND_COLUMNS",
+    "REFLEXIVE_MODES",
     "STAGES",
     "RunOptions",
     "RunSink",
     "RunSummary",
     "StagedSink",
     "assign_goals",
+    "check_navigation",
     "corrected_stream",
+    "episodes",
+    "interventions",
     "recorded_flags",
     "run_replay",
+    "runs",
     "summarise",
     "warm_up_all",
 ]
@@ -58,6 +71,9 @@ __all__ = [
 BUDGET_FLAGS = (
     Flag.MATCH_OVER_BUDGET | Flag.MODEL_OVER_BUDGET | Flag.PLANNER_OVER_BUDGET | Flag.REACTOR_OVER_BUDGET
 )
+#: The reflexive loop's overrides (the audit's "emergencies"): the rule that replaced or stopped a command.
+REFLEXIVE_MODES: tuple[str, ...] = tuple(m.value for m in (
+    Mode.EMERGENCY, Mode.SAFE_SLOW, Mode.SAFE_TURN, Mode.SAFE_REVERSE, Mode.STALE, Mode.ESCAPE))
 
 
 class RunSink(Protocol):
@@ -101,6 +117,8 @@ class RunOptions:
         every: run the stack on every N-th tick (the matcher still sees every scan).
         max_lookahead_ticks: bound of the goal lookahead buffer (memory stays constant when the robot
             stands still; the goal is then the newest known pose).
+        subgoals: the path follower's subgoals (corrected odometry frame; ``io.subgoals.load_subgoals``),
+            needed by navigation mode "follow".
     """
 
     goal_xy: tuple[float, float] | None = None
@@ -108,6 +126,7 @@ class RunOptions:
     until_s: float | None = None
     every: int = 1
     max_lookahead_ticks: int = 5000
+    subgoals: tuple[Subgoal, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -218,7 +237,12 @@ class RunSummary:
     data: dict[str, Any] = field(repr=False)
 
 
-_COMMAND_HEADER = "t,v,vy,w,mode,situation,flags\n"
+#: commands.csv's columns: the command, what produced it (GND mode or reflexive rule, ND+ situation, flags),
+#: then the audit: desired and active navigation mode, why they differ ("" when they do not), the subgoal.
+COMMAND_COLUMNS = (
+    "t", "v", "vy", "w", "mode", "situation", "flags", "desired", "active", "takeover", "subgoal",
+)  # fmt: skip
+_COMMAND_HEADER = ",".join(COMMAND_COLUMNS) + "\n"
 _TIMING_HEADER = "t," + ",".join(f"{m}_ms" for m in MODULES) + ",total_ms,planner_nodes,path_m,flags\n"
 
 
@@ -228,11 +252,18 @@ def recorded_flags(flags: Flag, *, enforce_budgets: bool) -> Flag:
     return flags if enforce_budgets else flags & ~BUDGET_FLAGS
 
 
+def _csv_text(text: str) -> str:
+    """Free text as one CSV field without quoting: commas become semicolons, line breaks spaces."""
+    return " ".join(text.replace(",", ";").split())
+
+
 def _command_row(r: TickResult, enforce_budgets: bool) -> str:
     flags = "|".join(recorded_flags(r.flags, enforce_budgets=enforce_budgets).names())
     return (
         f"{format_stamp(r.t_ns)},{r.v_mps:.6f},{r.vy_mps:.6f},{r.w_radps:.6f},"
-        f"{r.mode.value},{r.situation.name},{flags}\n"
+        f"{r.mode.value},{r.situation.name},{flags},"
+        f"{_csv_text(r.desired_mode)},{_csv_text(r.active_mode)},{_csv_text(r.takeover_reason)},"
+        f"{r.subgoal_index}\n"
     )
 
 
@@ -279,9 +310,13 @@ class _Recorder:
         self.flags: Counter[str] = Counter()
         self.over_budget: Counter[str] = Counter()
         self.planner: list[tuple[float, float]] = []  # nodes expanded (cells for NF1), path length [m]
+        self.t_ns: list[int] = []
+        self.audit: list[tuple[str, str, str, str]] = []  # desired, active, takeover reason, GND mode / rule
 
     def add(self, r: TickResult) -> None:
         self.t_s.append(r.t_ns / 1e9)
+        self.t_ns.append(r.t_ns)
+        self.audit.append((r.desired_mode, r.active_mode, _csv_text(r.takeover_reason), r.mode.value))
         p = r.pose_corrected
         self.pose.append((p.x, p.y, p.theta))
         self.cmd.append((r.v_mps, r.w_radps, r.direction_rad))
@@ -362,6 +397,57 @@ def _planner_stats(rec: _Recorder, cfg: Config) -> dict[str, Any]:
     return out
 
 
+def runs(labels: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Start and end (exclusive) indices of the runs of equal consecutive labels."""
+    a = np.asarray(labels)
+    if a.size == 0:
+        return np.zeros(0, np.intp), np.zeros(0, np.intp)
+    cut = np.flatnonzero(a[1:] != a[:-1]) + 1
+    return np.concatenate([[0], cut]).astype(np.intp), np.concatenate([cut, [a.size]]).astype(np.intp)
+
+
+def episodes(keys: Sequence[str]) -> list[tuple[int, int]]:
+    """(first, end) index pairs (end exclusive) of the maximal runs of equal non-empty consecutive keys."""
+    start, end = runs(np.asarray(keys, dtype=np.str_))
+    return [(int(i), int(j)) for i, j in zip(start, end, strict=True) if keys[i]]
+
+
+def _span(t_ns: Sequence[int], first: int, end: int) -> dict[str, Any]:
+    """An episode's start [s since the first tick], duration and ticks. It lasts until the tick after it
+    (when control came back), or until the last tick when it runs to the end of the run."""
+    stop = t_ns[end] if end < len(t_ns) else t_ns[end - 1]
+    return {"t_start_s": (t_ns[first] - t_ns[0]) / 1e9, "duration_s": (stop - t_ns[first]) / 1e9,
+            "ticks": end - first}
+
+
+def interventions(
+    t_ns: Sequence[int], desired: Sequence[str], active: Sequence[str], reasons: Sequence[str],
+    modes: Sequence[str],
+) -> dict[str, Any]:
+    """The assisted-navigation audit of a run (summary.json's ``interventions``), from its ticks.
+
+    Ticks per desired and per active navigation mode; the takeovers: consecutive ticks whose active mode is
+    not the desired one are one takeover (its reason and active mode: those of its first tick); the
+    reflexive overrides (``modes`` in ``REFLEXIVE_MODES``: emergency stops, safe replacements, stale data,
+    trap escapes): consecutive ticks of the same rule are one. Each episode has ``t_start_s`` (since the
+    first tick), ``duration_s`` (until the tick after it, or the last tick at the end of the run) and
+    ``ticks``. Pure: behaviour only, no wall clock.
+    """
+    taken = ["takeover" if a != d else "" for d, a in zip(desired, active, strict=True)]
+    rules = [m if m in REFLEXIVE_MODES else "" for m in modes]
+    takeovers = [{**_span(t_ns, i, j), "desired": desired[i], "active": active[i], "reason": reasons[i]}
+                 for i, j in episodes(taken)]
+    emergencies = [{**_span(t_ns, i, j), "rule": rules[i]} for i, j in episodes(rules)]
+    return {
+        "desired": dict(sorted(Counter(desired).items())),
+        "active": dict(sorted(Counter(active).items())),
+        "takeover_ticks": sum(1 for x in taken if x),
+        "takeovers": takeovers,
+        "reflexive_ticks": sum(1 for x in rules if x),
+        "emergencies": emergencies,
+    }
+
+
 def summarise(
     rec: _Recorder, cfg: Config, log: Path, options: RunOptions, read_report: Any
 ) -> dict[str, Any]:
@@ -374,6 +460,7 @@ def summarise(
     latency["total"] = _latency(timing.sum(axis=1))
     t = np.asarray(rec.t_s)
     agreement = motion_agreement(t, np.asarray(rec.pose).reshape(n, 3), np.asarray(rec.cmd).reshape(n, 3))
+    desired, active, reasons, modes = (list(col) for col in zip(*rec.audit, strict=True)) if n else ([],) * 4
     return {
         "gndreplay_version": __version__,
         "log": str(log),
@@ -386,6 +473,7 @@ def summarise(
             for name in (f.name for f in Flag if f.value and f.name)
             if rec.enforce_budgets or not Flag[name] & BUDGET_FLAGS
         },
+        "interventions": interventions(rec.t_ns, desired, active, reasons, modes),
         "agreement": agreement,
         "read_report": read_report,
         "options": {
@@ -393,6 +481,7 @@ def summarise(
             "goal_ahead_m": options.goal_ahead_m,
             "until_s": options.until_s,
             "every": options.every,
+            "subgoals": [[g.x, g.y, g.theta, g.kind] for g in options.subgoals],
         },
         "config": config_to_dict(cfg),
         "planner": _planner_stats(rec, cfg),
@@ -441,6 +530,17 @@ def warm_up_all(cfg: Config, on_compile: Callable[[str], None] | None = None) ->
         _warm_up_matcher(cfg)
 
 
+def check_navigation(cfg: Config, options: RunOptions) -> None:
+    """Refuse, before any work, a navigation mode the run cannot drive: "follow" without subgoals.
+
+    Raises:
+        ConfigError: one line saying what is missing.
+    """
+    if cfg.navigation.mode == "follow" and not options.subgoals:
+        raise ConfigError("navigation mode follow needs subgoals: give --subgoals FILE (x y theta [kind] per "
+                          "line)")
+
+
 #: Stages ``run_replay`` reports through ``on_stage``, in order.
 STAGES = ("warm-up", "replay", "write")
 
@@ -474,9 +574,11 @@ def run_replay(
 
     Raises:
         OutputError: ``out_dir`` is unsafe to write.
+        ConfigError: navigation mode "follow" without ``options.subgoals`` (checked first).
     """
     out_dir = Path(out_dir)
     log_path = Path(log)
+    check_navigation(cfg, options)
     check_output_dir(out_dir, inputs=(log_path,) if log_path.exists() else (), overwrite=overwrite)
     target = resolve_output_dir(out_dir, overwrite=overwrite)
     stage = on_stage if on_stage is not None else (lambda name: None)
@@ -492,7 +594,7 @@ def run_replay(
             stage("replay")
             rec = _Recorder(enforce_budgets=enforce)
             traj = _Trajectories()
-            stack = NavigationStack(cfg.stack_params())
+            stack = NavigationStack(cfg.stack_params(), options.subgoals)
             with (
                 open(tmp / "commands.csv", "w", newline="") as f_cmd,
                 open(tmp / "timing.csv", "w", newline="") as f_tim,
@@ -562,10 +664,13 @@ def run_log(
 
     Raises:
         OutputError: ``out_dir`` is unsafe to write (see ``run_replay``).
-        LogFormatError: the log cannot be read.
+        LogFormatError: the log cannot be read, or navigation mode "teleop" on a log without recorded
+            velocity commands.
+        ConfigError: navigation mode "follow" without subgoals.
     """
     from .io import open_log
 
+    check_navigation(cfg, options)
     check_output_dir(Path(out_dir), inputs=(Path(log),), overwrite=overwrite)
     with open_log(
         Path(log),
@@ -576,6 +681,9 @@ def run_log(
         truth_topic=read.truth_topic,
         strict=read.strict,
     ) as reader:
+        if cfg.navigation.mode == "teleop" and not reader.records_commands():
+            raise LogFormatError(f"{log}: no recorded velocity commands (cmd topic / CARMEN ODOM tv,rv); "
+                                 "--mode teleop needs them")
         if on_open is not None:
             on_open(reader)
         return run_replay(

@@ -49,6 +49,8 @@ def result(k: int) -> TickResult:
         flags=Flag.PLANNER_NO_PATH | Flag.EMERGENCY_STOP if k == 7 else Flag.NONE, direction_rad=0.1,
         goal=(p.x + 5.0, p.y - 1.0), path_xy=path,
         timings_ms={"match": 1.5, "model": 0.25, "planner": 3.0 + k, "reactor": 0.5},
+        desired_mode="teleop", active_mode="local" if 20 <= k < 24 else "teleop",
+        takeover_reason="teleop: swept area occupied (scan)" if 20 <= k < 24 else "",
     )
 
 
@@ -95,8 +97,10 @@ def test_message_counts_match_the_ticks(mcap: Path) -> None:
         counts = {c.topic: c.msgcount for c in reader.connections}
         types = {c.topic: c.msgtype for c in reader.connections}
     for topic in ("/tf", "/gndreplay/odom", "/cmd_vel", "/gndreplay/path", "/gndreplay/goal",
-                  "/gndreplay/timing", "/gndreplay/mode", "/gndreplay/situation", "/gndreplay/flags"):
+                  "/gndreplay/timing", "/gndreplay/mode", "/gndreplay/situation", "/gndreplay/flags",
+                  "/gndreplay/active_mode", "/gndreplay/takeover"):
         assert counts[topic] == N, topic
+    assert types["/gndreplay/active_mode"] == "std_msgs/msg/String"
     assert counts["/gndreplay/grid"] == 11  # 10.4 s at 1 Hz: t = 0, 1, ..., 10
     assert counts["/tf_static"] == 1
     assert types["/cmd_vel"] == "geometry_msgs/msg/TwistStamped"
@@ -120,6 +124,10 @@ def test_values_decode(mcap: Path) -> None:
     assert cmd.header.frame_id == "base_link" and cmd.twist.linear.x == pytest.approx(0.07)
     assert msgs["/gndreplay/flags"][k][1].data == "PLANNER_NO_PATH|EMERGENCY_STOP"
     assert msgs["/gndreplay/mode"][5][1].data == "mND" and msgs["/gndreplay/situation"][3][1].data == "HSWR"
+    active = [(t, m.data) for t, m in msgs["/gndreplay/active_mode"]]
+    assert active == [(T0_NS + j * PERIOD_NS, result(j).active_mode) for j in range(N)]
+    assert [j for j, (_, m) in enumerate(msgs["/gndreplay/takeover"]) if m.data] == [20, 21, 22, 23]
+    assert msgs["/gndreplay/takeover"][20][1].data == "teleop: swept area occupied (scan)"
     timing = msgs["/gndreplay/timing"][k][1]
     assert timing.data.tolist() == [1.5, 0.25, 10.0, 0.5]
     assert timing.layout.dim[0].label == "match,model,planner,reactor"

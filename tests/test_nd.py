@@ -66,8 +66,8 @@ def assert_finite_command(res: NdResult, robot: RobotConfig) -> None:
     assert all(math.isfinite(x) for x in (res.v_mps, res.vy_mps, res.w_radps))
     assert abs(res.w_radps) <= robot.wmax_radps + 1e-12
     assert math.hypot(res.v_mps, res.vy_mps) <= robot.vmax_mps + 1e-12
-    if robot.drive == "differential":
-        assert res.v_mps >= 0.0 and res.vy_mps == 0.0
+    if robot.drive == "differential":  # only the rectangle backs out of a turn it cannot make
+        assert res.vy_mps == 0.0 and (res.v_mps >= 0.0 or robot.shape == "rectangle")
 
 
 # ---------------------------------------------------------------------------------- sectors and shape
@@ -310,7 +310,7 @@ def test_surrounded_with_a_gap_narrower_than_the_robot_is_no_region(robot: Robot
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_surrounded_with_a_wide_gap_goes_through_it(robot: RobotConfig) -> None:
     res = nd_step(arc(1.5, 0.6, 2.0 * math.pi - 0.6), (3.0, 0.0), robot)
-    assert res.situation is Situation.HSGR and res.direction_rad == 0.0
+    assert res.situation is Situation.HSGR and res.direction_rad == pytest.approx(0.0, abs=1e-12)
     # the same gap behind, goal not in it: the region wraps round the back (through sector n/2)
     behind = nd_step(arc(1.5, -math.pi + 0.6, math.pi - 0.6), (0.0, 3.0), robot)
     assert behind.situation in (Situation.HSNR, Situation.HSWR)
@@ -372,7 +372,10 @@ def test_obstacle_inside_the_footprint(robot: RobotConfig) -> None:
     assert res.min_clearance_m < 0.0
     assert res.situation in (Situation.LSG, Situation.LS1)
     assert_finite_command(res, robot)
-    assert math.hypot(res.v_mps, res.vy_mps) < 0.1 * robot.vmax_mps
+    if robot.shape == "rectangle":  # no motion into it: slow, or backing off (any forward arc sweeps it)
+        assert res.v_mps < 0.1 * robot.vmax_mps
+    else:
+        assert math.hypot(res.v_mps, res.vy_mps) < 0.1 * robot.vmax_mps
 
 
 @pytest.mark.parametrize("robot", ROBOTS)

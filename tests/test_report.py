@@ -285,10 +285,11 @@ def test_load_run_errors_name_the_file(tmp_path: Path) -> None:
 # ---- figures and report.md --------------------------------------------------------------------------------
 
 
-def test_build_report_writes_four_pngs_and_the_report(run_dir: Path) -> None:
+def test_build_report_writes_the_pngs_and_the_report(run_dir: Path) -> None:
     sizes = {name: png_size(run_dir / name) for name in FIGURES}
     assert sizes["fig_commands.png"][0] == 1440 and sizes["fig_timing.png"] == (1440, 966)  # 5 panels
     assert sizes["fig_model.png"][0] == 1560 and sizes["fig_raw.png"][0] == 1080
+    assert sizes["fig_modes.png"][0] >= 1440  # the timeline, with its legend beside it
     for w, h in sizes.values():
         assert 500 <= h <= 1300 and w >= 1000
     text = (run_dir / "report.md").read_text()
@@ -304,6 +305,8 @@ def test_build_report_writes_four_pngs_and_the_report(run_dir: Path) -> None:
     assert "| matcher | idc |" in text and "| match failures (MATCH_FAILED) | 11 of 120 ticks |" in text
     assert "| heading_err_median_deg | 12.345 |" in text
     assert "| ticks (stack runs) | 120 |" in text and "| scan period (median) | 200.0 ms |" in text
+    # a run directory written before the audit (no desired/active columns, no interventions) still reads
+    assert "## Interventions\n\nNot recorded (a run written before the assisted-navigation audit)." in text
 
 
 def test_figures_show_the_data(run_dir: Path) -> None:

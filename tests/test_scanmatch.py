@@ -532,3 +532,35 @@ def test_long_gap_restarts_the_map_when_it_no_longer_fits() -> None:
     assert nxt.ok, nxt.reason
     et, er = pose_error(nxt.pose, compose(ODOM0, motion(0.2, 0.0, 3.0)))
     assert et < 0.01 and er < 0.2
+
+
+def round_hall() -> np.ndarray:
+    """A round hall (radius 4 m, 72 wall segments) with three pillars: its wall fits any heading (a match
+    at a wrong heading still pairs most points), only the pillars tell the heading."""
+    a = np.radians(np.arange(73) * 5.0)
+    pts = np.column_stack([4.0 * np.cos(a), 4.0 * np.sin(a)])
+    segs = [(tuple(pts[i]), tuple(pts[i + 1])) for i in range(72)]
+    segs += _box(2.0, 1.0, 0.4, 0.4) + _box(-1.5, 2.2, 0.6, 0.3) + _box(-1.0, -2.5, 0.3, 0.3)
+    return np.array(segs, dtype=float)
+
+
+@pytest.mark.parametrize(("step_deg", "back"), [(8.0, 5), (6.0, 6)])
+def test_stale_scan_in_a_turn_does_not_derail_the_next_ones(step_deg: float, back: int) -> None:
+    """A stale record (Intel: a scan repeating the view of ~40 deg earlier, with fresh odometry) in a turn
+    in place: the scan is placed where its content was seen, so the next scan's odometry prediction is off
+    by that jump. The right match of the next scan is then far from every prior, and a weak match near one
+    of them (the wall of a round hall fits any heading) must not win over it: every later scan stays within
+    1 cm / 0.5 deg (before the fix they all inherited ~45 deg)."""
+    start = np.array([0.3, -0.2, 0.0])
+    truth = [start]
+    for _ in range(15):
+        truth.append(compose(truth[-1], motion(0.0, 0.0, step_deg)))
+    m = IdcMatcher()
+    out = []
+    for i, tp in enumerate(truth):
+        seen = truth[i - back] if i == 7 else tp  # scan 7 repeats an earlier view; its odometry is fresh
+        res = m.update(cast(round_hall(), seen, t_ns=i * 10**8),
+                       Pose2D.from_array(compose(ODOM0, relative(start, tp))))
+        out.append((res.ok, *pose_error(res.pose, compose(ODOM0, relative(start, seen)))))
+    assert all(ok for ok, *_ in out[8:]), out
+    assert max(et for _, et, _ in out[8:]) < 0.01 and max(er for _, _, er in out[8:]) < 0.5, out

@@ -77,9 +77,11 @@ def test_idc_params_are_the_defaults() -> None:
 
 def test_idc_on_intel_below_baseline_and_odometry(datasets: Path) -> None:
     """Intel, a log never used to choose the defaults (fast turns, stale odometry): idc from scan 0 below the
-    published baseline (0.220 m) and odometry (before the coarse rotation search and the guard: 1.30 m).
-    Not asserted, because not met: one relation < 1 s still has a 35 deg error (scans 11561-11563 drift
-    into a wrong basin with few pairs; 11564 snaps back). Runs in ~20 s."""
+    published baseline (0.220 m) and odometry (before the coarse rotation search and the guard: 1.30 m), and
+    no relation < 1 s with a rotational error above 3 deg (1.6 deg measured; 35 deg before stale scans
+    11550-11554 stopped derailing the next ones, see idc's module docstring). From other start scans one
+    relation < 1 s can still reach 3.8 deg (scan 3: scans 8420-8421, a neighbouring minimum 2 deg off with
+    fewer pairs), so that is not asserted over starts. Runs in ~20 s."""
     from gndreplay.io import read_ticks
 
     ticks = list(read_ticks(datasets / "carmen" / "intel.clf.bz2"))
@@ -89,6 +91,7 @@ def test_idc_on_intel_below_baseline_and_odometry(datasets: Path) -> None:
     assert idc is not None and odom is not None and idc.unmatched == 0
     assert idc.trans_mean_m < 0.220 and idc.trans_mean_m < odom.trans_mean_m, idc.trans_mean_m
     assert idc.span("<1 s").trans_mean_m < 0.5 * odom.span("<1 s").trans_mean_m
+    assert idc.span("<1 s").rot_max_deg < 3.0, idc.span("<1 s").rot_max_deg
 
 
 def test_decimated_csail_never_worse_than_odometry(datasets: Path) -> None:

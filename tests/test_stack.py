@@ -367,3 +367,175 @@ def test_enclosed_robot_with_goal_beyond_the_grid_stops_after_one_turn(name: str
     turned = sum(r.w_radps * 0.2 for r in results)  # the ticks before the hold turn too (NO_REGION)
     assert 2.0 * math.pi - step <= turned <= 2.0 * math.pi + (params.supervisor.unreachable_ticks + 3) * step
     assert results[-1].w_radps == 0.0
+
+
+@pytest.mark.parametrize(("mode", "strategy"),
+                         [("teleop", "nd"), ("teleop", "wall-left"), ("follow", "free-space")])
+def test_warm_up_compiles_what_the_multi_loop_modes_need(mode: str, strategy: str) -> None:
+    """After warm_up with a teleop / follow configuration, real ticks (read-only beam angles) and a
+    takeover by the local strategy in front of a wall compile nothing new in any pipeline module."""
+    from pathlib import Path
+
+    from gndreplay.io import read_ticks
+    from gndreplay.pipeline import cspace, follow, local, model, nd, nf1, selector, supervisor
+    from gndreplay.pipeline.stack import warm_up
+    from gndreplay.types import Command, Subgoal
+
+    def signatures() -> dict[str, int]:
+        return {
+            f"{mod.__name__}.{name}": len(obj.signatures)
+            for mod in (model, cspace, nf1, nd, local, follow, selector, supervisor)
+            for name, obj in vars(mod).items()
+            if hasattr(obj, "signatures")
+        }
+
+    cfg = PRESETS["wheelchair"]
+    base = cfg.stack_params()
+    local_params = dataclasses.replace(base.local, strategy=strategy)
+    params = dataclasses.replace(base, nav_mode=mode, local=local_params)
+    warm_up(params)
+    before = signatures()
+    subgoals = (Subgoal(2.0, 0.0, 0.0), Subgoal(3.0, 1.0, 1.0, "stop")) if mode == "follow" else ()
+    stack = NavigationStack(params, subgoals)
+    sample = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
+    for tick, _ in zip(read_ticks(sample), range(5), strict=False):
+        tick = dataclasses.replace(tick, cmd=Command(tick.t_ns, cfg.robot.vmax_mps, 0.1))
+        stack.step(tick, tick.odom, (tick.odom.x + 3.0, tick.odom.y))
+    world = np.vstack([ROOM, wall(cfg.robot.front_m + 0.15, -3.0, cfg.robot.front_m + 0.15, 3.0)])
+    stack = NavigationStack(dataclasses.replace(params, nav_mode="teleop"))
+    sensor, pose = Pose2D(cfg.robot.laser_x_m, 0.0, 0.0), Pose2D(0.0, 0.0, 0.0)
+    for i in range(2):
+        t = 1_000_000_000 + i * 200_000_000
+        tick = Tick(index=i, t_ns=t, scan=scan_of(world, pose, sensor, t, FRONT), odom=pose,
+                    cmd=Command(t, cfg.robot.vmax_mps, 0.0))
+        r = stack.step(tick, pose, (4.0, 0.0))
+    assert r.active_mode == "local"
+    assert signatures() == before
+
+
+# ---- the multi-loop modes: command age, trap escape, reflexive loop, follower wiring --------------------
+
+
+def _multi(cfg: Config, mode: str, **changes: object) -> StackParams:
+    return dataclasses.replace(cfg.stack_params(), nav_mode=mode, **changes)  # type: ignore[arg-type]
+
+
+def _tick(cfg: Config, segments: np.ndarray, pose: Pose2D, i: int, t_ns: int, cmd: object = None) -> Tick:
+    sensor = Pose2D(cfg.robot.laser_x_m, cfg.robot.laser_y_m, cfg.robot.laser_theta_rad)
+    return Tick(index=i, t_ns=t_ns, scan=scan_of(segments, pose, sensor, t_ns, FRONT), odom=pose,
+                cmd=cmd)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("age_s", [0.0, 0.3, 0.5, 0.6, 60.0])
+def test_teleop_command_older_than_the_timeout_stands_still(age_s: float) -> None:
+    from gndreplay.types import Command
+
+    cfg = PRESETS["wheelchair"]
+    params = _multi(cfg, "teleop", cmd_timeout_s=0.5)
+    stack, pose = NavigationStack(params), Pose2D(0.0, 0.0, 0.0)
+    t = 100_000_000_000
+    cmd = Command(t - round(age_s * 1e9), 0.3, 0.1)
+    r = stack.step(_tick(cfg, ROOM, pose, 0, t, cmd), pose, (5.0, 0.0))
+    assert r.active_mode == "teleop"
+    if age_s > params.cmd_timeout_s:
+        assert (r.v_mps, r.vy_mps, r.w_radps) == (0.0, 0.0, 0.0)
+        assert r.takeover_reason == "teleop: command stale"
+    else:
+        assert (r.v_mps, r.w_radps) == (0.3, 0.1) and r.takeover_reason == ""
+
+
+def test_no_trap_escape_for_a_driver_but_for_local_navigation(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Whatever the trap detector says, a teleop command is never replaced by the escape (the driver's
+    dithering is the driver's); under local navigation the escape runs and the mode column says so."""
+    from gndreplay.types import Command
+
+    cfg = PRESETS["wheelchair"]
+    pose, w = Pose2D(0.0, 0.0, 0.0), 0.5 * cfg.robot.wmax_radps
+    for mode in ("teleop", "local"):
+        stack = NavigationStack(_multi(cfg, mode))
+        monkeypatch.setattr(stack._trap, "update", lambda *_a: True)  # a trap every tick
+        out = []
+        for k in range(6):
+            t = 1_000_000_000 + k * 200_000_000
+            cmd = Command(t, 0.0, w if k % 2 == 0 else -w)  # turning left and right in place
+            out.append(stack.step(_tick(cfg, ROOM, pose, k, t, cmd), pose, (4.0, 0.5)))
+        if mode == "teleop":
+            assert all(r.mode is not Mode.ESCAPE and r.v_mps == 0.0 for r in out)
+            assert all(not r.flags & Flag.TRAP_DETECTED for r in out)
+            assert [r.w_radps for r in out] == [w if k % 2 == 0 else -w for k in range(6)]
+        else:
+            assert any(r.mode is Mode.ESCAPE and r.flags & Flag.TRAP_DETECTED for r in out)
+            assert all(r.active_mode == "local" for r in out)
+
+
+def test_an_escape_begun_under_local_navigation_ends_when_the_driver_has_the_robot() -> None:
+    from gndreplay.types import Command
+
+    cfg = PRESETS["wheelchair"]
+    stack, pose = NavigationStack(_multi(cfg, "teleop")), Pose2D(0.0, 0.0, 0.0)
+    stack._escape_left, stack._escape_v = 5, 0.1  # an escape in progress
+    t = 1_000_000_000
+    r = stack.step(_tick(cfg, ROOM, pose, 0, t, Command(t, 0.0, 0.2)), pose, (4.0, 0.0))
+    assert r.mode is not Mode.ESCAPE and (r.v_mps, r.w_radps) == (0.0, 0.2)
+
+
+@pytest.mark.parametrize("selector", [True, False])
+def test_local_mode_keeps_the_reflexive_loop_without_the_selector(selector: bool) -> None:
+    """Local navigation has no selector: ``selector=False`` leaves its stale-data stop and its safety
+    check in place."""
+    cfg = PRESETS["wheelchair"]
+    stack = NavigationStack(_multi(cfg, "local", selector=selector))
+    pose = Pose2D(0.0, 0.0, 0.0)
+    r0 = stack.step(_tick(cfg, ROOM, pose, 0, 1_000_000_000), pose, (5.0, 0.0))
+    assert r0.mode is not Mode.STALE
+    r1 = stack.step(_tick(cfg, ROOM, pose, 1, 6_000_000_000), pose, (5.0, 0.0))  # 5 s later
+    assert r1.mode is Mode.STALE and r1.flags & Flag.STALE_SCAN and (r1.v_mps, r1.w_radps) == (0.0, 0.0)
+
+
+def test_multi_loop_tick_gathers_the_safety_points_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    from gndreplay.types import Command
+
+    cfg = PRESETS["wheelchair"]
+    stack, pose = NavigationStack(_multi(cfg, "teleop")), Pose2D(0.0, 0.0, 0.0)
+    calls = []
+    orig = stack._safety_points
+    monkeypatch.setattr(stack, "_safety_points", lambda *a: calls.append(1) or orig(*a))
+    world = np.vstack([ROOM, wall(cfg.robot.front_m + 0.15, -3.0, cfg.robot.front_m + 0.15, 3.0)])
+    for k in range(3):
+        t = 1_000_000_000 + k * 200_000_000
+        r = stack.step(_tick(cfg, world, pose, k, t, Command(t, cfg.robot.vmax_mps, 0.0)), pose, (4.0, 0.0))
+        assert len(calls) == k + 1
+    assert r.active_mode == "local"  # the selector and the reflexive loop both ran on them
+
+
+def test_follower_is_told_the_command_executed_last_tick() -> None:
+    """After a takeover the follower regenerates its trajectory from the motion actually executed: the
+    stack passes the last command out, v and w, and the new trajectory starts with its curvature."""
+    from gndreplay.pipeline.follow import PathFollower
+    from gndreplay.types import Subgoal
+
+    cfg = PRESETS["xr4000"]
+    stack = NavigationStack(_multi(cfg, "follow"), (Subgoal(4.0, 0.0, 0.0, "stop"),))
+    seen: list[tuple[float | None, float | None]] = []
+    follower = stack._follower
+    assert isinstance(follower, PathFollower)
+    orig = follower.step
+
+    def spy(pose: Pose2D, grid: object, *, v_mps: float | None = None,
+            w_radps: float | None = None) -> object:
+        seen.append((v_mps, w_radps))
+        return orig(pose, grid, v_mps=v_mps, w_radps=w_radps)  # type: ignore[arg-type]
+
+    follower.step = spy  # type: ignore[method-assign]
+    pose, out = Pose2D(0.0, 0.0, 0.0), []
+    for k in range(4):
+        t = 1_000_000_000 + k * 200_000_000
+        out.append(stack.step(_tick(cfg, ROOM, pose, k, t), pose, (0.0, 0.0)))
+        pose = Pose2D(pose.x + 0.05, pose.y, pose.theta)
+    assert seen[0] == (0.0, 0.0)
+    assert seen[1:] == [(r.v_mps, r.w_radps) for r in out[:-1]]
+    # a push off the trajectory: the new one starts with the executed curvature (w / v, within kappa_max)
+    stack._v_out, stack._w_out = 0.4, 0.2
+    t = 1_000_000_000 + 4 * 200_000_000
+    stack.step(_tick(cfg, ROOM, Pose2D(0.2, 1.0, 0.0), 4, t), Pose2D(0.2, 1.0, 0.0), (0.0, 0.0))
+    assert follower.trajectory is not None and follower.trajectory.kappa[0] == pytest.approx(0.5)

@@ -21,6 +21,7 @@ from gndreplay.pipeline.supervisor import (
     safe_command,
     safety_reach_m,
     swept_collision,
+    unconfirmed_cells,
 )
 from gndreplay.robot import WHEELCHAIR_ROBOT, XR4000_ROBOT, RobotConfig
 from gndreplay.types import Flag, Pose2D
@@ -269,3 +270,34 @@ def test_trap_detector_counts_dithering_in_any_mode() -> None:
     assert not any(steady.update(Mode.SAFE_SLOW, 0.2, (0.0, 0.0, 0.0)) for _ in range(40))
     tiny = TrapDetector(params, wmax)  # small steering corrections are not dithering
     assert not any(tiny.update(Mode.MPND, 0.01 * (-1) ** i, (0.0, 0.0, 0.0)) for i in range(40))
+
+
+def test_grid_cells_the_scan_confirms_are_checked_through_its_hits() -> None:
+    cells = np.array([[1.025, 0.425], [1.025, -0.425], [2.025, 1.025]])
+    hits = np.array([[1.01, 0.41], [3.0, 0.0]])  # a hit in the first cell only
+    kept = unconfirmed_cells(cells, hits, 0.05)
+    assert kept.tolist() == [[1.025, -0.425], [2.025, 1.025]]
+    assert unconfirmed_cells(cells, np.zeros((0, 2)), 0.05).shape == (3, 2)
+
+
+def test_chair_between_jamb_cells_goes_straight_instead_of_turning() -> None:
+    """Jambs beside the chair, seen only in the grid, 4 cm from each side (inside the grown margin): any
+    turn swings a side towards one; the same speed straight on passes them parallel (SAFE_TURN, w = 0)."""
+    r = WHEELCHAIR_ROBOT
+    xs = np.arange(0.0, 0.1, 0.05) + 0.125
+    side = r.width_m / 2.0 + 0.04
+    jambs = np.vstack([np.column_stack([xs, np.full(xs.size, side)]),
+                       np.column_stack([xs, np.full(xs.size, -side)])])
+    out = safe_command(0.1, 0.0, 0.05, np.zeros((0, 2)), jambs, r, P, cell_m=0.05)
+    assert out.rule is Mode.SAFE_TURN and out.w_radps == 0.0 and out.v_mps == 0.1
+
+
+def test_a_commanded_reverse_must_avoid_unknown_cells() -> None:
+    r = WHEELCHAIR_ROBOT
+    behind = np.array([[-r.rear_m - 0.04, 0.0], [-r.rear_m - 0.04, 0.1]])  # within the grown margin
+    free = safe_command(-0.09, 0.0, 0.0, np.zeros((0, 2)), np.zeros((0, 2)), r, P, cell_m=0.05,
+                        unknown_xy=lambda: np.zeros((0, 2)))
+    assert free.rule is None and free.v_mps == -0.09
+    unseen = safe_command(-0.09, 0.0, 0.0, np.zeros((0, 2)), np.zeros((0, 2)), r, P, cell_m=0.05,
+                          unknown_xy=lambda: behind)
+    assert unseen.rule is Mode.EMERGENCY and unseen.v_mps == 0.0

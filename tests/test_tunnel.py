@@ -12,7 +12,7 @@ import pytest
 from gndreplay.pipeline.cspace import free_cspace
 from gndreplay.pipeline.model import FREE, OCCUPIED
 from gndreplay.pipeline.nf1 import Nf1Params, _visible, plan
-from gndreplay.pipeline.tunnel import TunnelParams, TunnelPlanner, tunnel_plan
+from gndreplay.pipeline.tunnel import _CHECK_AFTER, TunnelParams, TunnelPlanner, _cast_rays, tunnel_plan
 from gndreplay.robot import WHEELCHAIR_ROBOT, XR4000_ROBOT, RobotConfig
 from gndreplay.types import Flag
 
@@ -168,6 +168,96 @@ def test_enclosed_goal_is_not_reachable(name: str) -> None:
     assert res.waypoints_cells.shape == (0, 2) and math.isnan(res.direction_rad)
     free = free_cspace(g, cell_m=CELL_M, inflate_m=robot.inner_radius_m + TunnelParams().margin_m)
     assert plan(free, to_cell(0, 0), goal_rc(3.0, 0.0), cell_m=CELL_M).flag == Flag.PLANNER_NO_PATH
+
+
+def clutter(seed: int, n_blocks: int = 25) -> np.ndarray:
+    """The grid with ``n_blocks`` random furniture blocks 0.2-2 m a side."""
+    rng = np.random.default_rng(seed)
+    g = empty()
+    for _ in range(n_blocks):
+        x, y = rng.uniform(-5.5, 5.5, 2)
+        w, h = rng.uniform(0.2, 2.0, 2)
+        r0, c0 = to_cell(x, y)
+        g[max(r0, 0) : r0 + round(h / CELL_M), max(c0, 0) : c0 + round(w / CELL_M)] = OCCUPIED
+    return g
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_goal_cut_off_behind_a_maze_stops_at_the_connectivity_check(name: str) -> None:
+    """A serpentine of walls, the goal boxed in at its far end: without the check the search would expand
+    every node of the maze; with it, it stops when the check runs, and says what NF1 says. With a door in
+    the box the search goes on past the check, as far as it needs, and finds the way."""
+    robot = ROBOTS[name]
+    g = empty()
+    for i, x in enumerate((-4.0, -2.0, 0.0, 2.0)):  # open at the top, then at the bottom, ...
+        wall(g, x, -6.0, x, 4.0) if i % 2 == 0 else wall(g, x, -4.0, x, 6.0)
+    for a, b in [((3.0, -1.0), (5.0, -1.0)), ((5.0, -1.0), (5.0, 1.0)), ((5.0, 1.0), (3.0, 1.0)),
+                 ((3.0, 1.0), (3.0, -1.0))]:
+        wall(g, *a, *b)
+    start, goal = to_cell(-5.0, -5.0), goal_rc(4.0, 0.0)
+    radius = robot.inner_radius_m + TunnelParams().margin_m
+    res = tunnel_plan(g, start, goal, cell_m=CELL_M, radius_m=radius)
+    assert not res.ok and res.flag == Flag.PLANNER_NO_PATH and res.nodes_expanded == _CHECK_AFTER
+    free = free_cspace(g, cell_m=CELL_M, inflate_m=radius)
+    assert plan(free, start, goal, cell_m=CELL_M).flag == Flag.PLANNER_NO_PATH
+    g[to_cell(0, -0.7)[0] : to_cell(0, 0.7)[0] + 1, to_cell(3.0, 0)[1] - 1 : to_cell(3.0, 0)[1] + 2] = FREE
+    opened = tunnel_plan(g, start, goal, cell_m=CELL_M, radius_m=radius)
+    assert opened.ok and opened.nodes_expanded > _CHECK_AFTER
+    assert tunnel_is_free(g, robot, opened.waypoints_cells)
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_goal_beyond_the_border_reached_along_a_border_strip(name: str) -> None:
+    """The goal lies beyond the grid's east border, projected onto it; a wall parallel to the border leaves
+    free C-space only in the border column beside it (the projected goal is on that strip, as a goal
+    behind a table next to the grid's edge). NF1 goes round the wall's end and up the strip; so must the
+    tunnel planner, which needs a node on the border itself (rays there stop at the border, and the regular
+    place a little past the wall's end is C-obstacle)."""
+    robot = ROBOTS[name]
+    radius = robot.inner_radius_m + TunnelParams().margin_m
+    r2 = math.floor((radius / CELL_M - 0.5) ** 2 * (1.0 + 1e-9))  # free_cspace's blocked squared radius
+    col = N - 1 - (math.isqrt(r2) + 1)  # the wall column whose C-obstacle stops one cell short of the border
+    g = empty()
+    g[to_cell(0, -3.0)[0] :, col] = OCCUPIED
+    free = free_cspace(g, cell_m=CELL_M, inflate_m=radius)
+    assert np.flatnonzero(free[N // 2, col:]).tolist() == [N - 1 - col]  # only the border column is free
+    goal = goal_rc(30.0, 0.0)
+    assert plan(free, to_cell(0, 0), goal, cell_m=CELL_M).ok
+    res = tunnel_plan(g, to_cell(0, 0), goal, cell_m=CELL_M, radius_m=radius)
+    assert res.ok and res.goal_projected and res.goal_cell == (N // 2, N - 1)
+    assert tunnel_is_free(g, robot, res.waypoints_cells)
+    assert res.waypoints_cells[-2][1] == N - 1  # the last tunnel runs up the strip
+
+
+def unit_walk(mask: np.ndarray, r0: float, c0: float, dr: float, dc: float, t: float) -> tuple[float, bool]:
+    """Reference ray: every sample t, t + 1, ... (rounded to its cell) until one leaves ``mask`` or the grid;
+    the last sample inside, and whether the border stopped it."""
+    last = t
+    while True:
+        r, c = math.floor(r0 + t * dr + 0.5), math.floor(c0 + t * dc + 0.5)
+        if not (0 <= r < mask.shape[0] and 0 <= c < mask.shape[1]):
+            return last, True
+        if not mask[r, c]:
+            return last, False
+        last, t = t, t + 1.0
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_rays_stop_where_a_walk_over_every_sample_stops(seed: int) -> None:
+    """Both rays of every direction (C-space, then on through the dilation band to the obstacle), also
+    those that leave the grid, end on the sample a walk over every sample ends on."""
+    g = clutter(seed, n_blocks=40)
+    free = free_cspace(g, cell_m=CELL_M, inflate_m=0.4)
+    clear = g != OCCUPIED
+    theta = np.arange(360) * 2.0 * math.pi / 360
+    rng = np.random.default_rng(seed)
+    cells = np.argwhere(free)
+    for r0, c0 in cells[rng.integers(len(cells), size=6)].astype(float):
+        got = _cast_rays(free, clear, r0, c0, np.sin(theta), np.cos(theta))
+        for k, a in enumerate(theta):
+            t, border = unit_walk(free, r0, c0, math.sin(a), math.cos(a), 0.0)
+            w, wborder = (t, True) if border else unit_walk(clear, r0, c0, math.sin(a), math.cos(a), t)
+            assert (got[0][k], got[1][k], got[2][k], got[3][k]) == (t, border, w, wborder)
 
 
 def test_goal_in_obstacle_and_expansion_budget() -> None:

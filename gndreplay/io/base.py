@@ -233,6 +233,11 @@ class LogReader(Protocol):
         """What the log contains, without a full pass."""
         ...
 
+    def records_commands(self) -> bool:
+        """Whether the log records velocity commands (``Tick.cmd``); may read the log once to find out
+        (CARMEN: whether any ODOM tv/rv is non-zero), unlike ``describe``."""
+        ...
+
     def fraction_read(self) -> float | None:
         """Share of the log read by the pass in progress, when the reader knows it (for progress bars when
         the description gives no duration); None otherwise."""

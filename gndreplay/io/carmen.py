@@ -20,6 +20,15 @@ Reader decisions (see also ECOSYSTEM.md §3 and the datasets README):
   inside the scan line. In ACES the FLASER odometry triple is the latest ODOM sample before the scan (stale by
   ~0.1 s); interpolating ODOM at the scan stamp is closer in time and matches the ROS conversions of the log.
   ``odom_topic="FLASER"`` picks the embedded triple instead.
+- Commands: ODOM lines carry the robot's translational and rotational velocity (``tv rv``). Loggers that do
+  not record velocities write zeros there (ACES and Intel: every tv and rv is 0; MIT CSAIL has no ODOM
+  line), and all-zero values are no command at all. So ODOM is a command stream only when the log has an ODOM
+  line with a non-zero tv or rv, and its tv/rv become ``Tick.cmd`` from the first such line on (the ticks
+  before it have no command: nothing was commanded yet, and a zero is indistinguishable from "not
+  recorded"). This rule streams: the pass itself never looks ahead. Whether the log *has* commands
+  (``describe().cmd_stream``, ``cmd_topic="ODOM"``) is known from the head when one of its ODOM lines moves,
+  after a complete pass, or else from one scan of the ODOM lines that stops at the first non-zero tv/rv (the
+  cost of decompressing the log once, paid only when the answer is asked for before a pass).
 - The laser pose in the robot frame comes from ``PARAM robot_frontlaser_offset`` (+ ``_side_offset``,
   ``_angular_offset``), the rear laser facing backwards; ROBOTLASER lines give it per line.
 - File order is not time order: records go through the bounded reorder heap of :mod:`.sync`.
@@ -92,6 +101,7 @@ __all__ = [
     "SCAN_MESSAGES",
     "CarmenReader",
     "flaser_angles",
+    "odom_has_commands",
     "parse_time_ns",
     "write_carmen",
 ]
@@ -356,6 +366,7 @@ class _Head:
     all_zero: bool
     first_name: str | None
     trailers: dict[bytes, int]  # per message: the usual number of trailer fields
+    odom_moves: bool = False  # an ODOM line of the head has a non-zero tv or rv
 
 
 @dataclass(slots=True)
@@ -394,6 +405,7 @@ def _read_head(path: Path, opened: _Opened) -> _Head:
     first_name: str | None = None
     trailer_sizes: dict[bytes, Counter[int]] = {}
     scans = kept = 0
+    odom_moves = False
     for lineno, line in _lines(path, opened.fh):
         if line is _TOO_LONG:
             opened.resumable = False
@@ -424,13 +436,45 @@ def _read_head(path: Path, opened: _Opened) -> _Head:
             if raw is not None:
                 scans += 1
                 samples.setdefault(name, []).append(raw)
+            elif name == "ODOM" and not odom_moves:
+                odom_moves = _odom_velocity_nonzero(tok)
     if not any(n in KNOWN_MESSAGES for n in names):
         what = f"first record starts with {first_name!r}" if first_name else "no records"
         if not opened.resumable:
             what += f", then a line longer than {_MAX_LINE >> 20} MB: binary data?"
         raise LogFormatError(f"{path}: not a CARMEN log (no CARMEN message in the first lines; {what})")
     trailers = {k: c.most_common(1)[0][0] for k, c in trailer_sizes.items()}
-    return _Head(names, params, samples, any_stamp, any_stamp and all_zero, first_name, trailers)
+    return _Head(names, params, samples, any_stamp, any_stamp and all_zero, first_name, trailers, odom_moves)
+
+
+def _odom_velocity_nonzero(tok: list[bytes]) -> bool:
+    """Whether an ODOM line (``ODOM x y theta tv rv accel ...``) carries a valid non-zero tv or rv."""
+    try:
+        tv, rv = check_speed(float(tok[4]), "velocity"), check_speed(float(tok[5]), "turn rate")
+    except (ValueError, IndexError):
+        return False
+    return tv != 0.0 or rv != 0.0
+
+
+def odom_has_commands(path: Path) -> bool:
+    """Whether any ODOM line of the log carries a non-zero tv or rv (read until the first one).
+
+    Never raises on damaged data: it answers for the lines it could read (the replay's own pass reports the
+    damage where it happens).
+    """
+    try:
+        fh = _LogFile(path)
+    except OSError:
+        return False
+    try:
+        for _, line in _lines(path, fh):
+            if line.startswith(b"ODOM") and _odom_velocity_nonzero(line.split(None, 7)):
+                return True
+    except LogFormatError:
+        return False
+    finally:
+        fh.close()
+    return False
 
 
 def _peek_record(name: str, tok: list[bytes]) -> tuple[F64 | None, int, int]:
@@ -537,7 +581,8 @@ class CarmenReader:
         path: the log (plain, .gz or .bz2).
         scan_topic: scan message name (FLASER, RLASER, ROBOTLASER1/2, RAWLASER1-4); auto when None.
         odom_topic: "ODOM" (interpolated ODOM lines) or the scan message name (its embedded odometry).
-        cmd_topic: CARMEN logs carry no velocity commands; giving one is an error.
+        cmd_topic: "ODOM" (the tv/rv of ODOM lines; an error when they are all zero), or None: ODOM when
+            the log has a non-zero tv or rv (see the module docstring); anything else is an error.
         truth_topic: "TRUEPOS", or the scan message name (its first pose triple, as a reference pose).
         strict: a malformed line is an error instead of being skipped and counted.
         sync: reorder / wait bounds.
@@ -565,6 +610,8 @@ class CarmenReader:
         self._stats = SyncStats()
         self._fh: _LogFile | None = None
         self._opened: _Opened | None = None
+        self._odom_cmds: bool | None = None  # ODOM tv/rv are commands (None: not known yet)
+        self._odom_moved = False  # the pass in progress has read an ODOM line with a non-zero tv or rv
         head, self._opened = _peek(self.path)
         self._head = head
         try:
@@ -617,10 +664,16 @@ class CarmenReader:
                 f"{', '.join(odom_candidates) or 'none'}"
             )
         if cmd_topic is not None:
-            raise LogFormatError(
-                f"{self.path}: no command stream {cmd_topic!r}; CARMEN logs record no "
-                "velocity commands (candidates: none)"
-            )
+            if cmd_topic != "ODOM" or "ODOM" not in head.names:
+                raise LogFormatError(
+                    f"{self.path}: no command stream {cmd_topic!r}; CARMEN logs record velocity commands "
+                    f"only as ODOM tv/rv (candidates: {'ODOM' if 'ODOM' in head.names else 'none'})"
+                )
+            if not self.has_commands:
+                raise LogFormatError(
+                    f"{self.path}: no command stream 'ODOM': every ODOM tv and rv is 0 (the log recorded "
+                    "no velocity commands)"
+                )
         truth_candidates = (["TRUEPOS"] if "TRUEPOS" in head.names else []) + (
             [scan_topic] if embeds_odom else []
         )
@@ -663,6 +716,27 @@ class CarmenReader:
         return None if fh is None else fh.fraction_read()
 
     # -- description -------------------------------------------------------------------------------
+    def _known_commands(self) -> bool | None:
+        """Whether ODOM tv/rv are a command stream, as far as known without reading ahead (None: not yet)."""
+        if self._odom_cmds is None:
+            head = self._head
+            if "ODOM" not in head.names or head.odom_moves:
+                self._odom_cmds = "ODOM" in head.names
+        return self._odom_cmds
+
+    @property
+    def has_commands(self) -> bool:
+        """Whether the ODOM lines' tv/rv are a command stream: the log has ODOM lines and one of them has a
+        non-zero tv or rv (known from the head or a complete pass, else by one scan of the ODOM lines)."""
+        known = self._known_commands()
+        if known is None:
+            known = self._odom_cmds = odom_has_commands(self.path)
+        return known
+
+    def records_commands(self) -> bool:
+        """``has_commands`` (the reader protocol's question; may read the ODOM lines once)."""
+        return self.has_commands
+
     @property
     def odom_source(self) -> str:
         if self._odom_mode == "stream":
@@ -672,10 +746,15 @@ class CarmenReader:
         return "none"
 
     def describe(self) -> LogDescription:
-        """Streams seen in the head of the log (counts only after a full pass: see ``message_counts``)."""
+        """Streams seen in the head of the log (counts only after a full pass: see ``message_counts``).
+
+        Commands are named when known without reading ahead (``records_commands`` asks, at a cost)."""
+        known = self._known_commands()
         roles: dict[str, StreamRole] = {self.scan_stream: "scan", "PARAM": "param"}
         if self._odom_mode == "stream":
             roles["ODOM"] = "odom"
+        elif known:
+            roles["ODOM"] = "cmd"
         if self._truth_mode == "stream":
             roles["TRUEPOS"] = "truth"
         counts = self._stats_counts
@@ -686,13 +765,17 @@ class CarmenReader:
         notes = [f"max range {self._laser.max_range_m:g} m ({self._laser.max_range_source})"]
         if self._head.all_zero:
             notes.append("timestamps are all zero: index clock")
+        if "ODOM" in self._head.names:
+            notes.append({True: "commands: ODOM tv/rv",
+                          False: "ODOM tv/rv are all zero: no recorded velocity commands",
+                          None: "ODOM tv/rv: not known before the log is read"}[known])
         return LogDescription(
             path=self.path,
             format=self.format_name,
             streams=streams,
             scan_stream=self.scan_stream,
             odom_source=self.odom_source,
-            cmd_stream=None,
+            cmd_stream="ODOM" if known else None,
             truth_stream="TRUEPOS"
             if self._truth_mode == "stream"
             else (self.scan_stream if self._truth_mode == "embedded" else None),
@@ -720,6 +803,7 @@ class CarmenReader:
         """
         stats = SyncStats()
         self._stats = stats
+        self._odom_moved = False
         events = self._events(stats)
         yield from synchronise(
             reorder(events, stats, self._sync),
@@ -727,7 +811,10 @@ class CarmenReader:
             odom_mode=self._odom_mode,
             truth_mode=self._truth_mode,
             opts=self._sync,
+            cmd_from_odom=self._known_commands() is not False,
         )
+        if self._odom_cmds is None:  # a complete pass read every ODOM line
+            self._odom_cmds = self._odom_moved
         if stats.scans == 0:
             raise LogFormatError(f"{self.path}: no scans ({self.scan_stream} lines) in the log")
 
@@ -813,7 +900,7 @@ class CarmenReader:
             h[scan.encode()] = self._on_robotlaser
         else:
             h[scan.encode()] = self._on_rawlaser
-        if self._odom_mode == "stream":
+        if self._odom_mode == "stream" or self._known_commands() is not False:
             h[b"ODOM"] = self._on_odom
         if self._truth_mode == "stream":
             h[b"TRUEPOS"] = self._on_truepos
@@ -930,7 +1017,9 @@ class CarmenReader:
         t = self._time(tok, 7, "x y theta tv rv accel")
         v = _floats(tok[1:7], "odometry")
         tv, rv = check_speed(v[3], "velocity"), check_speed(v[4], "turn rate")
-        return OdomEvent(t, Odometry(t, _pose(v, "odometry"), tv, rv))
+        event = OdomEvent(t, Odometry(t, _pose(v, "odometry"), tv, rv))
+        self._odom_moved = self._odom_moved or tv != 0.0 or rv != 0.0
+        return event
 
     def _on_truepos(self, tok: list[bytes]) -> TruthEvent:
         _need(tok, 7, "true pose and odometry")

@@ -517,6 +517,10 @@ class RosbagReader:
         """None: a bag's description gives its time span, which measures progress instead."""
         return None
 
+    def records_commands(self) -> bool:
+        """A Twist / TwistStamped command topic was found or given."""
+        return self.cmd_topic is not None
+
     def describe(self) -> LogDescription:
         """Topics, types and counts from the bag's metadata (no message decoded beyond the first few)."""
         roles: dict[str, StreamRole] = {self.scan_topic: "scan"}

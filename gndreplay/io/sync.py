@@ -7,9 +7,11 @@ Two steps, both streaming:
    order, not header-stamp order). Records more than ``window`` behind the newest stamp are released; one that
    arrives after the window has passed its stamp cannot be placed and is dropped and counted.
 2. :func:`synchronise` pairs each scan with the odometry pose interpolated at the scan stamp (linear in x, y,
-   shortest arc in theta), the ground-truth pose likewise, and the last command at or before it. A scan waits
-   (bounded in time and count) for the first odometry sample at or after its stamp; scans before the first
-   or after the last odometry sample take the nearest sample and are counted.
+   shortest arc in theta), the ground-truth pose likewise, and the last command at or before it (a command
+   record, or with ``cmd_from_odom`` the velocities of odometry samples from the first non-zero one on:
+   CARMEN ODOM tv/rv). A scan waits (bounded in time and count) for the first odometry sample at or after
+   its stamp; scans before the first or after the last odometry sample take the nearest sample and are
+   counted.
 
 Both steps update a :class:`SyncStats`, which becomes the reader's :class:`~gndreplay.io.base.ReadReport`.
 """
@@ -232,6 +234,7 @@ def synchronise(
     odom_mode: PoseMode,
     truth_mode: PoseMode = "none",
     opts: SyncOptions = DEFAULT_SYNC,
+    cmd_from_odom: bool = False,
 ) -> Iterator[Tick]:
     """Turn time-ordered events into Ticks (see the module docstring for the rules).
 
@@ -242,6 +245,9 @@ def synchronise(
             identity pose to every tick.
         truth_mode: the same for the ground-truth pose (``Tick.truth``); "none" leaves it None.
         opts: wait bounds and the gap threshold.
+        cmd_from_odom: OdomEvents are also commands (their ``v_mps``, ``w_radps``; CARMEN ODOM tv/rv), with
+            any ``odom_mode``, from the first one with a non-zero velocity on (before it a log that records
+            no velocities cannot be told from one that commanded a stop: no command).
 
     Yields:
         Ticks numbered from 0, in stamp order.
@@ -250,6 +256,7 @@ def synchronise(
     odom_prev: tuple[int, Pose2D] | None = None
     truth_prev: tuple[int, Pose2D] | None = None
     last_cmd: Command | None = None
+    odom_commands = False  # cmd_from_odom: a non-zero odometry velocity was seen
     last_scan_t: int | None = None
     index = 0
     identity = Pose2D(0.0, 0.0, 0.0)
@@ -302,17 +309,22 @@ def synchronise(
             elif truth_mode == "stream" and truth_prev is not None and truth_prev[0] == e.t_ns:
                 p.truth, p.truth_done = truth_prev[1], True
             pending.append(p)
-        elif isinstance(e, OdomEvent) and odom_mode == "stream":
-            pose = e.odom.pose
-            for p in pending:
-                if p.odom is None and p.ev.t_ns <= e.t_ns:
-                    if odom_prev is None:
-                        p.odom = pose
-                        if p.ev.t_ns < e.t_ns:
-                            stats.scans_without_odom_before += 1
-                    else:
-                        p.odom = interpolate_pose(p.ev.t_ns, odom_prev[0], odom_prev[1], e.t_ns, pose)
-            odom_prev = (e.t_ns, pose)
+        elif isinstance(e, OdomEvent):
+            if odom_mode == "stream":
+                pose = e.odom.pose
+                for p in pending:
+                    if p.odom is None and p.ev.t_ns <= e.t_ns:
+                        if odom_prev is None:
+                            p.odom = pose
+                            if p.ev.t_ns < e.t_ns:
+                                stats.scans_without_odom_before += 1
+                        else:
+                            p.odom = interpolate_pose(p.ev.t_ns, odom_prev[0], odom_prev[1], e.t_ns, pose)
+                odom_prev = (e.t_ns, pose)
+            v, w = e.odom.v_mps, e.odom.w_radps
+            if cmd_from_odom and (odom_commands or v != 0.0 or w != 0.0):
+                odom_commands = True
+                last_cmd = _set_command(pending, Command(e.t_ns, v, w))
         elif isinstance(e, TruthEvent) and truth_mode == "stream":
             for p in pending:
                 if not p.truth_done and p.ev.t_ns <= e.t_ns:
@@ -321,10 +333,7 @@ def synchronise(
                     p.truth_done = True
             truth_prev = (e.t_ns, e.pose)
         elif isinstance(e, CmdEvent):
-            last_cmd = e.cmd
-            for p in pending:  # a command stamped exactly at a scan counts as "at or before" it
-                if p.ev.t_ns == e.t_ns:
-                    p.cmd = e.cmd
+            last_cmd = _set_command(pending, e.cmd)
         now = e.t_ns
         # release only once time has moved past a scan, so records stamped exactly at it are applied too
         while pending and ((now > pending[0].ev.t_ns and ready(pending[0])) or overdue(pending[0], now)):
@@ -335,6 +344,14 @@ def synchronise(
         p = pending.popleft()
         if ready(p) or force(p):
             yield emit(p)
+
+
+def _set_command(pending: Iterable[_Pending], cmd: Command) -> Command:
+    """A new command: also the command of the scans waiting with exactly its stamp ("at or before" them)."""
+    for p in pending:
+        if p.ev.t_ns == cmd.t_ns:
+            p.cmd = cmd
+    return cmd
 
 
 def with_index_clock(e: Event, t_ns: int) -> Event:

@@ -59,6 +59,20 @@ Differences from ALGORITHMS.md / the released code, and why
       ``Ds + |front corner| - front`` straight ahead. A circle has ``ds = Ds`` all round (code).
     * Not ported (the supervisor owns them): the code's front emergency stop, and the rectangular robot's
       rear "cutting" correction, which needs the previous velocities.
+
+Rectangular differential chair (issue 10 item 2; a simple stand-in for the shape / kinematics abstraction
+of the wheelchair paper's reference [18]; the circle and the holonomic base are unchanged)
+    * Passages: while the region direction is ahead, when a left / right pair of obstacle points narrower
+      than W + 2 Ds lies on the way (the region direction crosses it) or around the body, the direction
+      pursues the passage axis (``_passage_axis``, ``_follow_axis``): the axle reaches the axis, and the
+      body lies along it, before the front reaches the jambs; ND+'s laws steer the axle only, which
+      enters a door crooked. A region behind keeps ND+'s direction: the chair backs out (below).
+    * Motion law: the command is the first admissible arc of ``_admissible_drive`` (the law's arc, wider
+      arcs with the same final heading, the turn in place, straight on, reversing while turning, straight
+      back), admissible when the real footprint swept along it does not approach an obstacle point: a
+      turn whose corners would sweep a wall is not commanded. Reversing (v < 0) happens only there; the
+      reflexive check then also requires the swept cells behind to be known FREE.
+    * ``min_clearance_m`` is the exact distance to the footprint.
 """
 
 from __future__ import annotations
@@ -75,6 +89,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import ConfigError
 from ..robot import RobotConfig
 from ..types import Flag
+from .supervisor import arc_touches, footprint_signed_distance
 
 __all__ = [
     "NdParams",
@@ -93,6 +108,16 @@ _FAR_M = 1e6  # distance of the sub-goal through a discontinuity whose far side 
 _HALF_PI = 0.5 * math.pi
 _LS_CLAMP = math.pi - 0.01
 _SECTOR_OFFSET = 0.5 + 1e-9  # round to the nearest bisector; a boundary goes counter-clockwise
+# the rectangle's admissible arcs (choices): clearance kept from the obstacle points (grid cell centres:
+# half a 5 cm cell; more would close a 0.85 m door to the 0.7 m chair, the reflexive check keeps the
+# safety margin), travel checked along an arc, and the reversing speed (the supervisor's escape speed)
+_SWEEP_MARGIN_M = 0.025
+_SWEEP_MIN_M = 0.3
+_SWEEP_MAX_M = 1.5
+_SWEEP_MIN_TURN_RAD = 0.3
+_SWEEP_STRAIGHT_M = 1.0
+_STEP_M = 0.05
+_REVERSE_FRAC = 0.3
 
 
 class Situation(enum.Enum):
@@ -160,12 +185,13 @@ class NdResult:
         situation: the situation (``Situation.NONE`` when no region).
         flag: ``Flag.NONE``, or ``Flag.REACTOR_NO_REGION`` when no navigable region exists.
         direction_rad: motion direction in the robot frame, (-pi, pi]; nan when no region.
-        v_mps: forward velocity [m/s] (>= 0 for a differential drive).
+        v_mps: forward velocity [m/s]; >= 0 for a differential drive, except the rectangle backing out
+            of a turn it cannot make (``_admissible_drive``).
         vy_mps: lateral velocity [m/s] (holonomic base only, else 0).
         w_radps: turn rate [rad/s], counter-clockwise positive.
         region: (first, last) sectors of the selected region, counter-clockwise; None when no region.
-        min_clearance_m: smallest distance from an obstacle point to the robot boundary [m], measured along
-            the sector bisector's boundary distance (negative: inside the footprint); inf without obstacles.
+        min_clearance_m: smallest exact distance from an obstacle point (within max_range_m) to the real
+            footprint [m] (negative: inside it); inf without obstacles.
     """
 
     situation: Situation
@@ -473,6 +499,64 @@ def _blend_away(theta_p: float, obstacle_a: float, ratio: float) -> float:
     return _wrap(th)
 
 
+def _passage_axis(dist: F64, ang: F64, left: NDArray[np.bool_], right: NDArray[np.bool_], beta: float, *,
+                  min_width_m: float, max_width_m: float, reach_m: float, behind_m: float,
+                  front_m: float) -> tuple[float, float, float, float] | None:
+    """The narrowest passage the robot is going through: the closest pair of a left and a right sector
+    point (both within ``reach_m`` of the rotation centre), at least ``min_width_m`` (the robot's width:
+    a narrower slot beside it is not its way) and narrower than ``max_width_m``, whose segment
+    the ray along the region direction ``beta`` crosses ahead of the rotation centre (or at most
+    ``behind_m`` behind it), or the robot's own axis crosses between ``behind_m`` behind and ``front_m``
+    ahead of the rotation centre (the body is in the passage: it leaves along the axis before turning).
+
+    Returns (cx, cy, nx, ny): the pair's midpoint and the passage axis, the unit normal of the pair's line
+    oriented along ``beta``; None without such a pair. For a door these are the jambs; in a corridor any
+    pair across it (the narrowest is the perpendicular one), whose axis runs along the corridor."""
+    near = dist <= reach_m
+    li, ri = np.flatnonzero(left & near), np.flatnonzero(right & near)
+    if li.size == 0 or ri.size == 0:
+        return None
+    lx, ly = dist[li] * np.cos(ang[li]), dist[li] * np.sin(ang[li])
+    rx, ry = dist[ri] * np.cos(ang[ri]), dist[ri] * np.sin(ang[ri])
+    ex, ey = lx[:, None] - rx[None, :], ly[:, None] - ry[None, :]
+    w2 = ex * ex + ey * ey
+    num = rx[None, :] * ey - ry[None, :] * ex
+    bx, by = math.cos(beta), math.sin(beta)
+    den = bx * ey - by * ex  # the beta ray meets the line r + s (l - r) at t = (r x (l - r)) / (b x (l - r))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = num / den
+        t_body = num / ey  # the same along the robot's own axis (b = +x)
+    on_way = (np.abs(den) > 1e-12) & (t > -behind_m)
+    straddles = (ly[:, None] > 0.0) & (ry[None, :] < 0.0)  # one point each side of the body
+    in_body = straddles & (np.abs(ey) > 1e-12) & (t_body > -behind_m) & (t_body < front_m)
+    w2 = np.where((on_way | in_body) & (w2 >= min_width_m * min_width_m), w2, np.inf)
+    k = int(np.argmin(w2))
+    a, b = divmod(k, ri.size)
+    width = math.sqrt(float(w2[a, b]))
+    if not width < max_width_m:  # also: no pair on the way (inf)
+        return None
+    ux, uy = (lx[a] - rx[b]) / width, (ly[a] - ry[b]) / width
+    nx, ny = uy, -ux  # the left point's side turned clockwise: the axis through the pair
+    if nx * math.cos(beta) + ny * math.sin(beta) < 0.0:
+        nx, ny = -nx, -ny
+    return 0.5 * float(lx[a] + rx[b]), 0.5 * float(ly[a] + ry[b]), float(nx), float(ny)
+
+
+def _follow_axis(axis: tuple[float, float, float, float], lookahead_m: float) -> float:
+    """Direction to the point ``lookahead_m`` along the passage axis past the rotation centre's projection
+    on it (pure pursuit of the axis line).
+
+    The rectangular chair's motion law in a passage: ND+'s LS2 law centres the rotation centre between the
+    closest obstacles, which for a chair whose front is 0.8 m ahead of its axle means entering a door
+    crooked and offset (the front is in, the axle still outside and off-centre), where every correction
+    swings a corner into a jamb. Pursuing the axis line brings the axle onto it, and the body along it,
+    before the front reaches the jambs (the lateral offset decays over about one lookahead of travel)."""
+    cx, cy, nx, ny = axis
+    along = -(cx * nx + cy * ny)  # the rotation centre's coordinate along the axis, from the midpoint
+    tx, ty = cx + (along + lookahead_m) * nx, cy + (along + lookahead_m) * ny
+    return _wrap(math.atan2(ty, tx))
+
+
 def _drive(theta: float, v_nd: float, robot: RobotConfig) -> tuple[float, float, float]:
     """(v, vy, w) for the base.
 
@@ -486,6 +570,69 @@ def _drive(theta: float, v_nd: float, robot: RobotConfig) -> tuple[float, float,
     if robot.drive == "holonomic":
         return v_nd * math.cos(theta), v_nd * math.sin(theta), w
     return v_nd * (1.0 - abs(tc) / _HALF_PI), 0.0, w
+
+
+def _admissible_drive(theta: float, v_nd: float, robot: RobotConfig, points: F64) -> tuple[float, float]:
+    """(v, w) for the rectangular differential chair: the first admissible of a list of arcs.
+
+    An arc is admissible when the real footprint, moved along it until the chair faces ``theta`` (the
+    whole turn ND+ asks for, however gentle the arc; at least ``_SWEEP_MIN_M`` of travel, at most
+    ``_SWEEP_MAX_M``), does not come within ``_SWEEP_MARGIN_M`` of an obstacle point it approaches
+    (``arc_touches``). Candidates in order: the paper law for theta, for theta/2 and theta/4 (wider
+    arcs, the same final heading), the turn in place towards theta (not for a correction smaller than
+    ``_SWEEP_MIN_TURN_RAD``), straight on when theta is ahead
+    (free for ``_SWEEP_STRAIGHT_M``: room to go on until the turn fits, as in a corridor before a side
+    opening), then reversing (``_REVERSE_FRAC`` of vmax, ``_SWEEP_MIN_M``) while turning the front
+    towards theta (a multi-point turn), then straight back; reversing only when theta is behind or
+    nothing forward can go even ``_STEP_M`` (``_blocked_now``). This is the
+    shape / kinematics abstraction in its simplest form: the turn a rectangle cannot make here (its
+    corners would sweep a jamb or a wall) is not commanded; it drives on until it can, or backs out.
+    Nothing admissible: the paper law, left to the reflexive check."""
+    law_v, _, law_w = _drive(theta, v_nd, robot)
+    if points.shape[0] == 0:
+        return law_v, law_w
+    turn = abs(min(max(theta, -math.pi), math.pi))
+    sign = 1.0 if theta >= 0.0 else -1.0
+    candidates: list[tuple[float, float, bool]] = [(law_v, law_w, False)]
+    for f in (0.5, 0.25):
+        v, _, w = _drive(theta * f, v_nd, robot)
+        candidates.append((v, w, True))
+    w_turn = 0.5 * robot.wmax_radps
+    v_back = -_REVERSE_FRAC * robot.vmax_mps
+    if turn >= _SWEEP_MIN_TURN_RAD:  # a turn in place for a small correction would only dither
+        candidates.append((0.0, sign * w_turn, True))
+    if turn <= _HALF_PI:  # straight on serves only a direction ahead
+        candidates.append((v_nd, 0.0, True))
+    if turn > _HALF_PI or _blocked_now(points, law_v, law_w, v_nd, robot):
+        candidates.extend([(v_back, sign * w_turn, True), (v_back, 0.0, True)])
+    for v, w, whole in candidates:
+        if v == 0.0 and w == 0.0:
+            continue
+        if v < 0.0:  # reversing: a short stretch of travel
+            t_end = _SWEEP_MIN_M / abs(v)
+        elif w == 0.0:  # straight on instead of the turn: only with room to go on until the turn fits
+            t_end = (_SWEEP_STRAIGHT_M if whole else _SWEEP_MIN_M) / v
+        elif v == 0.0:  # in place: the whole turn
+            t_end = turn / abs(w)
+        elif whole:  # a wider arc: it must make the whole turn, within the travel bound
+            t_end = min(max(turn / abs(w), _SWEEP_MIN_M / v), _SWEEP_MAX_M / v)
+        else:  # the law's own arc: its turn or a short stretch, whichever ends first
+            t_end = min(turn / abs(w), _SWEEP_MIN_M / v)
+        if not arc_touches(points, v, 0.0, w, t_end, robot, _SWEEP_MARGIN_M):
+            return v, w
+    return law_v, law_w
+
+
+def _blocked_now(points: F64, law_v: float, law_w: float, v_nd: float, robot: RobotConfig) -> bool:
+    """True when neither the law's arc nor straight on can go even ``_STEP_M``: reversing with a
+    direction ahead only then; a chair that reversed while it could still creep forward would come back
+    to the same spot next tick and oscillate there."""
+    for v, w in ((law_v, law_w), (v_nd, 0.0)):
+        if v <= 0.0:
+            continue
+        if not arc_touches(points, v, 0.0, w, _STEP_M / v, robot, _SWEEP_MARGIN_M):
+            return False
+    return True
 
 
 def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
@@ -530,7 +677,7 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
     n = params.n_sectors
     dist, ang = _sectorise(pts, geo.angles, params.max_range_m)
     occ = np.isfinite(dist)
-    min_clearance = float(np.min(dist[occ] - geo.boundary[occ])) if occ.any() else math.inf
+    min_clearance = _footprint_clearance(pts, robot, params.max_range_m) if occ.any() else math.inf
     dist = np.where(occ, np.maximum(dist, geo.boundary + params.contact_m), dist)
 
     goal_r, goal_a = math.hypot(goal[0], goal[1]), _wrap(math.atan2(goal[1], goal[0]))  # -0.0 y: pi
@@ -575,9 +722,28 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
         obs = obs_l if obs_l >= 0 else obs_r
         theta = _blend_away(theta_p, float(ang[obs]), float(ratio[obs]))
 
+    if robot.shape == "rectangle" and robot.drive == "differential" and abs(beta) <= _HALF_PI:
+        axis = _passage_axis(dist, ang, occ & left_side, occ & ~left_side, beta,
+                             min_width_m=geo.gap_m, max_width_m=geo.gap_m + 2.0 * params.security_m,
+                             reach_m=robot.front_m + robot.rear_m + params.security_m,
+                             behind_m=robot.rear_m + 0.5 * params.security_m, front_m=robot.front_m)
+        if axis is not None:
+            theta = _follow_axis(axis, robot.front_m)
     v_nd = robot.vmax_mps * min(c_l, c_r)
-    v, vy, w = _drive(theta, v_nd, robot)
+    if robot.shape == "rectangle" and robot.drive == "differential":
+        v, w = _admissible_drive(theta, v_nd, robot, pts)
+        vy = 0.0
+    else:
+        v, vy, w = _drive(theta, v_nd, robot)
     return NdResult(situation, Flag.NONE, theta, v, vy, w, (region.first, region.last), min_clearance)
+
+
+def _footprint_clearance(points: F64, robot: RobotConfig, max_range_m: float) -> float:
+    """Smallest exact distance [m] from the points within ``max_range_m`` to the real footprint (negative
+    inside), not along the sector bisectors: at a rectangle's corner the two differ by centimetres."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        near = points[np.einsum("ij,ij->i", points, points) <= max_range_m * max_range_m]
+    return float(np.min(footprint_signed_distance(near, robot))) if near.shape[0] else math.inf
 
 
 def _closest(mask: NDArray[np.bool_], ratio: F64) -> int:

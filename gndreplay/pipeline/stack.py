@@ -1,4 +1,5 @@
-"""NavigationStack: one synchronous model -> planner -> reactor cycle per scan, under the supervisor.
+"""NavigationStack: one synchronous model -> planner -> reactor cycle per scan, under the supervisor; or, in
+the multi-loop paper's modes (teleop, follow, local), the desired module -> mode selector -> reflexive loop.
 
 Scan matching runs one step ahead of the stack (in ``gndreplay.replay``) because the default goal of a
 replay is a pose further along the log's own *corrected* trajectory; the stack receives the corrected
@@ -7,8 +8,10 @@ pose with the tick and never looks at the future. It owns the per-module timers.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Literal
@@ -16,15 +19,17 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import ConfigError
 from ..geometry import transform_points, wrap_angle
 from ..robot import RobotConfig
-from ..types import Flag, Pose2D, Scan, Tick
+from ..types import Command, Flag, Pose2D, Scan, Subgoal, Tick
 from .cspace import free_cspace
-from .follow import FollowParams
-from .local import LocalParams
+from .follow import FollowParams, PathFollower, first_free_point
+from .local import LocalParams, local_command, polar_map, warm_up_local
 from .model import UNKNOWN, GridParams, RobotCentredGrid
 from .nd import NdParams, Situation, nd_step
 from .nf1 import Nf1Params, Nf1Planner, Planner, PlanResult, reaches_border
+from .selector import intention_xy, select_mode, swept_area_occupied
 from .supervisor import (
     Mode,
     SafeCommand,
@@ -41,7 +46,7 @@ from .tunnel import TunnelParams, TunnelPlanner, warm_up_planners
 
 __all__ = [
     "MODULES", "NAV_MODES", "PLANNERS", "NavMode", "NavigationStack", "StackParams", "TickResult",
-    "make_planner", "warm_up",
+    "make_planner", "teleop_command", "warm_up",
 ]
 
 MODULES = ("match", "model", "planner", "reactor")
@@ -60,7 +65,10 @@ class StackParams:
     """Everything the stack needs, one frozen section per stage (see ``gndreplay.config``).
 
     ``planner_kind`` chooses the planner ("nf1": ``planner`` settings and the [cspace] margin; "tunnel":
-    ``tunnel`` settings, its own margin); ``planner.lookahead_m`` places the reactor's target for both.
+    ``tunnel`` settings, its own margin); ``planner.lookahead_m`` places the reactor's target for both,
+    and local navigation's target ahead of a teleoperation command when the mode selector takes over.
+    ``nav_mode``, ``selector``, ``selector_margin_m``, ``cmd_timeout_s``, ``local`` and ``follow``: the
+    multi-loop architecture (``NavigationConfig``; see ``NavigationStack``).
     """
 
     robot: RobotConfig
@@ -76,6 +84,8 @@ class StackParams:
     selector: bool = True
     local: LocalParams = LocalParams()
     follow: FollowParams = FollowParams()
+    selector_margin_m: float = 0.05
+    cmd_timeout_s: float = 0.5
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -86,7 +96,8 @@ class TickResult:
         t_ns: the scan's time.
         pose_corrected: robot pose after scan matching (corrected odometry frame).
         v_mps, vy_mps, w_radps: the command (vy only for a holonomic base).
-        mode: GND mode or reflexive override that produced the command.
+        mode: GND mode or reflexive override that produced the command (a reflexive override of the active
+            module's command is recorded here; ``active_mode`` still names the module that won).
         situation: the ND+ situation (Situation.NONE without a region).
         flags: exception flags raised this tick.
         direction_rad: ND+ motion direction in the robot frame (nan without a region).
@@ -99,7 +110,9 @@ class TickResult:
         tunnel_width_m: width of the tunnel (nan for NF1 or when the planner failed).
         desired_mode: the navigation mode asked for ("gnd", "teleop", "follow", "local").
         active_mode: the mode whose command won this tick (the mode selector's choice).
-        takeover_reason: why the active mode is not the desired one ("" when it is).
+        takeover_reason: why the active mode is not the desired one ("teleop: swept area occupied (scan)"),
+            or why the desired module commands standing still ("teleop: no command", "teleop: command
+            stale"); "" otherwise.
         subgoal_index: the path follower's current subgoal (-1 outside path following).
     """
 
@@ -151,10 +164,49 @@ def _to_robot(pose: Pose2D, xy: NDArray[np.float64]) -> NDArray[np.float64]:
 
 class NavigationStack:
     """Holds the state carried between ticks: the robot-centred grid, the previous scan time, the trap
-    detector and an escape in progress. ``step`` runs one full cycle and always returns one command."""
+    detector, an escape in progress and, in path following, the path follower. ``step`` runs one full
+    cycle and always returns one command.
 
-    def __init__(self, params: StackParams) -> None:
+    ``params.nav_mode`` chooses the desired navigation mode (the multi-loop paper's three modes, plus GND):
+
+    - "gnd": GND to the goal (model -> NF1/tunnel planner -> ND+ -> supervisor); no mode selector.
+    - "teleop": the tick's velocity command (``Tick.cmd``, recorded in the log or scripted), clipped to the
+      robot's velocity limits; no command (None, not finite, or older than ``cmd_timeout_s`` at the tick's
+      time): stand still, the reason recorded.
+    - "follow": ``PathFollower.step`` over ``subgoals``; once it reports the final subgoal reached, GOAL:
+      stop, Flag.GOAL_REACHED.
+    - "local": local navigation alone towards the goal: strategy "nd" is ND+ to the goal itself (GND's
+      mND, and ROTATE towards it without a free walking area), the others ``local.local_command`` on the
+      polar map of the grid's occupied cells.
+
+    With ``params.selector`` (teleop and follow) the mode selector (``selector``) arbitrates every tick:
+    when the area the desired command sweeps over the braking horizon holds a raw scan hit or an occupied
+    cell (within ``selector_margin_m``), local navigation wins the tick and steers towards the desired
+    mode's intention (path following: the first point of its trajectory beyond its look-ahead point that
+    is free in C-space, ``PathFollower.local_target``; teleoperation: ``_teleop_target``, a point where the
+    driver's command heads, fixed in the world while the takeover lasts); the desired mode wins again on
+    the first tick its
+    area is clear. Whatever won then goes through the reflexive loop (stale data, ``safe_command``, trap
+    escape), as in GND, except that a teleop command is never replaced by a trap escape (a driver's
+    dithering is the driver's). ``selector=False`` is the driver alone, for comparison: the desired mode's
+    command goes out unchanged, with no takeover and no reflexive override (GND mode ignores it; local
+    mode has no selector, its reflexive loop always runs).
+    """
+
+    def __init__(self, params: StackParams, subgoals: Sequence[Subgoal] = ()) -> None:
+        if params.nav_mode not in NAV_MODES:
+            raise ConfigError(f"navigation.mode must be one of {', '.join(NAV_MODES)}, "
+                              f"got {params.nav_mode!r}")
         self.params = params
+        self._follower: PathFollower | None = None
+        if params.nav_mode == "follow":
+            if not subgoals:
+                raise ConfigError("navigation.mode = \"follow\" needs subgoals (none given)")
+            self._follower = PathFollower(
+                subgoals, params.follow, params.robot,
+                inflate_m=params.robot.inner_radius_m + params.cspace_margin_m,
+                unknown_is_free=params.unknown_is_free, escape_m=params.planner.escape_m,
+            )
         self.grid = RobotCentredGrid(params.grid)
         self._planner = make_planner(params)
         self._trap = TrapDetector(params.supervisor, params.robot.wmax_radps)
@@ -165,17 +217,35 @@ class NavigationStack:
         self._looked_rad = 0.0  # turned in place since the goal was held unreachable
         self._prev_theta: float | None = None
         self._rotate_sign = 0.0  # turn direction of the previous tick's ROTATE (0: not rotating)
+        self._v_out = 0.0  # forward speed of the last command out (path following's at-rest test)
+        self._w_out = 0.0  # ... and its turn rate (the start curvature of a regenerated trajectory)
+        self._local_side = 0  # the side the last local strategy command kept its wall / obstacle on
+        self._intent: tuple[NDArray[np.float64], tuple[float, float, float]] | None = None  # held teleop
+        # target (world) of the takeover in progress, and the driver's command it was aimed from
 
     def step(self, tick: Tick, pose: Pose2D, goal_xy: tuple[float, float], match_ms: float = 0.0,
              match_failed: bool = False) -> TickResult:
-        """One cycle: model -> planner -> reactor -> supervisor, for the tick's scan at ``pose``."""
-        p = self.params
+        """One cycle for the tick's scan at ``pose`` (corrected frame): GND's model -> planner -> reactor ->
+        supervisor, or the desired mode's module -> mode selector -> reflexive loop (see the class)."""
+        if self.params.nav_mode == "gnd":
+            return self._gnd_step(tick, pose, goal_xy, match_ms, match_failed)
+        return self._multi_loop_step(tick, pose, goal_xy, match_ms, match_failed)
+
+    def _model(self, tick: Tick, pose: Pose2D, match_ms: float,
+               match_failed: bool) -> tuple[Flag, dict[str, float]]:
+        """The start of every cycle: the matcher's flag and time, the scan into the grid (timed "model")."""
         flags = Flag.MATCH_FAILED if match_failed else Flag.NONE
         timings = {"match": match_ms}
-
         t0 = time.perf_counter_ns()
         self.grid.integrate(tick.scan, pose)
         timings["model"] = _ms(t0)
+        return flags, timings
+
+    def _gnd_step(self, tick: Tick, pose: Pose2D, goal_xy: tuple[float, float], match_ms: float,
+                  match_failed: bool) -> TickResult:
+        """GND: model -> planner -> reactor -> supervisor."""
+        p = self.params
+        flags, timings = self._model(tick, pose, match_ms, match_failed)
 
         t0 = time.perf_counter_ns()
         goal = np.asarray(goal_xy, dtype=np.float64)
@@ -241,6 +311,138 @@ class NavigationStack:
             tunnel_width_m=planned.width_m if planned.ok else math.nan,
         )
 
+    def _multi_loop_step(self, tick: Tick, pose: Pose2D, goal_xy: tuple[float, float], match_ms: float,
+                         match_failed: bool) -> TickResult:
+        """Teleop / follow / local: the desired module's command, the mode selector, the reflexive loop.
+
+        Timings: "planner" is the desired module (the path follower, reading the teleop command),
+        "reactor" the mode selector and local navigation."""
+        p = self.params
+        flags, timings = self._model(tick, pose, match_ms, match_failed)
+
+        t0 = time.perf_counter_ns()
+        desired: str = p.nav_mode
+        goal = np.asarray(goal_xy, dtype=np.float64)
+        goal_rel = _to_robot(pose, goal[None, :])[0]
+        path_xy: NDArray[np.float64] = np.zeros((0, 2))
+        subgoal_index, reason, done = -1, "", False
+        v = vy = w = 0.0
+        intention: NDArray[np.float64] | None = goal_rel
+        if desired == "teleop":
+            v, vy, w, reason = teleop_command(tick.cmd, p.robot, t_ns=tick.t_ns, timeout_s=p.cmd_timeout_s)
+            intention = intention_xy(v, vy, w, p.planner.lookahead_m)
+        elif desired == "follow":
+            assert self._follower is not None  # built in __init__ for this mode
+            fc = self._follower.step(pose, self.grid, v_mps=self._v_out, w_radps=self._w_out)
+            v, w = fc.v_mps, fc.w_radps
+            subgoal_index, done, path_xy = fc.subgoal_index, fc.done, fc.trajectory_xy
+        timings["planner"] = _ms(t0)
+
+        t0 = time.perf_counter_ns()
+        active, mode = desired, _MODULE_MODE[desired]
+        situation, direction = Situation.NONE, math.nan
+        reflexive = p.selector or desired == "local"  # local navigation has no selector to switch off
+        points = self._safety_points(tick, pose, self._reach_m()) if reflexive else None
+        if desired == "local" or done:
+            done = done or math.hypot(goal_rel[0], goal_rel[1]) <= p.supervisor.goal_tolerance_m
+        elif p.selector:
+            assert points is not None
+            where = swept_area_occupied(v, vy, w, points[1], points[2], p.robot, p.supervisor,
+                                        cell_m=p.grid.cell_m, margin_m=p.selector_margin_m)
+            active, why = select_mode(desired, where)
+            reason = why or reason
+        if done:
+            mode, v, vy, w = Mode.GOAL, 0.0, 0.0, 0.0
+            flags |= Flag.GOAL_REACHED
+        elif active == "local":
+            if self._follower is not None:  # past the obstacle on the path, not at it (follow.local_target)
+                intention = _to_robot(pose, np.asarray(self._follower.local_target(self.grid))[None, :])[0]
+            elif desired == "teleop":
+                intention = self._teleop_target(pose, (v, vy, w))
+            if intention is None:  # a still command is never taken over; kept for the type checker
+                intention = np.zeros(2)
+            mode, v, vy, w, situation, direction, flag = self._local(pose, intention)
+            flags |= flag
+        if active != "local":
+            self._intent = None
+        timings["reactor"] = _ms(t0)
+        flags |= budget_flags({k: x / 1e3 for k, x in timings.items()}, p.supervisor)
+
+        rotating = mode is Mode.ROTATE
+        if points is not None:
+            # no trap escape for the driver: dithering under teleop is the driver's own (and an escape
+            # begun under local navigation ends when the driver has the robot again)
+            mode, v, vy, w, flags = self._reflexive(tick, pose, mode, v, vy, w, flags, points=points,
+                                                    trap=active != "teleop")
+        self._rotate_sign = (1.0 if w > 0.0 else -1.0) if rotating and w != 0.0 else 0.0
+        self._v_out, self._w_out = _finite(v), _finite(w)
+        return TickResult(
+            t_ns=tick.t_ns,
+            pose_corrected=pose,
+            v_mps=_finite(v),
+            vy_mps=_finite(vy),
+            w_radps=_finite(w),
+            mode=mode,
+            situation=situation,
+            flags=flags,
+            direction_rad=direction,
+            goal=(float(goal[0]), float(goal[1])),
+            path_xy=path_xy,
+            timings_ms=timings,
+            desired_mode=desired,
+            active_mode=active,
+            takeover_reason=reason,
+            subgoal_index=subgoal_index,
+        )
+
+    def _teleop_target(self, pose: Pose2D, cmd: tuple[float, float, float]) -> NDArray[np.float64] | None:
+        """Local navigation's target (robot frame) while it has taken over from the driver.
+
+        Where the driver's command heads (``selector.intention_xy``), searched along that bearing from the
+        look-ahead distance to ``TELEOP_REACH`` times it for the first point free in C-space with unknown
+        cells counted as blocked (known free space past the obstacle, not the obstacle's unseen inside),
+        else the far end. It is fixed in the world when the takeover starts and kept while it lasts: a
+        target in the robot frame turns with the robot, so local navigation, turning to pass the obstacle,
+        would never see it move aside and would only dither in front of it. It is aimed again when the
+        driver's command changes (a sign of v or w, or a change of a quarter of the robot's limits: the
+        driver asked for something else)."""
+        p = self.params
+        if self._intent is not None and not _command_changed(self._intent[1], cmd, p.robot):
+            return _to_robot(pose, self._intent[0][None, :])[0]
+        rel = intention_xy(*cmd, p.planner.lookahead_m)
+        if rel is None:
+            self._intent = None
+            return None
+        bearing = math.atan2(rel[1], rel[0])
+        dists = np.arange(p.planner.lookahead_m, TELEOP_REACH * p.planner.lookahead_m + 1e-9, p.grid.cell_m)
+        ray = np.column_stack([dists * math.cos(bearing), dists * math.sin(bearing)])
+        world = transform_points(pose.as_array(), ray)
+        i = first_free_point(world, self.grid, inflate_m=p.robot.inner_radius_m + p.cspace_margin_m,
+                             unknown_is_free=False)
+        target = world[-1 if i is None else i]
+        self._intent = (target, cmd)
+        return _to_robot(pose, target[None, :])[0]
+
+    def _local(
+        self, pose: Pose2D, target: NDArray[np.float64]
+    ) -> tuple[Mode, float, float, float, Situation, float, Flag]:
+        """Local navigation towards ``target`` (robot frame) with the configured strategy, on the grid's
+        occupied cells: (mode, v, vy, w, ND+ situation, direction, flag). Strategy "nd": ND+ steering to the
+        target itself (GND's mND), ROTATE towards it without a free walking area (REACTOR_NO_REGION). The
+        others: ``local.local_command`` on the polar map, told the side it kept last time."""
+        p = self.params
+        obstacles = self.grid.occupied_points(pose, p.reactor.max_range_m)
+        if p.local.strategy == "nd":
+            nd = nd_step(obstacles, target, p.robot, p.reactor)
+            if nd.flag & Flag.REACTOR_NO_REGION:
+                return Mode.ROTATE, 0.0, 0.0, self._rotate_w(target), nd.situation, nd.direction_rad, nd.flag
+            return Mode.MND, nd.v_mps, nd.vy_mps, nd.w_radps, nd.situation, nd.direction_rad, nd.flag
+        lc = local_command(polar_map(obstacles, p.robot, p.local), target, p.robot, p.local,
+                           side_hint=self._local_side)
+        self._local_side = lc.side
+        mode = _MODULE_MODE["local"]
+        return mode, lc.v_mps, lc.vy_mps, lc.w_radps, Situation.NONE, lc.direction_rad, Flag.NONE
+
     def _rotate_w(self, goal_rel: NDArray[np.float64]) -> float:
         """ROTATE's turn rate. The direction is chosen towards the goal when ROTATE starts and kept while
         it lasts (the turn actually executed, also when the safety check reversed it): choosing it afresh
@@ -291,31 +493,51 @@ class NavigationStack:
             return np.array([d * math.cos(bearing), d * math.sin(bearing)])
         return _to_robot(pose, goal[None, :])[0]
 
+    def _reach_m(self) -> float:
+        """How far from the rotation centre an obstacle matters to the mode selector and the reflexive
+        loop: the loop's reach plus the selector's margin."""
+        p = self.params
+        return safety_reach_m(p.robot, p.supervisor, p.grid.cell_m) + p.selector_margin_m
+
+    def _safety_points(self, tick: Tick, pose: Pose2D, reach_m: float) -> _Points:
+        """The obstacles a command can touch (robot frame): all the tick's raw scan hits, those within
+        ``reach_m`` of the rotation centre, and the grid's occupied cell centres within ``reach_m``."""
+        raw = transform_points(tick.scan.sensor_pose.as_array(), tick.scan.points())
+        near = raw[np.hypot(raw[:, 0], raw[:, 1]) <= reach_m]
+        return raw, near, self.grid.occupied_points(pose, reach_m)
+
     def _reflexive(
         self, tick: Tick, pose: Pose2D, mode: Mode, v: float, vy: float, w: float, flags: Flag,
-        unreachable: bool = False,
+        unreachable: bool = False, points: _Points | None = None, trap: bool = True,
     ) -> tuple[Mode, float, float, float, Flag]:
         """The reflexive loop: stale data, a command whose swept footprint would touch an obstacle of the
         raw scan or the grid (replaced by ``safe_command``'s rule, recorded as the mode), trap escape.
 
         With the goal held unreachable the robot only looks around: a turn the check slows down is kept,
         one it would reverse or replace stops the robot for good (ROTATE at rest: no way, stay still),
-        and there is no trap escape (standing still is the intended behaviour, not a trap)."""
+        and there is no trap escape (standing still is the intended behaviour, not a trap). ``points``:
+        ``_safety_points`` of this tick if at hand (any reach at least the loop's: cut down to it).
+        ``trap`` False: no trap detection or escape this tick, and an escape in progress ends."""
         p = self.params
         prev, self._prev_t_ns = self._prev_t_ns, tick.t_ns
         if prev is not None and (tick.t_ns - prev) / 1e9 > p.supervisor.stale_scan_s:
             return Mode.STALE, 0.0, 0.0, 0.0, flags | Flag.STALE_SCAN
-        raw = transform_points(tick.scan.sensor_pose.as_array(), tick.scan.points())
         cell_m = p.grid.cell_m
         reach = safety_reach_m(p.robot, p.supervisor, cell_m)
-        near = raw[np.hypot(raw[:, 0], raw[:, 1]) <= reach]
-        grid_xy = self.grid.occupied_points(pose, reach)
+        if points is None:
+            raw, near, grid_xy = self._safety_points(tick, pose, reach)
+        else:
+            raw, near, grid_xy = points
+            near = near[np.hypot(near[:, 0], near[:, 1]) <= reach]
+            grid_xy = grid_xy[np.hypot(grid_xy[:, 0], grid_xy[:, 1]) <= reach]
         unknown_xy = partial(self.grid.cell_points, pose, reach, UNKNOWN)
 
         def check(v: float, vy: float, w: float) -> SafeCommand:
             return safe_command(v, vy, w, near, grid_xy, p.robot, p.supervisor, cell_m=cell_m,
                                 unknown_xy=unknown_xy)
 
+        if not trap:
+            self._escape_left = 0
         if self._escape_left > 0:
             self._escape_left -= 1
             if check(self._escape_v, 0.0, 0.0).rule is None:
@@ -330,7 +552,7 @@ class NavigationStack:
                 mode, v, vy, w = safe.rule, safe.v_mps, safe.vy_mps, safe.w_radps
                 if safe.rule is Mode.EMERGENCY:
                     flags |= Flag.EMERGENCY_STOP
-        if self._trap.update(mode, w, (pose.x, pose.y, pose.theta)) and not unreachable:
+        if trap and self._trap.update(mode, w, (pose.x, pose.y, pose.theta)) and not unreachable:
             flags |= Flag.TRAP_DETECTED
             v_esc, possible = escape_command(raw, p.robot, p.supervisor)
             if possible and check(v_esc, 0.0, 0.0).rule is None:
@@ -339,12 +561,79 @@ class NavigationStack:
         return mode, v, vy, w, flags
 
 
+_Points = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+"""A tick's obstacles for the safety checks (robot frame): all raw scan hits, the hits within a reach, the
+grid's occupied cell centres within it (``NavigationStack._safety_points``)."""
+
+# the mode column of a tick the desired module or a local strategy commanded unchanged (ND+ as local
+# navigation reports its own mND / ROTATE); ``active_mode`` names the module that won in any case
+_MODULE_MODE: dict[str, Mode] = {"teleop": Mode.TELEOP, "follow": Mode.FOLLOW, "local": Mode.LOCAL}
+
+
+TELEOP_REACH = 4.0
+"""How far a takeover's target may lie along the driver's command, in look-ahead distances."""
+
+
+def _command_changed(a: tuple[float, float, float], b: tuple[float, float, float],
+                     robot: RobotConfig) -> bool:
+    """The driver asked for something else: a sign of v, vy or w changed, or a component moved by a quarter
+    of the robot's limit."""
+    lim = (robot.vmax_mps, robot.vmax_mps, robot.wmax_radps)
+    return any(np.sign(x) != np.sign(y) or abs(x - y) > 0.25 * m for x, y, m in zip(a, b, lim, strict=True))
+
+
+def teleop_command(cmd: Command | None, robot: RobotConfig, *, t_ns: int | None = None,
+                   timeout_s: float = math.inf) -> tuple[float, float, float, str]:
+    """(v, vy, w, reason) of a teleoperation command: clipped to the robot's velocity limits (vy only for
+    a holonomic base); none, one not finite, or one older than ``timeout_s`` at time ``t_ns`` (a driver who
+    let go, a log whose commands stopped: ``Tick.cmd`` is the last one at or before the tick) is standing
+    still with the reason ("teleop: no command", "teleop: command stale")."""
+    if cmd is None:
+        return 0.0, 0.0, 0.0, "teleop: no command"
+    if t_ns is not None and (t_ns - cmd.t_ns) / 1e9 > timeout_s:
+        return 0.0, 0.0, 0.0, "teleop: command stale"
+    if not (math.isfinite(cmd.v_mps) and math.isfinite(cmd.vy_mps) and math.isfinite(cmd.w_radps)):
+        return 0.0, 0.0, 0.0, "teleop: command not finite"
+    vmax, wmax = robot.vmax_mps, robot.wmax_radps
+    vy = min(max(cmd.vy_mps, -vmax), vmax) if robot.drive == "holonomic" else 0.0
+    return min(max(cmd.v_mps, -vmax), vmax), vy, min(max(cmd.w_radps, -wmax), wmax), ""
+
+
 def warm_up(params: StackParams) -> None:
     """Run a throwaway stack on synthetic scans so numba compiles (or loads) every kernel before the
     first timed tick; otherwise tick 0 would report hundreds of milliseconds of JIT as model time.
 
     Readers may hand out read-only arrays (shared beam angles, buffers decoded in place), which numba
-    compiles as a separate specialisation, so every writable/read-only combination is exercised."""
+    compiles as a separate specialisation, so every writable/read-only combination is exercised. The GND
+    cycle is always warmed (its kernels serve the other modes too); for another navigation mode a stack in
+    that mode then runs its module, a mode selector takeover and the local strategy (``_warm_up_mode``)."""
+    gnd = dataclasses.replace(params, nav_mode="gnd")
+    _warm_up_gnd(gnd)
+    if params.nav_mode != "gnd":
+        warm_up_local(params.robot)
+        _warm_up_mode(params)
+
+
+def _warm_up_mode(params: StackParams) -> None:
+    """The teleop / follow / local module on the synthetic scans: a command driving at an obstacle close
+    ahead (the selector hands over to the local strategy), a reverse arc, no command."""
+    subgoals = (Subgoal(1.0, 0.0, 0.0), Subgoal(2.0, 0.5, 0.3, "stop")) if params.nav_mode == "follow" else ()
+    stack = NavigationStack(params, subgoals)
+    angles = np.linspace(-math.pi / 2, math.pi / 2, 181)
+    open_ranges = np.where(np.arange(angles.size) % 7 == 0, np.inf, 3.0)
+    close = np.where(np.abs(angles) < 0.3, params.robot.front_m + 0.1, 3.0)
+    v, w = params.robot.vmax_mps, params.robot.wmax_radps
+    k = 0
+    for ranges in (open_ranges, close):
+        scan = Scan(t_ns=k, ranges_m=ranges, angles_rad=angles, max_range_m=8.0)
+        for cmd in (Command(k, v, 0.0), Command(k, -v, 0.5 * w), None):
+            pose = Pose2D(0.0, 0.0, 0.0)
+            stack.step(Tick(index=k, t_ns=k, scan=scan, odom=pose, cmd=cmd), pose, (3.0, 0.5))
+            k += 1
+
+
+def _warm_up_gnd(params: StackParams) -> None:
+    """GND's kernels (model, planner, ND+, supervisor) on synthetic scans (see ``warm_up``)."""
     stack = NavigationStack(params)
     k = 0
     for ro_ranges in (False, True):

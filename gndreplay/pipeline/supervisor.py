@@ -11,8 +11,8 @@ The collision check (``safe_command``) sweeps the real footprint (rectangle or c
 arc over the braking horizon the robot's acceleration limits give, against the raw current scan *and* the
 grid's occupied cells (the wheelchair's laser sees only its front half: what it passes while turning was
 seen earlier, and is only in the grid). A command that would touch is replaced by the first admissible one
-of: a slower arc, the other turn direction, a short reverse through grid cells known FREE, and only then a
-stop; the tick's mode says which rule fired (SAFE_SLOW, SAFE_TURN, SAFE_REVERSE, EMERGENCY).
+of: a slower arc, no turn or the other turn direction, a short reverse through grid cells known FREE, and
+only then a stop; the tick's mode says which rule fired (SAFE_SLOW, SAFE_TURN, SAFE_REVERSE, EMERGENCY).
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ __all__ = [
     "SafeCommand",
     "SupervisorParams",
     "TrapDetector",
+    "arc_touches",
     "braking_time_s",
     "budget_flags",
     "escape_command",
@@ -44,6 +45,7 @@ __all__ = [
     "safe_command",
     "safety_reach_m",
     "swept_collision",
+    "unconfirmed_cells",
 ]
 
 
@@ -55,11 +57,14 @@ class Mode(enum.Enum):
     ROTATE = "ROTATE"  # reactor found no free walking area: stop and rotate
     EMERGENCY = "EMERGENCY"  # reflexive: every admissible command would touch an obstacle, stop
     SAFE_SLOW = "SAFE_SLOW"  # reflexive: the command would touch; a slower motion along the same arc
-    SAFE_TURN = "SAFE_TURN"  # reflexive: the command would touch; the other turn direction
+    SAFE_TURN = "SAFE_TURN"  # reflexive: the command would touch; straight on, or the other turn direction
     SAFE_REVERSE = "SAFE_REVERSE"  # reflexive: the command would touch; a short reverse through known free
     STALE = "STALE"  # reflexive: sensor data too old, stop
     ESCAPE = "ESCAPE"  # reflexive: trap detected, slow straight escape
     GOAL = "GOAL"  # goal reached, stop
+    TELEOP = "TELEOP"  # multi-loop: the driver's command, unchanged
+    FOLLOW = "FOLLOW"  # multi-loop: the path follower's command, unchanged
+    LOCAL = "LOCAL"  # multi-loop: a local navigation strategy's command (ND+ itself reports mND / ROTATE)
 
 
 @dataclass(frozen=True, slots=True)
@@ -175,25 +180,25 @@ _SWEEP_STEP_M = 0.02  # largest displacement of any footprint point between two 
 _SWEEP_MAX_POSES = 48
 
 
-def _sweep_touches(
-    points_xy: NDArray[np.float64], margin_m: float, v_mps: float, vy_mps: float,
-    w_radps: float, robot: RobotConfig, params: SupervisorParams,
+def arc_touches(
+    points_xy: NDArray[np.float64], v_mps: float, vy_mps: float, w_radps: float, t_end_s: float,
+    robot: RobotConfig, margin_m: float,
 ) -> bool:
-    """True when the footprint, moved along the constant-twist arc for ``braking_time_s``, comes within
+    """True when the footprint, moved along the constant-twist arc for ``t_end_s``, comes within
     ``margin_m`` of a point *and closer than it is now* (a point beside a robot driving parallel to it,
-    or already under it, does not block every motion; one the motion approaches does)."""
-    if points_xy.shape[0] == 0:
+    or already under it, does not block every motion; one the motion approaches does). Footprint poses
+    are checked every 2 cm of the farthest footprint point's travel (at most 48 poses)."""
+    if points_xy.shape[0] == 0 or t_end_s <= 0.0:
         return False
-    t_end = braking_time_s(v_mps, vy_mps, w_radps, robot, params)
-    travel = math.hypot(v_mps, vy_mps) * t_end
+    travel = math.hypot(v_mps, vy_mps) * t_end_s
     # only points the moving footprint's enclosing circle can reach (the centre moves at most ``travel``)
     bound = robot.outer_radius_m + travel + margin_m
     points_xy = points_xy[np.einsum("ij,ij->i", points_xy, points_xy) <= bound * bound]
     if points_xy.shape[0] == 0:
         return False
-    reach = travel + abs(w_radps) * robot.outer_radius_m * t_end
+    reach = travel + abs(w_radps) * robot.outer_radius_m * t_end_s
     n = min(max(math.ceil(reach / _SWEEP_STEP_M), 1), _SWEEP_MAX_POSES)
-    ts = np.linspace(0.0, t_end, n + 1)
+    ts = np.linspace(0.0, t_end_s, n + 1)
     th = w_radps * ts
     # constant-twist integration (exact for an arc); the limit w -> 0 is a straight line
     if abs(w_radps) > 1e-9:
@@ -228,8 +233,25 @@ def swept_collision(
     ``grow_m`` = half a cell: the obstacle lies anywhere in its cell). Touching means coming within
     emergency_margin_m + grow_m of a point and closer than now; a pure rotation sweeps the rotating
     footprint (it matters for the rectangular wheelchair)."""
-    margin = params.emergency_margin_m + grow_m
-    return _sweep_touches(points_xy, margin, v_mps, vy_mps, w_radps, robot, params)
+    t_end = braking_time_s(v_mps, vy_mps, w_radps, robot, params)
+    return arc_touches(points_xy, v_mps, vy_mps, w_radps, t_end, robot, params.emergency_margin_m + grow_m)
+
+
+def unconfirmed_cells(grid_xy: NDArray[np.float64], scan_xy: NDArray[np.float64],
+                      cell_m: float) -> NDArray[np.float64]:
+    """The occupied cell centres that hold no raw hit of the current scan.
+
+    A cell the scan confirms (a hit within half a cell diagonal of its centre, i.e. in the cell) is checked
+    through its hits, which are exact to the laser's noise, instead of as a cell grown by half its side:
+    the growth exists because the grid forgets where in the cell the obstacle was. In a 0.85 m door the
+    grown jamb cells alone leave the 0.7 m chair less than a centimetre per side; the hits leave it the
+    real 7.5 cm. Cells out of the scan's view (beside and behind the chair) keep the grown check."""
+    if grid_xy.shape[0] == 0 or scan_xy.shape[0] == 0:
+        return grid_xy
+    r = 0.5 * math.sqrt(2.0) * cell_m
+    d2 = (grid_xy[:, None, 0] - scan_xy[None, :, 0]) ** 2 + (grid_xy[:, None, 1] - scan_xy[None, :, 1]) ** 2
+    keep: NDArray[np.float64] = grid_xy[~np.any(d2 <= r * r, axis=1)]
+    return keep
 
 
 @dataclass(frozen=True, slots=True)
@@ -258,33 +280,48 @@ def safe_command(
 
     Obstacles: ``scan_xy`` raw hits of the current scan and ``grid_xy`` OCCUPIED cell centres (both robot
     frame); cell centres are grown by half a cell (``swept_collision``). Replacements, first admissible
-    wins: the same arc at 1/2 then 1/4 of the speed (SAFE_SLOW: a shorter braking horizon); the other turn
-    direction, on the same arc then in place (SAFE_TURN); for a turning command, a straight reverse at
-    escape_v_frac * vmax whose sweep also avoids every cell not known FREE (``unknown_xy()``: UNKNOWN cell
-    centres, computed only if needed; without it no reverse) (SAFE_REVERSE); else stop (EMERGENCY). A still
-    command is never checked.
+    wins: the same arc at 1/2 then 1/4 of the speed (SAFE_SLOW: a shorter braking horizon); the same speed
+    straight on (a chair in a door: any turn swings a side towards a jamb it passes parallel), then the
+    other turn direction, on the same arc then in place (SAFE_TURN); for a turning command, a straight
+    reverse at escape_v_frac * vmax whose sweep also avoids every cell not known FREE (``unknown_xy()``:
+    UNKNOWN cell centres, computed only if needed; without it no reverse) (SAFE_REVERSE); else stop
+    (EMERGENCY). A still command is never checked. A differential base's commanded reverse (the reactor
+    backing out of a turn the chair cannot make) must avoid the UNKNOWN cells too: the chair's laser never
+    saw what is behind it.
+
+    Grid cells that hold a hit of the current scan are checked through the hit (``unconfirmed_cells``).
 
     The reverse only serves a turn: backing off makes room for the sweep of a rectangle turning (the
     wheelchair's problem); for a straight command it would only back off and come again, tick after tick.
     """
     grow = 0.5 * cell_m
+    grid_xy = unconfirmed_cells(grid_xy, scan_xy, cell_m)
 
     def touches(v: float, vy: float, w: float) -> bool:
         return swept_collision(scan_xy, v, w, robot, params, vy_mps=vy) or swept_collision(
             grid_xy, v, w, robot, params, vy_mps=vy, grow_m=grow
         )
 
-    if (v_mps == 0.0 and vy_mps == 0.0 and w_radps == 0.0) or not touches(v_mps, vy_mps, w_radps):
+    def backs_into_unknown(v: float, w: float) -> bool:  # a differential base backing up
+        return v < 0.0 and robot.drive == "differential" and unknown_xy is not None and swept_collision(
+            unknown_xy(), v, w, robot, params, grow_m=grow
+        )
+
+    if (v_mps == 0.0 and vy_mps == 0.0 and w_radps == 0.0) or not (
+        touches(v_mps, vy_mps, w_radps) or backs_into_unknown(v_mps, w_radps)
+    ):
         return SafeCommand(v_mps, vy_mps, w_radps, None)
     candidates: list[tuple[float, float, float, Mode]] = [
         (f * v_mps, f * vy_mps, f * w_radps, Mode.SAFE_SLOW) for f in (0.5, 0.25)
     ]
     if w_radps != 0.0:
+        if v_mps != 0.0 or vy_mps != 0.0:  # the same speed without turning: parallel to what it passes
+            candidates.append((v_mps, vy_mps, 0.0, Mode.SAFE_TURN))
         candidates.append((v_mps, vy_mps, -w_radps, Mode.SAFE_TURN))
         if v_mps != 0.0 or vy_mps != 0.0:
             candidates.append((0.0, 0.0, -w_radps, Mode.SAFE_TURN))
     for v, vy, w, rule in candidates:
-        if not touches(v, vy, w):
+        if not (touches(v, vy, w) or backs_into_unknown(v, w)):
             return SafeCommand(v, vy, w, rule)
     if unknown_xy is not None and w_radps != 0.0:
         v_back = -params.escape_v_frac * robot.vmax_mps

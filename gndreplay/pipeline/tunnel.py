@@ -39,11 +39,16 @@ Choices:
   than the robot is a one- or two-cell waist that rays from afar almost never thread, and a straight
   tunnel through it must follow its axis. A too narrow passage gets no node (its gap is not
   wider than the tunnel) and, were a node placed, its tunnel would be blocked (Fig. 3a, nodes 2 and 3).
-* **Rays march** by the chessboard distance to the nearest C-obstacle cell (two raster passes; a lower
-  bound of the Euclidean one) minus one, so open space costs a few steps per ray. In the workspace a C-free
-  cell d from C-obstacle is at least d + floor((rho - 1) / sqrt 2) from an obstacle (every cell within
-  rho - 1 cells of an obstacle is C-obstacle, rho the dilation radius), so one distance transform serves
-  both.
+* **Rays march** in unit steps of their parameter (the samples t = 0, 1, 2, ... cells, each rounded to its
+  cell), the C-space ray from the node, the workspace ray on from where the C-space one stopped. Skipping
+  samples by a distance transform gives the same samples' answer but was slower on 400 x 400 office grids:
+  the transform (two passes over the grid) and a random read of an int array per step cost more than the
+  steps saved (rays end at walls a few metres away; ``benchmarks/planner.py``).
+* **Border nodes**: when no candidate fits past an obstacle end whose far ray leaves the grid (the place a
+  little past the corner is C-obstacle), a node goes on the ray's last sample, on the grid border. Why: a
+  goal beyond the grid is projected onto the border, and the border column beside a wall parallel to it
+  may be the only free C-space there (NF1 walks up it; a node must stand on it for a straight tunnel to
+  run along it). Not complete: where the spacing rule already took the strip's foot, it still gets none.
 * **"Unless the space is already taken by a node"**: a candidate whose cell lies within ``spacing_m`` of
   any node already in the graph (open or expanded) is dropped. ``spacing_m`` is capped below twice the
   dilation radius so a node never takes space on the other side of a wall (two C-free points on opposite
@@ -53,14 +58,19 @@ Choices:
   linearly (a few hundred nodes at most).
 * **Goal test** on expansion (ALGORITHMS.md section 4): the search stops when the tunnel from the node being
   expanded to the goal cell is free. The robot's own node is expanded first, and when the goal is in sight
-  from it nothing else is computed (no distance transform, no ray). The goal cell is resolved as for NF1 (a
+  from it nothing else is computed (no ray). The goal cell is resolved as for NF1 (a
   goal outside the grid is projected onto the border, moved to a free border cell nearby); a goal cell
   outside free C-space is GOAL_IN_OBSTACLE.
 * **Robot in C-obstacle** (closer to a wall than the dilation radius): as NF1's escape, the search starts
   from the nearest free cell within ``escape_m`` and the chain begins with the straight escape segment.
 * **Not reachable**: the open list empties (PLANNER_NO_PATH: no tunnel joins robot and goal, the
   supervisor goes to mND), or ``max_expansions`` nodes were expanded without reaching the goal
-  (PLANNER_TIMEOUT: the search gave up; the supervisor treats it like a time-out). The search is not
+  (PLANNER_TIMEOUT: the search gave up; the supervisor treats it like a time-out). A search still going
+  after 16 expansions first asks whether the robot's and the goal's cells lie in the same 4-connected
+  component of free C-space (two breadth-first floods, one from each end, in turn: about twice the smaller
+  component's size in cells) and stops with PLANNER_NO_PATH when they do not: no chain of tunnels could
+  join them, and an enclosed goal (or robot) would otherwise cost the exhaustion of every node of the
+  robot's region. The search is not
   complete at cell level (rays sample directions): NF1 may find a way the tunnel planner misses; the
   converse cannot happen (a free tunnel chain is a 4-connected path of free cells).
 * **Tunnel and course**: the node chain is string-pulled (from each node, skip to the farthest later node
@@ -68,8 +78,10 @@ Choices:
   tunnel, the paper's "main course of the first part of the tunnel". The stack puts the reactor's target
   ``lookahead_m`` along it, as for NF1's instantaneous direction.
 
-Cost: a plan is the C-space (about 0.5 ms on 400 x 400) plus, unless the goal is in sight, one distance
-transform (about 0.4 ms) and about 0.1-0.2 ms per expansion (``benchmarks/planner.py``).
+Cost (``benchmarks/planner.py``, one core): a plan is the C-space (about 0.5-0.7 ms on 400 x 400), plus,
+unless the goal is in sight, about 0.1 ms per expansion (360 rays, half of it; the rest the passage and
+corner candidates and their tunnels), plus one connectivity check (below 1 ms) in searches longer than 16
+expansions.
 """
 
 from __future__ import annotations
@@ -91,6 +103,8 @@ __all__ = ["TunnelParams", "TunnelPlanner", "tunnel_plan", "warm_up_planners"]
 
 # search outcomes of the kernel
 _FOUND, _EXHAUSTED, _BUDGET = 0, 1, 2
+# expansions without the goal before the search asks whether start and goal are connected at all
+_CHECK_AFTER = 16
 
 
 @dataclass(frozen=True, slots=True)
@@ -147,52 +161,13 @@ class TunnelParams:
 
 
 @njit(cache=True)
-def _chessboard_distance(free: NDArray[np.bool_]) -> NDArray[np.int32]:
-    """(R, C) -> (R, C) chessboard distance [cells] from each cell to the nearest non-free cell (a lower
-    bound of the Euclidean one); cells outside the grid do not count. Two raster passes."""
-    n_r, n_c = free.shape
-    big = np.int32(1 << 20)
-    d = np.empty((n_r, n_c), np.int32)
-    for r in range(n_r):
-        for c in range(n_c):
-            if not free[r, c]:
-                d[r, c] = 0
-                continue
-            m = big
-            if r > 0:
-                m = min(m, d[r - 1, c])
-                if c > 0:
-                    m = min(m, d[r - 1, c - 1])
-                if c < n_c - 1:
-                    m = min(m, d[r - 1, c + 1])
-            if c > 0:
-                m = min(m, d[r, c - 1])
-            d[r, c] = min(m + 1, big)
-    for r in range(n_r - 1, -1, -1):
-        for c in range(n_c - 1, -1, -1):
-            m = d[r, c]
-            if m == 0:
-                continue
-            if r < n_r - 1:
-                m = min(m, d[r + 1, c] + 1)
-                if c > 0:
-                    m = min(m, d[r + 1, c - 1] + 1)
-                if c < n_c - 1:
-                    m = min(m, d[r + 1, c + 1] + 1)
-            if c < n_c - 1:
-                m = min(m, d[r, c + 1] + 1)
-            d[r, c] = m
-    return d
-
-
-@njit(cache=True)
 def _march(
-    mask: NDArray[np.bool_], dist: NDArray[np.int32], bonus: int, r0: float, c0: float, dr: float, dc: float,
-    t: float,
+    mask: NDArray[np.bool_], r0: float, c0: float, dr: float, dc: float, t: float
 ) -> tuple[float, bool]:
-    """March a ray from parameter ``t`` while ``mask`` holds; returns the last sample inside and whether
-    the grid border stopped it. ``dist`` + ``bonus`` (where ``dist`` > 0, else 0) is a lower bound of the
-    chessboard distance to the nearest cell outside ``mask``; the ray steps by it minus one (>= 1)."""
+    """Walk a ray over the samples t, t + 1, ... while ``mask`` holds; returns the last sample inside and
+    whether the grid border stopped it. Unit steps on purpose: skipping samples by a distance transform
+    costs the transform (two passes over the grid) and a random read per step of an int array four times
+    the mask's size, more than it saves on 400 x 400 grids (``benchmarks/planner.py``)."""
     n_r, n_c = mask.shape
     last = t
     while True:
@@ -203,30 +178,64 @@ def _march(
         if not mask[ri, ci]:
             return last, False
         last = t
-        d = dist[ri, ci]
-        t += max(float(d + bonus) - 1.0, 1.0) if d > 0 else 1.0
+        t += 1.0
 
 
 @njit(cache=True)
 def _cast_rays(
-    free: NDArray[np.bool_], clear: NDArray[np.bool_], dist: NDArray[np.int32], bonus: int, r0: float,
-    c0: float, sin_t: NDArray[np.float64], cos_t: NDArray[np.float64],
+    free: NDArray[np.bool_], clear: NDArray[np.bool_], r0: float, c0: float, sin_t: NDArray[np.float64],
+    cos_t: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64], NDArray[np.bool_]]:
     """Range [cells] of each ray from (r0, c0) to its last sample in free C-space and, continuing from
-    there, to its last sample clear of obstacles, and for each whether the grid border stopped it.
-    ``dist`` is the chessboard distance to C-obstacle; ``bonus`` what it adds up to in the workspace."""
+    there, to its last sample clear of obstacles, and for each whether the grid border stopped it."""
     n = sin_t.shape[0]
     rng = np.empty(n, np.float64)
     border = np.zeros(n, np.bool_)
     wrng = np.empty(n, np.float64)
     wborder = np.zeros(n, np.bool_)
     for k in range(n):
-        rng[k], border[k] = _march(free, dist, 0, r0, c0, sin_t[k], cos_t[k], 0.0)
+        rng[k], border[k] = _march(free, r0, c0, sin_t[k], cos_t[k], 0.0)
         if border[k]:
             wrng[k], wborder[k] = rng[k], True
         else:
-            wrng[k], wborder[k] = _march(clear, dist, bonus, r0, c0, sin_t[k], cos_t[k], rng[k])
+            wrng[k], wborder[k] = _march(clear, r0, c0, sin_t[k], cos_t[k], rng[k])
     return rng, border, wrng, wborder
+
+
+@njit(cache=True)
+def _connected(free: NDArray[np.bool_], ar: int, ac: int, br: int, bc: int) -> bool:
+    """Cells a and b (both free) are joined by a 4-connected path of free cells. Two breadth-first floods,
+    one from each end, advance in turn: they meet when a path exists, and otherwise the flood of the
+    smaller component runs dry, after about twice its size in cells."""
+    n_r, n_c = free.shape
+    label = np.zeros(n_r * n_c, np.int8)
+    qa = np.empty(n_r * n_c, np.int32)
+    qb = np.empty(n_r * n_c, np.int32)
+    label[ar * n_c + ac] = 1
+    label[br * n_c + bc] = 2
+    qa[0] = ar * n_c + ac
+    qb[0] = br * n_c + bc
+    heads = np.zeros(2, np.int64)
+    tails = np.ones(2, np.int64)
+    while True:
+        for side in range(2):
+            q = qa if side == 0 else qb
+            if heads[side] == tails[side]:
+                return False
+            i = q[heads[side]]
+            heads[side] += 1
+            r, c = i // n_c, i % n_c
+            for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+                rr, cc = r + dr, c + dc
+                if rr < 0 or rr >= n_r or cc < 0 or cc >= n_c or not free[rr, cc]:
+                    continue
+                j = rr * n_c + cc
+                if label[j] == 0:
+                    label[j] = side + 1
+                    q[tails[side]] = j
+                    tails[side] += 1
+                elif label[j] != side + 1:
+                    return True
 
 
 @njit(cache=True)
@@ -289,12 +298,14 @@ def _away(near: int, far: int) -> int:
 def _search(
     free: NDArray[np.bool_], clear: NDArray[np.bool_], start_r: int, start_c: int, g0: float,
     goal_r: int, goal_c: int, n_rays: int, rho: float, jump: float, advance: float, passage_max: float,
-    spacing: int, max_expansions: int, hw: float,
+    spacing: int, max_expansions: int, hw: float, check_after: int,
 ) -> tuple[int, int, int, NDArray[np.int32], NDArray[np.int32], NDArray[np.int32], NDArray[np.float64], int]:
     """A* over free-space nodes from (start_r, start_c) (chain length ``g0`` already travelled) to the goal
     cell; ``free`` is the C-space, ``clear`` the workspace (not an obstacle), lengths in cells. Returns
     (status, n_expanded, goal_parent, node rows, node cols, parents, g, n): the goal is accessible from node
-    ``goal_parent`` when status is _FOUND."""
+    ``goal_parent`` when status is _FOUND. After ``check_after`` expansions without the goal, a search
+    whose start and goal cells lie in different components of the free C-space stops (_EXHAUSTED: no
+    chain of tunnels can join them, whatever the rays would still find)."""
     cap = min(max_expansions * (n_rays + 1) + 1, free.shape[0] * free.shape[1] + 1)
     nr = np.empty(cap, np.int32)
     nc = np.empty(cap, np.int32)
@@ -307,6 +318,9 @@ def _search(
     theta = np.arange(n_rays) * dtheta
     sin_t = np.sin(theta)
     cos_t = np.cos(theta)
+    sin_j = np.empty(n_rays // 4)  # sin of (j + 1) ray steps, the passage search's bound
+    for j in range(n_rays // 4):
+        sin_j[j] = math.sin((j + 1) * dtheta)
     nr[0] = start_r
     nc[0] = start_c
     parent[0] = -1
@@ -315,11 +329,6 @@ def _search(
     n = 1
     if _visible(free, start_r, start_c, goal_r, goal_c):  # the goal in sight: no ray needed
         return _FOUND, 1, 0, nr, nc, parent, g, n
-    dist = _chessboard_distance(free)
-    # workspace clearance from the C-space one: every cell within rho - 1 of an obstacle is C-obstacle (also
-    # with free_cspace's sub-cell rule), so a C-free cell d (chessboard) from C-obstacle is at least d + j
-    # from an obstacle, j = floor((rho - 1) / sqrt 2)
-    j_ws = max(math.floor((rho - 1.0) / math.sqrt(2.0) - 1e-9), 0)
     _stamp(taken, start_r, start_c, spacing)
     n_expanded = 0
     width = 2.0 * rho
@@ -334,13 +343,15 @@ def _search(
             return _EXHAUSTED, n_expanded, -1, nr, nc, parent, g, n
         if n_expanded >= max_expansions:
             return _BUDGET, n_expanded, -1, nr, nc, parent, g, n
+        if n_expanded == check_after and not _connected(free, start_r, start_c, goal_r, goal_c):
+            return _EXHAUSTED, n_expanded, -1, nr, nc, parent, g, n
         closed[best] = True
         n_expanded += 1
         r0 = int(nr[best])
         c0 = int(nc[best])
         if _visible(free, r0, c0, goal_r, goal_c):
             return _FOUND, n_expanded, best, nr, nc, parent, g, n
-        rng, border, wr, wb = _cast_rays(free, clear, dist, j_ws, float(r0), float(c0), sin_t, cos_t)
+        rng, border, wr, wb = _cast_rays(free, clear, float(r0), float(c0), sin_t, cos_t)
         # workspace gaps between two obstacles, wider than the robot: a node in front of the passage, on
         # its axis, and one through it (a straight tunnel through a tight passage must follow its axis);
         # first, so that the space in front of a passage goes to its axis node
@@ -362,7 +373,7 @@ def _search(
             b_c = 0.0
             reach = wr[near] + 1.0
             for j in range(n_rays // 4):  # the other side: the hit beyond the gap closest to it
-                if reach * math.sin((j + 1) * dtheta) > passage_max:
+                if reach * sin_j[j] > passage_max:
                     break  # every later ray passes farther than passage_max from the near hit
                 kk = (far + j * step) % n_rays
                 if wb[kk]:
@@ -416,6 +427,7 @@ def _search(
             d = min(rng[near] + advance, 0.5 * (rng[near] + rng[far]))
             step = _away(near, far)
             prev = -1
+            n_before = n
             for lateral in (0.0, 1.0, 2.0, 4.0):  # the far ray grazes the corner: tilt away by a few cells
                 tilt = math.floor(math.atan2(lateral, max(rng[near], 1.0)) / dtheta + 0.5)
                 kk = (far + step * tilt) % n_rays
@@ -432,6 +444,10 @@ def _search(
                 if m > n:
                     n = m
                     break
+            if n == n_before and border[far]:  # no room short of the border: a node on the border itself
+                rr = math.floor(r0 + rng[far] * sin_t[far] + 0.5)
+                cc = math.floor(c0 + rng[far] * cos_t[far] + 0.5)
+                n = _try_add(free, taken, nr, nc, parent, g, f, n, best, rr, cc, goal_r, goal_c, spacing, hw)
 
 @njit(cache=True)
 def _string_pull(free: NDArray[np.bool_], chain: NDArray[np.int32], first_free: bool) -> NDArray[np.int64]:
@@ -540,7 +556,7 @@ def tunnel_plan(
         f, clear, root[0], root[1], g0, goal[0], goal[1], params.n_rays, radius_m / cell_m,
         params.jump_m / cell_m, params.advance_m / cell_m, params.passage_max_m / cell_m,
         max(min(int(params.spacing_m / cell_m), int(2.0 * radius_m / cell_m) - 1), 1), params.max_expansions,
-        params.heuristic_weight,
+        params.heuristic_weight, _CHECK_AFTER,
     )
     if status != _FOUND:
         flag = Flag.PLANNER_TIMEOUT if status == _BUDGET else Flag.PLANNER_NO_PATH

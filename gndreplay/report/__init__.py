@@ -1,10 +1,10 @@
 """Figures, report.md and the results MCAP of a run directory.
 
 A replay feeds the sinks while it streams (``MapSink`` -> maps.npz, ``McapSink`` -> results.mcap);
-``build_report(run_dir)`` then draws fig_model.png, fig_raw.png, fig_commands.png, fig_timing.png and
-report.md from the run's files alone (``ReportSink`` does it inside the replay's staging directory,
-``gndreplay report RUN_DIR`` afterwards). matplotlib and rosbags
-are imported only when a figure or the MCAP is made.
+``build_report(run_dir)`` then draws fig_model.png, fig_raw.png, fig_commands.png, fig_timing.png,
+fig_modes.png and report.md from the run's files alone (``ReportSink`` does it inside the replay's staging
+directory, ``gndreplay report RUN_DIR`` afterwards). matplotlib and rosbags are imported only when a figure
+or the MCAP is made.
 """
 
 from __future__ import annotations

@@ -21,12 +21,13 @@ REPORT_FILE = "report.md"
 
 def build_report(run_dir: Path, *, name: str | None = None) -> list[Path]:
     """Read ``run_dir`` (commands.csv, timing.csv, the TUM trajectories, summary.json and maps.npz when
-    present) and write fig_model.png, fig_raw.png, fig_commands.png, fig_timing.png and report.md into it,
-    replacing only files gndreplay wrote there (listed in its ``.gndreplay`` marker). Deterministic: the
-    same files give the same bytes. ``name`` titles report.md (default: the directory's name).
+    present) and write fig_model.png, fig_raw.png, fig_commands.png, fig_timing.png, fig_modes.png and
+    report.md into it, replacing only files gndreplay wrote there (listed in its ``.gndreplay`` marker).
+    Deterministic: the same files give the same bytes. ``name`` titles report.md (default: the directory's
+    name).
 
     Returns:
-        The paths written (the four figures, then report.md).
+        The paths written (the figures of ``FIGURE_MAKERS``, then report.md).
 
     Raises:
         RunDirError: a required file is missing or malformed.

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from ..fsutil import atomic_path
 from .plots import (
     MODE_COLORS,
+    NAV_MODE_COLORS,
     SITUATION_COLORS,
     plot_bands,
     plot_commands,
@@ -25,6 +26,7 @@ from .plots import (
     plot_pose,
     plot_timing,
     plot_trajectory,
+    tick_edges,
 )
 from .rundir import TIMING_MODULES, RunData
 
@@ -40,6 +42,7 @@ __all__ = [
     "build_figures",
     "figure_commands",
     "figure_model",
+    "figure_modes",
     "figure_raw",
     "figure_timing",
     "save_figure",
@@ -55,6 +58,9 @@ FIGURES: Mapping[str, str] = {
     "ticks where each flag fired (Fig. 5d).",
     "fig_timing.png": "Computation time of each module per tick, with the time-out budgets and the log's "
     "scan period (Fig. 5e).",
+    "fig_modes.png": "Intervention timeline: the commands with the takeovers shaded, the desired and the "
+    "active navigation mode, and the reflexive overrides (emergency stops, safe replacements, stale data, "
+    "trap escapes).",
 }
 LegendLoc = Literal["outside right upper", "outside right center"]
 _START, _END, _GOAL = "#2ca02c", "#d62728", "#ffbf00"
@@ -255,6 +261,56 @@ def figure_commands(data: RunData) -> Figure:
     return fig
 
 
+def figure_modes(data: RunData) -> Figure:
+    """The assisted-navigation audit: v and w over time with each takeover shaded, bands of the desired and
+    the active navigation mode, and a band per reflexive override in the colour of its rule."""
+    from ..replay import REFLEXIVE_MODES, episodes
+
+    c = data.commands
+    t = c.t_s - _t0(data)
+    fig = _new_figure(12.0, 4.8)
+    ax_c, ax_d, ax_a, ax_r = fig.subplots(4, 1, sharex=True,
+                                          gridspec_kw={"height_ratios": [3.0, 0.45, 0.45, 0.45]})
+    if len(c) == 0:
+        _no_data(ax_c, "no tick")
+    ax_c.step(t, c.v_mps, where="post", color="#1f4e79", linewidth=0.8, label="v [m/s]")
+    ax_c.step(t, c.w_radps, where="post", color="#7b1f3a", linewidth=0.8, label="w [rad/s]")
+    ax_c.axhline(0.0, color="0.6", linewidth=0.6, zorder=0)
+    ax_c.grid(True, linewidth=0.3, alpha=0.6)
+    edges = tick_edges(t)
+    taken = episodes(np.where(c.active != c.desired, "takeover", "").tolist())
+    for k, (i, j) in enumerate(taken):
+        ax_c.axvspan(float(edges[i]), float(edges[j]), color="#e41a1c", alpha=0.15, linewidth=0,
+                     label="takeover" if k == 0 else None)
+    ax_c.legend(loc="upper right", fontsize=7, ncol=3)
+    rules = np.where(np.isin(c.modes, REFLEXIVE_MODES), c.modes, "")
+    strips: tuple[tuple[Axes, NDArray[np.str_], Mapping[str, str], str], ...] = (
+        (ax_d, c.desired, NAV_MODE_COLORS, "desired"),
+        (ax_a, c.active, NAV_MODE_COLORS, "active"),
+        (ax_r, rules, MODE_COLORS, "reflexive"),
+    )
+    for ax, labels, colors, name in strips:
+        plot_bands(ax, t, labels, colors=colors, legend=False, skip=("",))
+        ax.set_ylabel(name, rotation=0, ha="right", va="center", fontsize=8)
+    legends: tuple[tuple[Axes, str, LegendLoc], ...] = (
+        (ax_a, "navigation mode", "outside right upper"), (ax_r, "reflexive rule", "outside right center"))
+    for ax, title, where in legends:
+        handles, names = ax.get_legend_handles_labels()
+        if handles:
+            fig.legend(handles, names, loc=where, title=title, fontsize=8, title_fontsize=8, frameon=False,
+                       handlelength=1.0)
+    if not np.any(rules != ""):
+        ax_r.text(0.5, 0.5, "no reflexive override", transform=ax_r.transAxes, ha="center", va="center",
+                  fontsize=7, color="0.4")
+    ax_r.set_xlabel("time since the first scan [s]")
+    _pad_xlim(ax_r, t)
+    n_rules = len(episodes(rules.tolist()))
+    n_taken, n_reflex = int(np.count_nonzero(c.active != c.desired)), int(np.count_nonzero(rules != ""))
+    ax_c.set_title(f"Interventions: {len(taken)} takeover{'s' * (len(taken) != 1)} ({n_taken} ticks), "
+                   f"{n_rules} reflexive override{'s' * (n_rules != 1)} ({n_reflex} ticks)", fontsize=10)
+    return fig
+
+
 def _timing_stats(ms: NDArray[np.float64], budget: float | None) -> str:
     if ms.size == 0:
         return ""
@@ -316,11 +372,12 @@ FIGURE_MAKERS: Mapping[str, Callable[[RunData], Figure]] = {
     "fig_raw.png": figure_raw,
     "fig_commands.png": figure_commands,
     "fig_timing.png": figure_timing,
+    "fig_modes.png": figure_modes,
 }
 
 
 def build_figures(data: RunData, out_dir: Path, *, dpi: int = DPI) -> list[Path]:
-    """Draw the four figures of ``data`` into ``out_dir`` under their fixed names (``FIGURE_MAKERS``),
+    """Draw the figures of ``data`` into ``out_dir`` under their fixed names (``FIGURE_MAKERS``),
     replacing earlier ones (the caller checks they are gndreplay's: ``fsutil.check_may_write``)."""
     makers = FIGURE_MAKERS
     out = []

@@ -13,7 +13,7 @@ from ..geometry import compose, inverse
 from .figures import FIGURES, budgets_ms, scan_period_s
 from .rundir import RunData
 
-__all__ = ["render_report", "trajectory_gap"]
+__all__ = ["interventions_section", "render_report", "trajectory_gap"]
 
 _LATENCY_ROWS = ("match", "model", "planner", "reactor", "stack", "total")
 _OVER = {"match": "MATCH_OVER_BUDGET", "model": "MODEL_OVER_BUDGET", "planner": "PLANNER_OVER_BUDGET",
@@ -42,6 +42,51 @@ def _histogram(title: str, column: str, counts: Mapping[str, int], total: int) -
     rows = [(k, str(v), f"{100.0 * v / total:.1f} %" if total else "-")
             for k, v in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))]
     return [f"## {title}", "", *_table((column, "ticks", "share"), rows)]
+
+
+#: Rows of each intervention table at most (summary.json lists them all).
+MAX_EPISODE_ROWS = 50
+
+
+def _episode_rows(episodes: Sequence[Mapping[str, Any]], *cols: str) -> list[tuple[str, ...]]:
+    return [(_num(e.get("t_start_s"), ".2f"), _num(e.get("duration_s"), ".2f"), _num(e.get("ticks")),
+             *(str(e.get(c, "")) or "-" for c in cols)) for e in episodes[:MAX_EPISODE_ROWS]]
+
+
+def _more(episodes: Sequence[Any]) -> list[str]:
+    extra = len(episodes) - MAX_EPISODE_ROWS
+    return [f"... and {extra} more (summary.json lists them all).", ""] if extra > 0 else []
+
+
+def interventions_section(iv: Mapping[str, Any] | None, n: int) -> list[str]:
+    """report.md's "Interventions": ticks per active navigation mode, the takeovers and the reflexive
+    overrides (from summary.json's ``interventions``), or a sentence saying there were none."""
+    out = ["## Interventions", ""]
+    if not iv:
+        return [*out, "Not recorded (a run written before the assisted-navigation audit).", ""]
+    desired = ", ".join(sorted(iv.get("desired", {}) or {})) or "-"
+    out += [f"Desired navigation mode: {desired}. Ticks per active mode:", ""]
+    active: Mapping[str, int] = iv.get("active", {}) or {}
+    out += _table(("active mode", "ticks", "share"),
+                  [(k, str(v), f"{100.0 * v / n:.1f} %" if n else "-")
+                   for k, v in sorted(active.items(), key=lambda kv: (-kv[1], kv[0]))])
+    takeovers: Sequence[Mapping[str, Any]] = iv.get("takeovers", []) or []
+    out += ["### Takeovers", ""]
+    if takeovers:
+        out += _table(("start [s]", "duration [s]", "ticks", "desired", "taken over by", "reason"),
+                      _episode_rows(takeovers, "desired", "active", "reason")) + _more(takeovers)
+    else:
+        out += ["No takeover: the desired mode was active on every tick.", ""]
+    emergencies: Sequence[Mapping[str, Any]] = iv.get("emergencies", []) or []
+    out += ["### Emergencies and reflexive overrides", ""]
+    if emergencies:
+        out += _table(("start [s]", "duration [s]", "ticks", "rule"), _episode_rows(emergencies, "rule"))
+        out += _more(emergencies)
+    else:
+        out += ["No emergency stop and no reflexive override.", ""]
+    out += ["Times are seconds since the first tick; an episode lasts until the tick after it (the last tick "
+            "when it runs to the end).", ""]
+    return out
 
 
 def trajectory_gap(odom: NDArray[np.float64], corrected: NDArray[np.float64]) -> dict[str, float]:
@@ -111,6 +156,8 @@ def render_report(data: RunData, figures: Iterable[str] = tuple(FIGURES), *, nam
     out += _table(("flag", "ticks", "share"), fired) if fired else ["no flag fired", ""]
     if silent:
         out += [f"Never fired: {', '.join(silent)}.", ""]
+
+    out += interventions_section(s.get("interventions"), n)
 
     agree = s.get("agreement", {}) or {}
     if agree:

@@ -19,6 +19,9 @@ Topics (per tick = every tick the stack ran):
                                                     robot-centred grid, -1 unknown / 0 free / 100 occupied
     /gndreplay/timing    std_msgs/Float64MultiArray per tick: match, model, planner, reactor [ms]
     /gndreplay/mode, /gndreplay/situation, /gndreplay/flags   std_msgs/String per tick ("|"-joined flags)
+    /gndreplay/active_mode, /gndreplay/takeover               std_msgs/String per tick: the navigation mode
+                                                    whose command won, and the takeover reason ("" when the
+                                                    desired mode won)
 """
 
 from __future__ import annotations
@@ -55,6 +58,8 @@ TOPICS: dict[str, str] = {
     "/gndreplay/mode": "std_msgs/msg/String",
     "/gndreplay/situation": "std_msgs/msg/String",
     "/gndreplay/flags": "std_msgs/msg/String",
+    "/gndreplay/active_mode": "std_msgs/msg/String",
+    "/gndreplay/takeover": "std_msgs/msg/String",
 }
 MAP, ODOM, BASE, LASER = "map", "odom", "base_link", "laser"
 _OCCUPANCY = np.array([-1, 0, 100], dtype=np.int8)  # UNKNOWN, FREE, OCCUPIED
@@ -286,6 +291,8 @@ class McapSink:
         self._put("/gndreplay/situation", t, m.string(result.situation.name))
         self._put("/gndreplay/flags", t, m.string("|".join(
             recorded_flags(result.flags, enforce_budgets=self.enforce_budgets).names())))
+        self._put("/gndreplay/active_mode", t, m.string(result.active_mode))
+        self._put("/gndreplay/takeover", t, m.string(result.takeover_reason))
 
     def finish(self, run_dir: Path) -> None:
         """Close the bag and move its .mcap file to ``run_dir/results.mcap``."""

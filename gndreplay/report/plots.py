@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..replay import runs  # runs of equal labels: one definition, shared with the audit
+
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
@@ -19,6 +21,7 @@ __all__ = [
     "FLAG_ORDER",
     "MODE_COLORS",
     "MODULE_COLORS",
+    "NAV_MODE_COLORS",
     "SITUATION_COLORS",
     "hit_image",
     "plot_bands",
@@ -30,6 +33,7 @@ __all__ = [
     "plot_timing",
     "plot_trajectory",
     "runs",
+    "tick_edges",
 ]
 
 F64 = NDArray[np.float64]
@@ -45,6 +49,15 @@ MODE_COLORS: Mapping[str, str] = {
     "STALE": "#999999",
     "ESCAPE": "#984ea3",
     "GOAL": "#222222",
+    "TELEOP": "#1f78b4",
+    "FOLLOW": "#a6761d",
+    "LOCAL": "#ff7f00",
+}
+NAV_MODE_COLORS: Mapping[str, str] = {  # the navigation modes of the multi-loop architecture
+    "gnd": "#4daf4a",
+    "teleop": "#377eb8",
+    "follow": "#a6761d",
+    "local": "#ff7f00",
 }
 SITUATION_COLORS: Mapping[str, str] = {
     "HSGR": "#1b9e77",
@@ -164,16 +177,7 @@ def plot_grid(ax: Axes, cells: ArrayLike, extent: Extent) -> None:
     ax.set_aspect("equal")
 
 
-def runs(labels: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Start and end (exclusive) indices of the runs of equal consecutive labels."""
-    a = np.asarray(labels)
-    if a.size == 0:
-        return np.zeros(0, np.intp), np.zeros(0, np.intp)
-    cut = np.flatnonzero(a[1:] != a[:-1]) + 1
-    return np.concatenate([[0], cut]).astype(np.intp), np.concatenate([cut, [a.size]]).astype(np.intp)
-
-
-def _tick_edges(t: F64) -> F64:
+def tick_edges(t: F64) -> F64:
     """(K + 1,) edges of the ticks' time spans: each tick lasts until the next one (the last: the median
     period)."""
     if t.size == 0:
@@ -183,16 +187,18 @@ def _tick_edges(t: F64) -> F64:
 
 
 def plot_bands(ax: Axes, t: ArrayLike, labels: ArrayLike, *, colors: Mapping[str, str],
-               legend: bool = True, legend_title: str = "") -> None:
+               legend: bool = True, legend_title: str = "", skip: Sequence[str] = ()) -> None:
     """A strip of coloured bands: tick k spans [t_k, t_k+1) in the colour of ``labels[k]``.
 
-    Labels missing from ``colors`` are drawn grey. The legend lists the labels present, in ``colors`` order.
+    Labels missing from ``colors`` are drawn grey; labels in ``skip`` are left blank. The legend lists the
+    labels present, in ``colors`` order.
     """
     tt = np.asarray(t, dtype=np.float64)
     lab = np.asarray(labels).astype(str)
-    edges = _tick_edges(tt)
+    edges = tick_edges(tt)
     start, end = runs(lab)
     present = [k for k in colors if np.any(lab == k)] + sorted(set(lab.tolist()) - set(colors))
+    present = [k for k in present if k not in skip]
     for name in present:
         sel = lab[start] == name
         x0 = edges[start[sel]]

@@ -38,6 +38,9 @@ class Commands:
         t_s: (K,) tick times [s]; v_mps, vy_mps, w_radps: (K,) the commands.
         modes, situations: (K,) str arrays.
         flags: flag name -> (K,) bool mask, for every flag that fired at least once (in first-seen order).
+        desired, active, takeover: (K,) str arrays: the desired and the active navigation mode and the
+            takeover reason ("" when none). A run written before the audit existed reads as "gnd", "gnd", "".
+        subgoal: (K,) int: the path follower's subgoal (-1 outside path following).
     """
 
     t_s: F64
@@ -47,6 +50,10 @@ class Commands:
     modes: NDArray[np.str_]
     situations: NDArray[np.str_]
     flags: Mapping[str, NDArray[np.bool_]]
+    desired: NDArray[np.str_] = field(default_factory=lambda: np.zeros(0, dtype=np.str_))
+    active: NDArray[np.str_] = field(default_factory=lambda: np.zeros(0, dtype=np.str_))
+    takeover: NDArray[np.str_] = field(default_factory=lambda: np.zeros(0, dtype=np.str_))
+    subgoal: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -89,28 +96,40 @@ def _need(path: Path) -> Path:
     return path
 
 
+#: commands.csv's header before the assisted-navigation audit (still read: desired = active = "gnd").
+_COMMAND_HEADER_V1 = ["t", "v", "vy", "w", "mode", "situation", "flags"]
+
+
 def read_commands(path: Path) -> Commands:
-    """Parse commands.csv (header ``t,v,vy,w,mode,situation,flags``).
+    """Parse commands.csv (header ``replay.COMMAND_COLUMNS``, or the older one without the audit columns
+    ``desired,active,takeover,subgoal``).
 
     Raises:
         RunDirError: missing file, wrong header or a malformed row (named by line).
     """
+    from ..replay import COMMAND_COLUMNS
+
     with open(_need(path), newline="") as f:
         rows = list(csv.reader(f))
-    expected = ["t", "v", "vy", "w", "mode", "situation", "flags"]
-    if not rows or rows[0] != expected:
+    expected = list(COMMAND_COLUMNS)
+    if not rows or rows[0] not in (expected, _COMMAND_HEADER_V1):
         raise RunDirError(f"{path}: expected header {','.join(expected)}")
+    width = len(rows[0])
     body = rows[1:]
     num = np.empty((len(body), 4), dtype=np.float64)
+    subgoal = np.full(len(body), -1, dtype=np.int64)
     flags: dict[str, NDArray[np.bool_]] = {}
     for k, r in enumerate(body):
         try:
-            if len(r) != 7:
+            if len(r) != width:
                 raise ValueError(f"{len(r)} fields")
             num[k] = [float(x) for x in r[:4]]
+            if width > 7:
+                subgoal[k] = int(r[10])
         except ValueError as err:
             raise RunDirError(
-                f"{path} line {k + 2}: expected 7 fields t,v,vy,w (numbers),mode,situation,flags ({err})"
+                f"{path} line {k + 2}: expected {width} fields t,v,vy,w (numbers),mode,situation,flags"
+                f"{',desired,active,takeover,subgoal (an integer)' if width > 7 else ''} ({err})"
             ) from err
         for name in filter(None, r[6].split("|")):
             mask = flags.get(name)
@@ -125,6 +144,10 @@ def read_commands(path: Path) -> Commands:
         modes=np.array([r[4] for r in body], dtype=np.str_),
         situations=np.array([r[5] for r in body], dtype=np.str_),
         flags=flags,
+        desired=np.array([r[7] if width > 7 else "gnd" for r in body], dtype=np.str_),
+        active=np.array([r[8] if width > 7 else "gnd" for r in body], dtype=np.str_),
+        takeover=np.array([r[9] if width > 7 else "" for r in body], dtype=np.str_),
+        subgoal=subgoal,
     )
 
 
@@ -195,6 +218,20 @@ def _opt(ok: Any) -> Any:
 
 
 _COUNTS = _table_of(_is_count)
+
+
+def _episodes_ok(x: Any, label: str) -> bool:
+    """A list of episodes: tables with numeric t_start_s and duration_s and a text ``label``."""
+    return isinstance(x, list) and all(
+        isinstance(e, dict) and _is_num(e.get("t_start_s")) and _is_num(e.get("duration_s"))
+        and isinstance(e.get(label), str) for e in x)
+
+
+def _interventions_ok(x: Any) -> bool:
+    return (isinstance(x, dict) and all(_COUNTS(x.get(k, {})) for k in ("desired", "active"))
+            and _episodes_ok(x.get("takeovers", []), "reason")
+            and _episodes_ok(x.get("emergencies", []), "rule"))
+
 #: summary.json key -> (what it must be, a test); keys the report reads, each optional.
 _SUMMARY_FIELDS: Mapping[str, tuple[str, Any]] = {
     "ticks": ("a count (integer >= 0)", _is_count),
@@ -206,6 +243,7 @@ _SUMMARY_FIELDS: Mapping[str, tuple[str, Any]] = {
     "latency_ms": ("a table of {median, p90, p99, max} numbers",
                    _table_of(_opt(_table_of(_opt(_is_num))))),
     "agreement": ("a table of numbers", _opt(_table_of(_opt(_is_num)))),
+    "interventions": ("a table of mode counts and takeovers / emergencies lists", _interventions_ok),
     "config": ("a table", lambda x: isinstance(x, dict)
                and all(isinstance(x.get(k), dict | None) for k in ("supervisor", "scanmatch"))),
     "options": ("a table", lambda x: isinstance(x, dict)

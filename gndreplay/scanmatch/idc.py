@@ -33,6 +33,15 @@ window. The far match is believed when that second match fails, lands near it, o
 the second one fits clearly better it is taken instead (the far one was a wrong basin); when both fit
 alike, the scan cannot tell, and the odometry increment is kept with MATCH_FAILED ("unconfirmed match").
 
+Scans that do not follow the odometry (a stale record: on Intel, scans 11550-11554 repeat the view of
+~40 deg earlier in a turn, 11552 and 11554 with fresh odometry): such a scan is placed where its content
+was seen, so the next scan's priors are all off by that jump and its right match lies far from every one
+of them. A match near its own prior is normally preferred, but not over one that fits clearly better (mean
+truncated pair distance lower by ``coarse_margin``): in a place whose walls fit many headings (a round
+hall, a cluttered lab) the match near a wrong prior is a poor fit between two basins, and taking it put
+every later scan ~40 deg off until the map was rebuilt (a relation 0.01 s long with 35 deg of error). The
+clearly better far match still needs the guard's second opinion.
+
 Logs sampled by distance and long gaps: keyframes are taken by corrected motion (0.5 m / 10 deg) or a drop
 in overlap, never by scan count, so the map does not depend on the scan rate. After a gap longer than
 ``map_max_gap_s`` a scan that fails to match restarts the map from itself at once (the map no longer
@@ -173,7 +182,8 @@ class IdcParams:
     # beats the prior's by coarse_min_gain, IDC also starts from it, and that match wins if its mean
     # truncated pair distance is lower by coarse_margin. Measured over five start scans of each log: a 3 %
     # margin raised CSAIL's median from 0.050 to 0.060 m (switching basins on noise), 20 % cost Intel 0.194
-    # against 0.176 m; 1 deg steps gave Intel 0.227 m
+    # against 0.176 m; 1 deg steps gave Intel 0.227 m. The same margin lets a match far from its prior win
+    # over a plausible one that fits worse (see IdcMatcher._clearly_better)
     coarse_window_rad: float = math.radians(45.0)
     coarse_step_rad: float = math.radians(2.0)
     coarse_points: int = 90
@@ -348,10 +358,12 @@ class IdcMatcher:
         # only run when the first match failed, was suspicious or paired suspiciously few points, so a
         # fallback far from odometry may win (CSAIL's odometry under-reports turns; requiring it to be near
         # odometry too raised the median relation error over ten start scans from 0.054 to 0.070 m). A match
-        # far from its prior and from the odometry is only taken when no other is plausible. Whichever wins,
-        # far from the odometry it needs the guard's second opinion
+        # far from its prior and from the odometry is only taken when no other is plausible or when it fits
+        # clearly better (a stale scan before this one, see the module docstring). Whichever wins, far from
+        # the odometry it needs the guard's second opinion
         pool = plausible or accepted
         res = min(pool, key=lambda o: (-o.pairs, o.residual_m)) if pool else outcomes[0]
+        res = self._clearly_better(res, accepted, px.shape[0])
         if fresh and not res.reason:
             res, extra = self._guard(res, px, py, pr, pa, odo_laser, priors[0][1])
             iterations += extra
@@ -432,6 +444,19 @@ class IdcMatcher:
         left unpaired (lower is better; compares two poses of one scan against one map)."""
         gate = self.params.gate_min_m
         return (o.residual_m * o.pairs + gate * (n - o.pairs)) / n
+
+    def _clearly_better(self, res: _Outcome, accepted: list[_Outcome], n: int) -> _Outcome:
+        """The accepted match that fits clearly better than ``res`` (mean truncated distance lower by
+        ``coarse_margin``, the best such), else ``res``. A match near its own prior is preferred to one far
+        from it, but not when it fits much worse: after a scan that does not follow the odometry (a stale
+        record repeating an earlier view, Intel) every prior is off by that scan's jump, and the match near
+        a prior can be a poor fit between two basins while the far one fits as well as the scans before.
+        A far match still needs the guard's second opinion."""
+        if res.reason:
+            return res
+        limit = (1.0 - self.params.coarse_margin) * self._cost(res, n)
+        better = [o for o in accepted if self._cost(o, n) < limit]
+        return min(better, key=lambda o: self._cost(o, n)) if better else res
 
     def _odo_sigmas(self, incr: P3) -> tuple[float, float]:
         """The odometry's error model for an increment: (translation sigma [m], rotation sigma [rad])."""

@@ -3,8 +3,8 @@
 :mod:`.world` holds the segment geometry of the scripted sample (ray casting, the laser model, footprints);
 :mod:`.scenario` the route follower, the odometry error model, named scenarios and :func:`simulate`.
 Closed loop: :mod:`.scenario_file` reads scenario YAML files, :mod:`.geometry` the exact shapes and
-kernels, :mod:`.closedloop` drives the stack in the world, :mod:`.runner` writes the run directory
-(:func:`simulate_scenario`).
+kernels, :mod:`.closedloop` drives the stack in the world, :mod:`.teleop` is the scripted operator of
+teleop scenarios, :mod:`.runner` writes the run directory (:func:`simulate_scenario`).
 """
 
 from .closedloop import ClosedLoop, SimParams

@@ -15,6 +15,15 @@ command takes effect (scan time + latency):
   to the footprint; door leaves wait likewise (0.3 m), as the people moving them would;
 - wheel odometry drifts (``OdometryNoise``), the laser is ray cast (exact circles, thick walls) with noise.
 
+Navigation modes (issue 14): the scenario's ``mode`` / ``local`` override the configuration's
+(:func:`navigation_config`). In teleop mode the operator of :mod:`.teleop` gives the command of each scan
+(``Tick.cmd``, what a log's recorded command would be; otherwise ``Tick.cmd`` is the robot's true velocity,
+as wheel odometry reports it). A teleop run succeeds when the script's time is over or the track's end is
+reached, a follow run when the stack reports the final subgoal reached, any other when the true axle is
+within the supervisor's goal tolerance of the goal; always without contact. Each tick's desired and active
+modes are counted; a takeover is a tick whose active mode differs from the desired one after one where
+they agreed.
+
 Everything random comes from the seed; with a fixed latency the run is a pure function of (scenario,
 config, seed).
 """
@@ -31,7 +40,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..config import Config
+from ..config import Config, apply_overrides
+from ..errors import ConfigError
 from ..geometry import compose, relative
 from ..pipeline.stack import TickResult
 from ..replay import recorded_flags
@@ -46,9 +56,10 @@ from .geometry import (
 )
 from .scenario import DEFAULT_T0_NS, OdometryNoise
 from .scenario_file import DEFAULT_YIELD_M, ScenarioSpec
+from .teleop import TeleopDriver
 from .world import LaserModel, add_laser_noise
 
-__all__ = ["ClosedLoop", "SimParams", "SimRecord", "arc_step"]
+__all__ = ["ClosedLoop", "SimParams", "SimRecord", "arc_step", "navigation_config"]
 
 F64 = NDArray[np.float64]
 NS = 1_000_000_000
@@ -121,6 +132,33 @@ class SimRecord:
     movers_t: list[float] = field(default_factory=list)  # every second
     movers_xy: list[list[tuple[float, float]]] = field(default_factory=list)
     sim_ns: list[int] = field(default_factory=list)  # wall time of the simulator per tick
+    active_modes: Counter[str] = field(default_factory=Counter)  # ticks per active navigation mode
+    takeovers: int = 0
+    takeover_reasons: Counter[str] = field(default_factory=Counter)  # per takeover onset
+    mode_stretches: list[list[Any]] = field(default_factory=list)  # [active mode, from s, to s]
+    subgoal_index: int = -1
+    teleop_cmd: list[tuple[float, float]] = field(default_factory=list)  # the operator's (v, w) per tick
+
+
+def navigation_config(spec: ScenarioSpec, cfg: Config) -> Config:
+    """``cfg`` with the scenario's ``mode`` and ``local`` (when it gives them) as ``[navigation]``.
+
+    Raises:
+        ConfigError: the resulting mode needs what the scenario lacks (teleop without an operator, follow
+            without subgoals), naming the scenario file.
+    """
+    nav: dict[str, Any] = {}
+    if spec.mode is not None:
+        nav["mode"] = spec.mode
+    if spec.local is not None:
+        nav["local"] = {"strategy": spec.local}
+    out = apply_overrides(cfg, {"navigation": nav}) if nav else cfg
+    mode = out.navigation.mode
+    if mode == "teleop" and spec.teleop is None:
+        raise ConfigError(f"{spec.source}: teleop: missing (mode teleop needs commands or a track)")
+    if mode == "follow" and not spec.subgoals:
+        raise ConfigError(f"{spec.source}: subgoals: missing (navigation mode follow needs them)")
+    return out
 
 
 class _World:
@@ -201,7 +239,8 @@ class ClosedLoop:
 
     Args:
         spec: the scenario.
-        cfg: robot, laser and stack configuration (the preset).
+        cfg: robot, laser and stack configuration (the preset); the scenario's navigation mode is applied
+            over it (``self.cfg``, see :func:`navigation_config`).
         seed: fixes the laser noise and the odometry errors.
         latency_s: the command computed from scan k applies from t_k + latency_s; None uses the stack's
             measured time of that tick (then the run is not deterministic).
@@ -212,7 +251,9 @@ class ClosedLoop:
     def __init__(self, spec: ScenarioSpec, cfg: Config, *, seed: int, latency_s: float | None = 0.0,
                  perfect_odometry: bool = False, time_limit_s: float | None = None,
                  params: SimParams = SimParams()) -> None:
+        cfg = navigation_config(spec, cfg)
         self.spec, self.cfg, self.seed, self.params = spec, cfg, seed, params
+        self.nav_mode = cfg.navigation.mode
         self.latency_s, self.perfect_odometry = latency_s, perfect_odometry
         self.time_limit_s = time_limit_s if time_limit_s is not None else spec.time_limit_s
         robot = cfg.robot
@@ -236,6 +277,8 @@ class ClosedLoop:
         self.world = _World(spec)
         self.goal = spec.goal
         self.goal_tol = cfg.supervisor.goal_tolerance_m
+        self.driver = None if spec.teleop is None or self.nav_mode != "teleop" else TeleopDriver(
+            spec.teleop, wmax_radps=robot.wmax_radps, accel_mps2=robot.accel_mps2, tolerance_m=self.goal_tol)
         # state
         self.t_ns = 0
         self.pose = np.array(spec.start, dtype=np.float64)
@@ -251,6 +294,7 @@ class ClosedLoop:
         self.contact: dict[str, Any] | None = None
         self._next_mover_record = 0.0
         self._prev_flags = Flag.NONE
+        self._prev_taken = False
         # clearance bookkeeping: the last exact clearance and an upper bound of every closing speed, so
         # pieces far from everything skip the exact test (their clearance is above the security distance)
         reach = self.radius if self.local is None else float(np.max(np.hypot(*self.local.T)))
@@ -302,6 +346,28 @@ class ClosedLoop:
             rec.stack_goal_t_s = self.t_ns / NS
         self._prev_flags = r.flags
         rec.stack_ms.append(ms)
+        self._record_modes(r)
+
+    def _record_modes(self, r: TickResult) -> None:
+        """Count the tick's active mode, takeover onsets and their reasons, stretches of one active mode;
+        a follow run ends once the stack reports the final subgoal reached (GOAL_REACHED, or the subgoal
+        index past the last one)."""
+        rec, now = self.rec, self.t_ns / NS
+        rec.active_modes[r.active_mode] += 1
+        taken = r.active_mode != r.desired_mode
+        if taken and not self._prev_taken:
+            rec.takeovers += 1
+            rec.takeover_reasons[r.takeover_reason or "unspecified"] += 1
+        self._prev_taken = taken
+        if rec.mode_stretches and rec.mode_stretches[-1][0] == r.active_mode:
+            rec.mode_stretches[-1][2] = now
+        else:
+            rec.mode_stretches.append([r.active_mode, now, now])
+        rec.subgoal_index = r.subgoal_index
+        n = len(self.spec.subgoals)
+        if self.nav_mode == "follow" and self.outcome is None and (
+                r.subgoal_index >= n or r.flags & Flag.GOAL_REACHED):
+            self.outcome, self.end_t_s = "success", now
 
     # ---- internals ------------------------------------------------------------------------------------
 
@@ -333,6 +399,10 @@ class ClosedLoop:
         rec.scan_odom.append((odom.x, odom.y, odom.theta))
         v, vy, w = self.vel
         rec.scan_vel.append((v, vy, w))
+        if self.driver is not None:  # the operator's command, as a log records it
+            v, w = self.driver.command(t_s, self.pose)
+            vy = 0.0
+            rec.teleop_cmd.append((v, w))
         return Tick(index=k, t_ns=t, scan=scan, odom=odom, cmd=Command(t, v, w, vy), truth=truth)
 
     def _record_movers(self, t_s: float) -> None:
@@ -480,10 +550,18 @@ class ClosedLoop:
             self._record_movers(now)
             if self.outcome is not None:
                 break
-            if math.hypot(self.pose[0] - self.goal[0], self.pose[1] - self.goal[1]) <= self.goal_tol:
+            if self._arrived(now):
                 self.outcome, self.end_t_s = "success", now
             elif self.t_ns >= limit_ns:
                 self.outcome, self.end_t_s = "timeout", now
+
+    def _arrived(self, now: float) -> bool:
+        """The run's task is done at ``now`` (a follow run's end is the stack's report, see on_tick)."""
+        if self.driver is not None:
+            return self.driver.ended(now, self.pose)
+        if self.nav_mode == "follow":
+            return False
+        return math.hypot(self.pose[0] - self.goal[0], self.pose[1] - self.goal[1]) <= self.goal_tol
 
     def _odometry(self, a: F64, b: F64, h: float) -> None:
         """Wheel odometry over one piece: the true increment split into wheel travels, corrupted, recombined
@@ -519,8 +597,9 @@ class ClosedLoop:
     def result(self) -> dict[str, Any]:
         """result.json: a pure function of (scenario, config, seed) with a fixed latency.
 
-        Fields: ``outcome`` success (the true axle within the supervisor's goal tolerance of the goal) /
-        collision / timeout; ``end_time_s``; ``time_to_goal_s``; ``collision``: ``t_s``, ``object`` (the
+        Fields: ``outcome`` success (the task done, see the module docstring: by default the true axle
+        within the supervisor's goal tolerance of the goal) / collision / timeout; ``end_time_s``;
+        ``time_to_goal_s``; ``collision``: ``t_s``, ``object`` (the
         element's or mover's id), ``contact_world`` and ``contact_robot`` (the touching point of the
         footprint, world and robot frame), ``robot_moving``, ``hit_by_mover`` (the robot stood still and
         a mover or door leaf moved into it); ``path_length_m`` (true); ``min_clearance_m`` (footprint to
@@ -528,7 +607,11 @@ class ClosedLoop:
         clearance below ``reactor.security_m``); ``mean_abs_dw_dt_radps2`` (commanded turn rate changes
         per second); ``longest_stall_s`` (see :func:`longest_stall`); ``modes`` and ``flags`` (ticks per
         name); ``trap_count`` (TRAP_DETECTED onsets); ``stack_goal_reached_s`` (first GOAL_REACHED tick,
-        the stack's own belief); ``ticks``; start, goal, final pose and distance to the goal.
+        the stack's own belief); ``ticks``; start, goal, final pose and distance to the goal;
+        ``navigation``: the desired ``mode``, ``selector``, ``local`` strategy, ``active_modes`` (ticks per
+        active mode), ``takeovers`` (onsets of an active mode other than the desired one) and their
+        ``takeover_reasons``, ``mode_stretches`` ([active mode, first tick s, last tick s] in order),
+        ``subgoals`` (how many) and the last ``subgoal_index``; ``teleop`` (script / track / None).
         """
         rec = self.rec
         truth = np.asarray(rec.truth, dtype=np.float64).reshape(-1, 3)
@@ -569,6 +652,18 @@ class ClosedLoop:
             "goal": list(self.spec.goal),
             "final_pose": [float(v) for v in end],
             "final_goal_distance_m": math.hypot(end[0] - self.goal[0], end[1] - self.goal[1]),
+            "active_modes": dict(sorted(rec.active_modes.items())),
+            "takeovers": rec.takeovers,
+            "navigation": {
+                "mode": self.nav_mode,
+                "selector": self.cfg.navigation.selector,
+                "local": self.cfg.navigation.local.strategy,
+                "teleop": None if self.driver is None else self.driver.spec.kind,
+                "takeover_reasons": dict(sorted(rec.takeover_reasons.items())),
+                "mode_stretches": [[m, round(a, 9), round(b, 9)] for m, a, b in rec.mode_stretches],
+                "subgoals": len(self.spec.subgoals),
+                "subgoal_index": rec.subgoal_index,
+            },
         }
 
 

@@ -1,5 +1,7 @@
 """fig_world.png: the true world of a closed-loop run, the trajectory with the footprint every second,
-events (elements that appear, vanish or move drawn dashed), movers' paths and positions, the contact."""
+events (elements that appear, vanish or move drawn dashed), movers' paths and positions, the contact; in
+the multi-loop modes the subgoals (arrows), the operator's track (dashed) and, thick, the stretches driven
+by local navigation (as the multi-loop paper's Fig. 7)."""
 
 from __future__ import annotations
 
@@ -13,6 +15,26 @@ from ..geometry import compose
 
 if TYPE_CHECKING:
     from .closedloop import ClosedLoop
+
+
+def _draw_modes(ax: Any, loop: ClosedLoop, truth: np.ndarray, tt: np.ndarray) -> None:
+    """Subgoals, the teleop track, and the local-navigation stretches of the trajectory (thick)."""
+    for k, g in enumerate(loop.spec.subgoals):
+        ax.arrow(g.x, g.y, 0.4 * math.cos(g.theta), 0.4 * math.sin(g.theta), width=0.02, color="#a65628",
+                 label="subgoals" if k == 0 else None)
+        ax.annotate(f"sg{k}{' stop' if g.kind == 'stop' else ''}", (g.x, g.y), fontsize=6, color="#a65628")
+    tel = loop.spec.teleop
+    if tel is not None and tel.track is not None:
+        ax.plot(tel.track[:, 0], tel.track[:, 1], "--", color="#999999", lw=0.8, label="operator's track")
+    period = loop.period_ns / 1e9
+    first = True
+    for mode, a, b in loop.rec.mode_stretches:
+        if mode != "local" or mode == loop.nav_mode or not len(tt):
+            continue
+        sel = (tt >= a) & (tt <= b + period)
+        ax.plot(truth[sel, 0], truth[sel, 1], "-", color="#e41a1c", lw=3.0, alpha=0.7,
+                label="local navigation" if first else None)
+        first = False
 
 
 def draw_world(path: Path, loop: ClosedLoop, result: dict[str, Any]) -> Path:
@@ -64,6 +86,7 @@ def draw_world(path: Path, loop: ClosedLoop, result: dict[str, Any]) -> Path:
     truth = np.asarray(rec.truth).reshape(-1, 3)
     tt = np.asarray(rec.truth_t)
     ax.plot(truth[:, 0], truth[:, 1], "-", color="#377eb8", lw=1.2, label="trajectory (truth)")
+    _draw_modes(ax, loop, truth, tt)
     outline = footprint_outline(loop.cfg)
     local = np.column_stack([outline, np.zeros(len(outline))])
     for t in np.arange(0.0, (tt[-1] if len(tt) else 0.0) + 1e-9, 1.0):

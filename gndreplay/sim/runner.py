@@ -17,7 +17,7 @@ import json
 import math
 import shutil
 import tempfile
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +43,10 @@ TIMING_FILE = "sim_timing.json"
 
 @dataclass(frozen=True, slots=True)
 class SimOutcome:
-    """What one closed-loop run gives (the fields of result.json, plus the wall-clock timings)."""
+    """What one closed-loop run gives (the fields of result.json, plus the wall-clock timings).
+
+    ``active_modes`` counts ticks per active navigation mode, ``takeovers`` the onsets of an active mode
+    other than the desired one (see :meth:`ClosedLoop.result`)."""
 
     scenario: str
     preset: str
@@ -65,6 +68,8 @@ class SimOutcome:
     out_dir: Path
     sim_ms_per_step: float
     stack_ms_per_tick: float
+    active_modes: dict[str, int] = field(default_factory=dict)
+    takeovers: int = 0
 
     @property
     def success(self) -> bool:
@@ -233,7 +238,8 @@ def simulate_scenario(
     Args:
         scenario: a shipped scenario's name, a scenario file, or a parsed spec.
         out_dir: the run directory (written by ``run_replay``: staged, moved into place at the end).
-        cfg: configuration; default: the scenario's preset.
+        cfg: configuration; default: the scenario's preset. The scenario's ``mode`` / ``local`` override
+            its ``[navigation]`` (see ``closedloop.navigation_config``).
         seed: laser noise and odometry errors.
         latency_s: command latency [s]; None = the stack's measured time (not deterministic).
         perfect_odometry: no odometry drift.
@@ -266,9 +272,9 @@ def simulate_scenario(
 
         # the report last, inside the staging folder: the run directory appears with every figure
         sinks = [MapSink(), *sinks, ReportSink()]
-    summary = run_replay(loop.ticks(), cfg, Path(out_dir), log=Path(spec.source),
-                         options=RunOptions(goal_xy=spec.goal), on_tick=tick_done, sinks=sinks,
-                         overwrite=overwrite, **(run_kwargs or {}))
+    summary = run_replay(loop.ticks(), loop.cfg, Path(out_dir), log=Path(spec.source),
+                         options=RunOptions(goal_xy=spec.goal, subgoals=spec.subgoals), on_tick=tick_done,
+                         sinks=sinks, overwrite=overwrite, **(run_kwargs or {}))
     return _outcome(loop.result(), summary.out_dir, timings(loop))
 
 

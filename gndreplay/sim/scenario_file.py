@@ -23,6 +23,12 @@ Schema (unknown keys are errors; every error is one line naming the file and the
       - {at: 30.0, open: door, over: 2.0}
     movers:
       - {id: person, radius: 0.25, speed: 1.0, path: [[x, y], ...], loop: false, start_at: 0.0, yield_m: 0.3}
+    mode: gnd                                   # optional: gnd (default) | teleop | follow | local
+    local: nd                                   # optional: the local navigation strategy
+    subgoals: [[x, y, theta, stop], ...]        # mode follow: stop | forward | reverse
+    teleop:                                     # mode teleop: one of
+      commands: [[t_s, v, w], ...]              #   a script (last entry [t_end, 0, 0])
+      track: {points: [[x, y], ...], speed: v, lookahead: 0.8, tolerance: 0.3}   # a careless driver
 
 A wall with ``close`` / ``open`` events is a door leaf: open (absent, or swung away) before its first
 ``close``, closed before its first ``open``; ``over`` (default 0) is the motion's duration, 0 a step at
@@ -30,6 +36,14 @@ A wall with ``close`` / ``open`` events is a door leaf: open (absent, or swung a
 the robot (``DEFAULT_YIELD_M``). A mover stands at its first waypoint until ``start_at``, then walks the
 path at ``speed`` (back to the start and again if ``loop``), and stays at its last waypoint. ``name`` is a
 plain name (letters, digits, ``_ . -``, not starting with ``.`` or ``-``): it names the run directory.
+
+Navigation mode (issue 14): ``mode`` (when given) overrides the configuration's ``navigation.mode`` and
+``local`` its ``navigation.local.strategy``. Poses (start, goal, subgoals, track) are in the scenario's
+world frame; the simulated odometry starts at ``start`` with that frame, so they are the robot's odometry
+frame too. ``mode: follow`` needs ``subgoals`` (the goal defaults to the last one's position) and succeeds
+when the stack reports the final subgoal reached, without contact. ``mode: teleop`` needs ``teleop`` (see
+:mod:`.teleop`; a track's goal defaults to its last point) and succeeds when the script's time is over or
+the track's end is reached, without contact. ``subgoals`` and ``teleop`` are errors in other modes.
 """
 
 from __future__ import annotations
@@ -45,7 +59,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import ConfigError
+from ..pipeline.local import LOCAL_STRATEGIES
+from ..types import Subgoal
 from .geometry import box_vertices, wall_vertices
+from .teleop import DEFAULT_LOOKAHEAD_M, TeleopSpec
 
 __all__ = [
     "DEFAULT_WALL_THICKNESS_M",
@@ -64,6 +81,7 @@ DEFAULT_WALL_THICKNESS_M = 0.1
 DEFAULT_YIELD_M = 0.3
 _KINDS = ("walls", "boxes", "circles", "polygons")
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
+NAV_MODES = ("gnd", "teleop", "follow", "local")
 
 
 @dataclass(frozen=True, slots=True)
@@ -206,6 +224,10 @@ class ScenarioSpec:
     elements: tuple[Element, ...]
     movers: tuple[Mover, ...]
     source: str
+    mode: str | None = None
+    local: str | None = None
+    subgoals: tuple[Subgoal, ...] = ()
+    teleop: TeleopSpec | None = None
 
     def element_ids(self) -> list[str]:
         """Names of the elements then of the movers, in index order (a contact names one of them)."""
@@ -318,8 +340,9 @@ def _movers(raw: Any, err: _Err) -> list[Mover]:
 def parse_scenario(doc: Any, source: str) -> ScenarioSpec:
     """Validate a loaded YAML document; ``source`` names it in errors."""
     err = _Err(source)
-    top = ("name", "description", "preset", "start", "goal", "time_limit", "world", "events", "movers")
-    d = _table(doc, "", err, top, ("name", "start", "goal", "time_limit", "world"))
+    top = ("name", "description", "preset", "start", "goal", "time_limit", "world", "events", "movers",
+           "mode", "local", "subgoals", "teleop")
+    d = _table(doc, "", err, top, ("name", "start", "time_limit", "world"))
     name = d["name"]
     if not isinstance(name, str) or not _NAME.fullmatch(name):
         raise err("name", f"expected a plain name (letters, digits, _ . -, not starting with . or -), "
@@ -331,7 +354,15 @@ def parse_scenario(doc: Any, source: str) -> ScenarioSpec:
     if preset not in ("wheelchair", "xr4000"):
         raise err("preset", f"expected wheelchair or xr4000, got {preset!r}")
     sx, sy, st = _nums(d["start"], "start", err, (3,))
-    gx, gy = _nums(d["goal"], "goal", err, (2,))
+    mode, local, subgoals, teleop = _navigation(d, err)
+    if "goal" in d:
+        gx, gy = _nums(d["goal"], "goal", err, (2,))
+    elif subgoals:
+        gx, gy = subgoals[-1].x, subgoals[-1].y
+    elif teleop is not None and teleop.track is not None:
+        gx, gy = float(teleop.track[-1, 0]), float(teleop.track[-1, 1])
+    else:
+        raise err("goal", "missing (only mode follow and a teleop track imply one)")
     time_limit = _num(d["time_limit"], "time_limit", err, positive=True)
     elements = _elements(d["world"], "world", err, None)
     by_id: dict[str, Element] = {}
@@ -388,7 +419,74 @@ def parse_scenario(doc: Any, source: str) -> ScenarioSpec:
         final.append(Element(e.id, e.kind, e.vertices, e.circle, e.segment, e.appear_s, removes.get(e.id),
                              tuple(a for _, a, _ in acts), swings.pop() if swings else 0.0))
     return ScenarioSpec(name, description.strip(), preset, (sx, sy, st), (gx, gy), time_limit, tuple(final),
-                        tuple(movers), source)
+                        tuple(movers), source, mode, local, subgoals, teleop)
+
+
+def _navigation(d: dict[str, Any], err: _Err) -> tuple[str | None, str | None, tuple[Subgoal, ...],
+                                                       TeleopSpec | None]:
+    """The keys of the multi-loop architecture: mode, local, subgoals, teleop (see the module docstring)."""
+    mode = d.get("mode")
+    if mode is not None and mode not in NAV_MODES:
+        raise err("mode", f"expected one of {', '.join(NAV_MODES)}, got {mode!r}")
+    local = d.get("local")
+    if local is not None and local not in LOCAL_STRATEGIES:
+        raise err("local", f"expected one of {', '.join(LOCAL_STRATEGIES)}, got {local!r}")
+    subgoals: tuple[Subgoal, ...] = ()
+    if "subgoals" in d:
+        if mode != "follow":
+            raise err("subgoals", f"only with mode: follow (mode is {mode or 'gnd'})")
+        subgoals = _subgoals(d["subgoals"], err)
+    elif mode == "follow":
+        raise err("subgoals", "missing (mode follow needs them)")
+    teleop = None
+    if "teleop" in d:
+        if mode != "teleop":
+            raise err("teleop", f"only with mode: teleop (mode is {mode or 'gnd'})")
+        teleop = _teleop(d["teleop"], err)
+    elif mode == "teleop":
+        raise err("teleop", "missing (mode teleop needs commands or a track)")
+    return mode, local, subgoals, teleop
+
+
+def _subgoals(raw: Any, err: _Err) -> tuple[Subgoal, ...]:
+    """``[[x, y, theta, kind], ...]`` -> subgoals (validated as the rows of a subgoal file)."""
+    from ..io.subgoals import subgoals_from_rows
+
+    return subgoals_from_rows(raw, f"{err.source}: subgoals")
+
+
+def _teleop(raw: Any, err: _Err) -> TeleopSpec:
+    t = _table(raw, "teleop", err, ("commands", "track"))
+    if len(t) != 1:
+        raise err("teleop", "expected exactly one of commands, track")
+    if "commands" in t:
+        rows = t["commands"]
+        if not isinstance(rows, list) or len(rows) < 2:
+            raise err("teleop.commands", f"expected a list of >= 2 [t_s, v, w] rows, got {rows!r}")
+        cmds = np.array([_nums(r, f"teleop.commands[{i}]", err, (3,)) for i, r in enumerate(rows)],
+                        dtype=np.float64)
+        if cmds[0, 0] < 0.0 or np.any(np.diff(cmds[:, 0]) <= 0.0):
+            raise err("teleop.commands", "times must be >= 0 and increasing")
+        if cmds[-1, 1] != 0.0 or cmds[-1, 2] != 0.0:
+            raise err(f"teleop.commands[{len(rows) - 1}]", "the last entry ends the script: [t_end, 0, 0]")
+        return TeleopSpec(commands=cmds)
+    tr = _table(t["track"], "teleop.track", err, ("points", "speed", "lookahead", "tolerance"),
+                ("points", "speed"))
+    pts = tr["points"]
+    if not isinstance(pts, list) or len(pts) < 2:
+        raise err("teleop.track.points", f"expected a list of >= 2 [x, y] points, got {pts!r}")
+    xy = np.array([_nums(q, f"teleop.track.points[{i}]", err, (2,)) for i, q in enumerate(pts)],
+                  dtype=np.float64)
+    if np.any(np.hypot(*np.diff(xy, axis=0).T) <= 0.0):
+        raise err("teleop.track.points", "two consecutive points are equal")
+    tol = tr.get("tolerance")
+    return TeleopSpec(
+        track=xy,
+        speed_mps=_num(tr["speed"], "teleop.track.speed", err, positive=True),
+        lookahead_m=_num(tr.get("lookahead", DEFAULT_LOOKAHEAD_M), "teleop.track.lookahead", err,
+                         positive=True),
+        tolerance_m=None if tol is None else _num(tol, "teleop.track.tolerance", err, positive=True),
+    )
 
 
 def load_scenario(path: Path) -> ScenarioSpec:

@@ -1,0 +1,161 @@
+"""ND+ for the rectangular differential chair: passages are crossed along their axis.
+
+A kinematic unicycle loop (exact arcs) drives the 1.2 x 0.7 m chair with ``nd_step`` followed by the
+stack's reflexive check ``safe_command`` through a 0.85 m door seen as synthetic points, from crooked and
+off-centre starts; the real footprint must never touch the wall and the chair must end up through.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+
+from gndreplay.pipeline.nd import NdParams, nd_step
+from gndreplay.pipeline.supervisor import SupervisorParams, footprint_signed_distance, safe_command
+from gndreplay.robot import WHEELCHAIR_ROBOT, XR4000_ROBOT
+
+F64 = NDArray[np.float64]
+CHAIR = WHEELCHAIR_ROBOT
+DOOR_M = 0.85
+WALL_T = 0.1
+CELL_M = 0.05
+
+
+def _outline(x0: float, x1: float, y0: float, y1: float, step: float = 0.02) -> F64:
+    """Points every ``step`` along the outline of the box [x0, x1] x [y0, y1]."""
+    nx, ny = math.ceil((x1 - x0) / step) + 1, math.ceil((y1 - y0) / step) + 1
+    xs, ys = np.linspace(x0, x1, nx), np.linspace(y0, y1, ny)
+    return np.vstack([np.column_stack([xs, np.full(nx, y0)]), np.column_stack([xs, np.full(nx, y1)]),
+                      np.column_stack([np.full(ny, x0), ys]), np.column_stack([np.full(ny, x1), ys])])
+
+
+def door_world(door_m: float = DOOR_M) -> F64:
+    """A 0.1 m thick wall along y = 0 from x = -4 to 4 with a door of ``door_m`` centred on x = 0."""
+    h = 0.5 * door_m
+    return np.vstack([_outline(-4.0, -h, -0.5 * WALL_T, 0.5 * WALL_T), _outline(h, 4.0, -0.5 * WALL_T,
+                                                                                  0.5 * WALL_T)])
+
+
+def to_robot(pose: F64, xy: F64) -> F64:
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    d = xy - pose[:2]
+    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+
+
+def arc(pose: F64, v: float, w: float, h: float) -> F64:
+    """Exact constant-twist motion of a unicycle for ``h`` seconds."""
+    x, y, th = pose
+    if abs(w) < 1e-12:
+        return np.array([x + v * h * math.cos(th), y + v * h * math.sin(th), th])
+    th1 = th + w * h
+    r = v / w
+    return np.array([x + r * (math.sin(th1) - math.sin(th)), y - r * (math.cos(th1) - math.cos(th)), th1])
+
+
+def path_target(pose: F64, goal: F64, lookahead_m: float = 1.0) -> F64:
+    """The stack's mpND target: ``lookahead_m`` along the shortest path, here the polyline from the
+    rotation centre through the door's midpoint (while before it) to the goal."""
+    p = pose[:2]
+    legs = [p, np.zeros(2), goal] if p[1] < 0.0 else [p, goal]
+    left = lookahead_m
+    for a, b in itertools.pairwise(legs):
+        d = float(np.hypot(*(b - a)))
+        if d >= left:
+            out: F64 = a + (b - a) * (left / d)
+            return out
+        left -= d
+    return goal
+
+
+def drive_through_door(start: tuple[float, float, float], goal: tuple[float, float],
+                       *, seconds: float = 90.0, dt: float = 0.2) -> tuple[F64, float, list[str]]:
+    """Closed loop: ND+ then the reflexive check on the wall points (the scan: exact hits, and the same
+    points as grid cells, grown by half a cell); returns the final pose, the smallest real clearance
+    of the footprint over the run (checked at 1 cm steps of the motion) and the rules that fired."""
+    world = door_world()
+    cells = np.unique(np.floor(world / CELL_M), axis=0) * CELL_M + 0.5 * CELL_M  # the grid's memory
+    pose = np.array(start, dtype=np.float64)
+    sup = SupervisorParams()
+    goal_xy = np.asarray(goal, dtype=np.float64)
+    min_clear = math.inf
+    rules: list[str] = []
+    for _ in range(round(seconds / dt)):
+        pts = to_robot(pose, world)
+        pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= 5.0]
+        res = nd_step(pts, to_robot(pose, path_target(pose, goal_xy)[None, :])[0], CHAIR, NdParams())
+        scan = pts[pts[:, 0] >= CHAIR.laser_x_m]  # the chair's laser sees the half plane ahead of it
+        grid = to_robot(pose, cells)
+        grid = grid[np.hypot(grid[:, 0], grid[:, 1]) <= 2.0]
+        safe = safe_command(res.v_mps, 0.0, res.w_radps, scan, grid, CHAIR, sup, cell_m=CELL_M)
+        if safe.rule is not None:
+            rules.append(safe.rule.value)
+        n_sub = max(1, math.ceil(max(abs(safe.v_mps) * dt, abs(safe.w_radps) * dt * 1.0) / 0.01))
+        for _ in range(n_sub):
+            pose = arc(pose, safe.v_mps, safe.w_radps, dt / n_sub)
+            d = float(np.min(footprint_signed_distance(to_robot(pose, world), CHAIR)))
+            min_clear = min(min_clear, d)
+        if pose[1] - CHAIR.rear_m > 0.5 * WALL_T + 0.3:
+            break
+    return pose, min_clear, rules
+
+
+@pytest.mark.parametrize(
+    ("x", "y", "heading_deg"),
+    [(0.15, -2.0, 100.0), (-0.2, -2.5, 75.0), (0.3, -1.8, 110.0), (-0.5, -2.0, 60.0)],
+)
+def test_crooked_chair_crosses_the_door_without_touching(x: float, y: float, heading_deg: float) -> None:
+    pose, min_clear, rules = drive_through_door((x, y, math.radians(heading_deg)), (0.0, 2.5))
+    assert pose[1] - CHAIR.rear_m > 0.5 * WALL_T  # the whole chair is through
+    assert abs(pose[0]) < 0.05 and abs(math.degrees(pose[2]) - 90.0) < 3.0  # straight, on the axis
+    assert min_clear > 0.02  # the real footprint never came near a jamb
+    assert "EMERGENCY" not in rules
+
+
+def _corridor(half_w: float, x0: float = -3.0, x1: float = 4.0) -> F64:
+    xs = np.arange(x0, x1, 0.02)
+    return np.vstack([np.column_stack([xs, np.full(xs.size, half_w)]),
+                      np.column_stack([xs, np.full(xs.size, -half_w)])])
+
+
+def test_chair_in_a_narrow_corridor_goes_on_instead_of_turning_into_the_wall() -> None:
+    """1.3 m between the wall faces: any turn towards the target 40 deg right sweeps the front corner
+    into the right wall before the chair faces it; it drives on (the circle robot turns)."""
+    pts = _corridor(0.65)
+    target = (math.cos(-0.7), math.sin(-0.7))
+    res = nd_step(pts, target, CHAIR)
+    assert res.w_radps == 0.0 and res.v_mps > 0.0
+    circle = nd_step(pts, target, XR4000_ROBOT)
+    assert circle.w_radps < 0.0
+
+
+def test_chair_turns_into_a_side_opening_once_its_corners_fit() -> None:
+    """The right wall ends 0.9 m behind the axle: the opening lets the turn in place sweep freely."""
+    xs = np.arange(-3.0, 4.0, 0.02)
+    left = np.column_stack([xs, np.full(xs.size, 0.65)])
+    right = np.column_stack([xs[xs < -0.9], np.full(int(np.sum(xs < -0.9)), -0.65)])
+    res = nd_step(np.vstack([left, right]), (0.2, -1.5), CHAIR)
+    assert res.w_radps < 0.0
+    closed = nd_step(_corridor(0.65), (0.2, -1.5), CHAIR)  # the same target without the opening
+    assert closed.w_radps == 0.0 or closed.v_mps < 0.0
+
+
+def test_chair_backs_out_when_no_forward_arc_or_turn_fits() -> None:
+    """A wall 0.15 m ahead of the front in a 1.3 m corridor, target to the right: nothing forward is
+    admissible and the turn in place sweeps the walls; the chair reverses (turning its front right)."""
+    front = np.column_stack([np.full(70, CHAIR.front_m + 0.15), np.linspace(-0.7, 0.7, 70)])
+    res = nd_step(np.vstack([_corridor(0.65, x1=CHAIR.front_m + 0.15), front]), (0.3, -1.0), CHAIR)
+    assert res.v_mps < 0.0 and res.w_radps <= 0.0
+
+
+def test_chair_backs_out_of_a_narrow_corridor_towards_a_target_behind() -> None:
+    """The way is behind (GND's trap: the far end closed): the 1.3 m corridor leaves no room to turn round
+    (the corners sweep 0.87 m); the chair reverses along it, where the circle robot just turns."""
+    pts = _corridor(0.65, x0=-0.5)  # the corridor ends 0.5 m behind the axle: it opens there
+    res = nd_step(pts, (-2.0, 0.3), CHAIR)
+    assert res.v_mps < 0.0
+    circle = nd_step(pts, (-2.0, 0.3), XR4000_ROBOT)
+    assert circle.w_radps > 0.0

@@ -1,0 +1,288 @@
+"""The mode selector (issue 14 item 4) on scripted scans, in a kinematic loop: the robot moves exactly as
+commanded, the laser is ray cast from the new pose each tick."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from gndreplay.config import PRESETS, Config
+from gndreplay.errors import ConfigError
+from gndreplay.geometry import compose
+from gndreplay.pipeline.selector import intention_xy, select_mode, swept_area_occupied
+from gndreplay.pipeline.stack import NavigationStack, StackParams, TickResult, teleop_command
+from gndreplay.pipeline.supervisor import Mode, braking_time_s, footprint_signed_distance
+from gndreplay.sim.closedloop import arc_step
+from gndreplay.sim.world import box, cast_rays, polygon, wall
+from gndreplay.types import Command, Flag, Pose2D, Scan, Subgoal, Tick
+
+FRONT = np.linspace(-math.pi / 2, math.pi / 2, 361)  # the papers' SICK: 180 deg, 0.5 deg
+ROOM = polygon([(-6, -6), (14, -6), (14, 6), (-6, 6)])
+PRESET_NAMES = sorted(PRESETS)
+T0 = 1_000_000_000
+
+
+def teleop_params(cfg: Config, **changes: object) -> StackParams:
+    return dataclasses.replace(cfg.stack_params(), nav_mode="teleop", **changes)  # type: ignore[arg-type]
+
+
+def clearance(segments: np.ndarray, pose: np.ndarray, cfg: Config) -> float:
+    """Smallest signed distance [m] from the footprint at ``pose`` to the walls (sampled every 5 mm)."""
+    pts = []
+    for x0, y0, x1, y1 in segments:
+        n = max(2, math.ceil(math.hypot(x1 - x0, y1 - y0) / 0.005) + 1)
+        t = np.linspace(0.0, 1.0, n)[:, None]
+        pts.append(np.column_stack([x0 + t[:, 0] * (x1 - x0), y0 + t[:, 0] * (y1 - y0)]))
+    world = np.vstack(pts)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    d = world - pose[:2]
+    local = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+    return float(np.min(footprint_signed_distance(local, cfg.robot)))
+
+
+def drive(
+    cfg: Config,
+    segments: np.ndarray,
+    start: tuple[float, float, float],
+    command: Command | None,
+    n: int,
+    params: StackParams,
+    subgoals: tuple[Subgoal, ...] = (),
+    goal: tuple[float, float] = (0.0, 0.0),
+) -> tuple[list[TickResult], list[np.ndarray]]:
+    """``n`` ticks: scan at the pose, step the stack with ``command`` as the teleop command, move the robot
+    exactly by the stack's command for one laser period. Returns the results and the pose of each tick."""
+    stack = NavigationStack(params, subgoals)
+    sensor = Pose2D(cfg.robot.laser_x_m, cfg.robot.laser_y_m, cfg.robot.laser_theta_rad)
+    dt = cfg.laser.period_s
+    pose = np.array(start, dtype=np.float64)
+    results, poses = [], []
+    for i in range(n):
+        t = T0 + round(i * dt * 1e9)
+        laser = compose(pose, sensor.as_array())
+        ranges = cast_rays(laser[:2], FRONT + laser[2], segments, max_range_m=8.0)
+        scan = Scan(t_ns=t, ranges_m=ranges, angles_rad=FRONT, max_range_m=8.0, sensor_pose=sensor)
+        p = Pose2D.from_array(pose)
+        cmd = None if command is None else dataclasses.replace(command, t_ns=t)  # the driver holds it
+        r = stack.step(Tick(index=i, t_ns=t, scan=scan, odom=p, cmd=cmd), p, goal)
+        results.append(r)
+        poses.append(pose)
+        pose = arc_step(pose, r.v_mps, r.vy_mps, r.w_radps, dt)
+    return results, poses
+
+
+# ---- the pure functions ------------------------------------------------------------------------------
+
+
+def test_intention_points_along_the_commanded_motion() -> None:
+    ahead = intention_xy(0.3, 0.0, 0.0, 1.0)
+    behind = intention_xy(-0.3, 0.0, 0.0, 1.0)
+    left = intention_xy(0.0, 0.0, 0.5, 1.0)
+    right_arc = intention_xy(0.3, 0.0, -0.3, 1.0)
+    assert ahead is not None and np.allclose(ahead, [1.0, 0.0])
+    assert behind is not None and np.allclose(behind, [-1.0, 0.0], atol=1e-12)
+    assert left is not None and np.allclose(left, [0.0, 1.0], atol=1e-12)
+    # an arc to the right: the chord after 1 m turns by half of the 1 rad heading change
+    assert right_arc is not None and np.allclose(right_arc, [math.cos(-0.5), math.sin(-0.5)])
+    assert intention_xy(0.0, 0.0, 0.0, 1.0) is None
+
+
+def test_select_mode_takes_over_only_when_occupied() -> None:
+    assert select_mode("teleop", "") == ("teleop", "")
+    assert select_mode("teleop", "scan") == ("local", "teleop: swept area occupied (scan)")
+    assert select_mode("follow", "grid") == ("local", "follow: swept area occupied (grid)")
+
+
+def test_swept_area_reports_where_it_is_occupied() -> None:
+    cfg = PRESETS["wheelchair"]
+    sup, robot = cfg.supervisor, cfg.robot
+    ahead = np.array([[robot.front_m + 0.1, 0.0]])
+    none = np.zeros((0, 2))
+    kw = {"cell_m": 0.05, "margin_m": 0.05}
+    assert swept_area_occupied(0.3, 0.0, 0.0, ahead, none, robot, sup, **kw) == "scan"
+    assert swept_area_occupied(0.3, 0.0, 0.0, none, ahead, robot, sup, **kw) == "grid"
+    assert swept_area_occupied(-0.3, 0.0, 0.0, ahead, ahead, robot, sup, **kw) == ""  # backing away
+    assert swept_area_occupied(0.0, 0.0, 0.0, ahead, ahead, robot, sup, **kw) == ""  # standing still
+
+
+def test_teleop_command_is_clipped_and_none_stands_still() -> None:
+    robot = PRESETS["wheelchair"].robot
+    assert teleop_command(Command(0, 5.0, -9.0, 1.0), robot) == (robot.vmax_mps, 0.0, -robot.wmax_radps, "")
+    assert teleop_command(None, robot) == (0.0, 0.0, 0.0, "teleop: no command")
+    assert teleop_command(Command(0, math.nan, 0.0), robot)[:3] == (0.0, 0.0, 0.0)
+
+
+# ---- teleoperation in a kinematic loop -----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_teleop_at_a_wall_is_taken_over_at_the_braking_distance(name: str) -> None:
+    """Full speed straight at a wall 3 m ahead: local navigation takes over on the first tick the swept
+    area (braking horizon, emergency + selector margins) reaches the wall, and the robot never touches."""
+    cfg = PRESETS[name]
+    p = teleop_params(cfg)
+    v = cfg.robot.vmax_mps
+    x_wall = cfg.robot.front_m + 3.013  # not on a cell boundary
+    world = np.vstack([ROOM, wall(x_wall, -3.0, x_wall, 3.0)])
+    results, poses = drive(cfg, world, (0.0, 0.0, 0.0), Command(0, v, 0.0), 60, p)
+    taken = [i for i, r in enumerate(results) if r.active_mode == "local"]
+    assert taken, "never taken over"
+    k = taken[0]
+    assert all(r.active_mode == "teleop" and r.mode is not Mode.EMERGENCY for r in results[:k])
+    assert results[k].desired_mode == "teleop" and results[k].takeover_reason.startswith("teleop: swept area")
+    gap = x_wall - (poses[k][0] + cfg.robot.front_m)  # heading 0 until the takeover
+    predicted = v * braking_time_s(v, 0.0, 0.0, cfg.robot, cfg.supervisor) + (
+        cfg.supervisor.emergency_margin_m + p.selector_margin_m)
+    step = v * cfg.laser.period_s  # the robot moves this much per tick: the takeover falls within a step
+    cell = cfg.grid.cell_m  # an occupied cell counts grown by half a cell, its centre is within half a cell
+    assert predicted - step - 1e-9 < gap <= predicted + cell + 1e-9
+    assert min(clearance(world, q, cfg) for q in poses) > 0.0
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_teleop_parallel_to_a_wall_is_never_taken_over(name: str) -> None:
+    cfg = PRESETS[name]
+    side = cfg.robot.width_m / 2 if cfg.robot.shape == "rectangle" else cfg.robot.radius_m
+    y_wall = side + 0.25
+    world = np.vstack([ROOM, wall(-2.0, y_wall, 12.0, y_wall)])
+    results, poses = drive(cfg, world, (0.0, 0.0, 0.0), Command(0, cfg.robot.vmax_mps, 0.0), 40,
+                           teleop_params(cfg))
+    assert all(r.active_mode == "teleop" and r.takeover_reason == "" for r in results)
+    assert all(r.v_mps == cfg.robot.vmax_mps and r.w_radps == 0.0 for r in results)
+    assert poses[-1][0] > 0.9 * 39 * cfg.robot.vmax_mps * cfg.laser.period_s
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_without_the_selector_the_command_goes_out_unchanged_and_collides(name: str) -> None:
+    """The same drive at the wall, selector off: the command is never changed, and the robot hits the
+    wall (so the selector is what keeps the robot clear in the test above)."""
+    cfg = PRESETS[name]
+    v = cfg.robot.vmax_mps
+    x_wall = cfg.robot.front_m + 3.013
+    world = np.vstack([ROOM, wall(x_wall, -3.0, x_wall, 3.0)])
+    results, poses = drive(cfg, world, (0.0, 0.0, 0.0), Command(0, v, 0.0), 60,
+                           teleop_params(cfg, selector=False))
+    assert all((r.v_mps, r.vy_mps, r.w_radps) == (v, 0.0, 0.0) for r in results)
+    assert all(r.active_mode == "teleop" and r.desired_mode == "teleop" for r in results)
+    assert min(clearance(world, q, cfg) for q in poses) < 0.0
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_teleop_resumes_once_the_obstacle_is_passed(name: str) -> None:
+    """A box partly across the straight drive: local navigation deviates around it, teleoperation wins
+    again as soon as its straight sweep is clear, and the robot passes the box without touching it."""
+    cfg = PRESETS[name]
+    side = cfg.robot.width_m / 2 if cfg.robot.shape == "rectangle" else cfg.robot.radius_m
+    bx = cfg.robot.front_m + 2.5
+    obstacle = box(bx, side + 0.1, 0.4, 0.6)  # its near edge 0.2 m inside the swept band
+    world = np.vstack([ROOM, obstacle])
+    results, poses = drive(cfg, world, (0.0, 0.0, 0.0), Command(0, cfg.robot.vmax_mps, 0.0), 90,
+                           teleop_params(cfg))
+    active = [r.active_mode for r in results]
+    first = active.index("local")
+    assert "teleop" in active[first:], "teleoperation never won again"
+    back = first + active[first:].index("teleop")
+    assert all(a == "teleop" for a in active[-10:])
+    assert poses[-1][0] > bx + 0.5  # past the box
+    assert min(clearance(world, q, cfg) for q in poses) > 0.0
+    assert back > first
+
+
+def test_no_teleop_command_stands_still_with_the_reason() -> None:
+    cfg = PRESETS["wheelchair"]
+    results, _ = drive(cfg, ROOM, (0.0, 0.0, 0.0), None, 3, teleop_params(cfg))
+    assert all((r.v_mps, r.w_radps) == (0.0, 0.0) for r in results)
+    assert all(r.takeover_reason == "teleop: no command" and r.active_mode == "teleop" for r in results)
+
+
+def test_gnd_mode_records_gnd_and_no_selector() -> None:
+    cfg = PRESETS["wheelchair"]
+    results, _ = drive(cfg, ROOM, (0.0, 0.0, 0.0), Command(0, 0.3, 0.0), 3, cfg.stack_params(),
+                       goal=(4.0, 0.0))
+    assert all(r.desired_mode == r.active_mode == "gnd" and r.takeover_reason == "" for r in results)
+    assert all(r.subgoal_index == -1 for r in results)
+
+
+def test_follow_without_subgoals_is_a_config_error() -> None:
+    with pytest.raises(ConfigError, match="subgoals"):
+        NavigationStack(dataclasses.replace(PRESETS["wheelchair"].stack_params(), nav_mode="follow"))
+
+
+# ---- path following ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_follow_reaches_the_final_subgoal_and_stops(name: str) -> None:
+    cfg = PRESETS[name]
+    params = dataclasses.replace(cfg.stack_params(), nav_mode="follow")
+    subgoals = (Subgoal(2.0, 0.0, 0.0), Subgoal(4.0, 1.5, math.pi / 2),
+                Subgoal(4.0, 3.5, math.pi / 2, "stop"))
+    results, poses = drive(cfg, ROOM, (0.0, 0.0, 0.0), None, 250, params, subgoals)
+    done = [i for i, r in enumerate(results) if r.flags & Flag.GOAL_REACHED]
+    assert done, f"final subgoal not reached; last subgoal index {results[-1].subgoal_index}"
+    k = done[0]
+    assert results[k].mode is Mode.GOAL and (results[k].v_mps, results[k].w_radps) == (0.0, 0.0)
+    assert results[k].subgoal_index == len(subgoals)
+    assert [r.subgoal_index for r in results[:k]] == sorted(r.subgoal_index for r in results[:k])
+    _at_the_final_stop(cfg, results, poses, k, subgoals[-1])
+    assert all(r.desired_mode == "follow" for r in results)
+
+
+def _at_the_final_stop(cfg: Config, results: list[TickResult], poses: list[np.ndarray], k: int,
+                       goal: Subgoal) -> None:
+    """Tick k reports the path done: the robot is within reach of the final stop subgoal, with the heading
+    asked, at rest (the command executed on the tick before, which moved it there, within stop_v_mps), and
+    stays still."""
+    follow = cfg.stack_params().follow
+    last = poses[k]
+    assert math.hypot(last[0] - goal.x, last[1] - goal.y) <= follow.reach_m + 1e-9
+    assert abs(math.remainder(last[2] - goal.theta, math.tau)) <= follow.heading_tol_rad
+    assert abs(results[k - 1].v_mps) <= follow.stop_v_mps
+    assert all((r.v_mps, r.w_radps) == (0.0, 0.0) and r.mode is Mode.GOAL for r in results[k:])
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_follow_deviates_round_an_unknown_obstacle_and_resumes(name: str) -> None:
+    """The paper's Fig. 7 in a kinematic loop: a box on the straight path between two subgoals; local
+    navigation takes over in front of it, path following resumes once its sweep is clear, and the final
+    subgoal is reached without touching anything."""
+    cfg = PRESETS[name]
+    params = dataclasses.replace(cfg.stack_params(), nav_mode="follow")
+    subgoals = (Subgoal(3.0, 0.0, 0.0), Subgoal(7.0, 0.0, 0.0, "stop"))
+    world = np.vstack([ROOM, box(4.6, 0.15, 0.4, 0.5)])
+    results, poses = drive(cfg, world, (0.0, 0.0, 0.0), None, 400, params, subgoals)
+    active = [r.active_mode for r in results]
+    assert "local" in active and all(r.takeover_reason.startswith("follow: swept area") for r in results
+                                     if r.active_mode == "local")
+    first = active.index("local")
+    assert "follow" in active[first:]
+    done = [i for i, r in enumerate(results) if r.flags & Flag.GOAL_REACHED]
+    assert done, f"final subgoal not reached; last subgoal index {results[-1].subgoal_index}"
+    assert min(clearance(world, q, cfg) for q in poses[: done[0] + 1]) > 0.0
+    _at_the_final_stop(cfg, results, poses, done[0], subgoals[-1])
+
+
+@pytest.mark.parametrize("strategy", ["free-space", "contour"])
+def test_a_local_strategy_takes_over_at_the_wall_without_contact(strategy: str) -> None:
+    cfg = PRESETS["wheelchair"]
+    p = teleop_params(cfg, local=dataclasses.replace(cfg.stack_params().local, strategy=strategy))
+    x_wall = cfg.robot.front_m + 2.013
+    world = np.vstack([ROOM, wall(x_wall, -3.0, x_wall, 3.0)])
+    results, poses = drive(cfg, world, (0.0, 0.0, 0.0), Command(0, cfg.robot.vmax_mps, 0.0), 50, p)
+    assert any(r.active_mode == "local" for r in results)
+    assert min(clearance(world, q, cfg) for q in poses) > 0.0
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_local_mode_alone_reaches_the_goal(name: str) -> None:
+    cfg = PRESETS[name]
+    params = dataclasses.replace(cfg.stack_params(), nav_mode="local")
+    world = np.vstack([ROOM, box(2.5, 0.0, 0.4, 0.6)])
+    results, poses = drive(cfg, world, (0.0, 0.0, 0.0), None, 300, params, goal=(5.0, 0.0))
+    assert all(r.desired_mode == r.active_mode == "local" for r in results)
+    done = [i for i, r in enumerate(results) if r.flags & Flag.GOAL_REACHED]
+    assert done and results[done[0]].mode is Mode.GOAL
+    assert min(clearance(world, q, cfg) for q in poses[: done[0] + 1]) > 0.0

@@ -1,0 +1,119 @@
+"""Teleoperation input from logs: CARMEN ODOM tv/rv become ``Tick.cmd`` (only when one is non-zero)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from gndreplay.errors import LogFormatError
+from gndreplay.io import open_log
+from gndreplay.io.carmen import CarmenReader, odom_has_commands
+
+RANGES = "1.0 2.0 3.0 2.0 1.0"
+
+
+def flaser(t: float, x: float) -> str:
+    return f"FLASER 5 {RANGES} {x} 0 0 {x} 0 0 {t:.3f} host 0.0\n"
+
+
+def odom(t: float, x: float, tv: float, rv: float) -> str:
+    return f"ODOM {x} 0 0 {tv} {rv} 0 {t:.3f} host 0.0\n"
+
+
+def write_log(path: Path, velocities: list[tuple[float, float]]) -> Path:
+    """An ODOM line at 0.1 s * k with velocities[k], a FLASER 50 ms after each."""
+    lines = []
+    for k, (tv, rv) in enumerate(velocities):
+        lines.append(odom(100 + 0.1 * k, 0.01 * k, tv, rv))
+        lines.append(flaser(100 + 0.1 * k + 0.05, 0.01 * k + 0.005))
+    path.write_text("".join(lines))
+    return path
+
+
+def test_odom_tv_rv_become_the_ticks_commands(tmp_path: Path) -> None:
+    vel = [(0.1 * (k + 1), -0.05 * k) for k in range(6)]
+    with open_log(write_log(tmp_path / "a.clf", vel)) as log:
+        ticks = list(log.ticks())
+        desc = log.describe()
+    assert desc.cmd_stream == "ODOM"
+    assert "commands: ODOM tv/rv" in desc.notes
+    assert len(ticks) == 6
+    for k, tick in enumerate(ticks):  # the last ODOM at or before the scan (50 ms before it)
+        assert tick.cmd is not None
+        assert tick.cmd.t_ns == round((100 + 0.1 * k) * 1e9)
+        assert (tick.cmd.v_mps, tick.cmd.w_radps) == pytest.approx(vel[k])
+
+
+def test_all_zero_tv_rv_are_no_commands(tmp_path: Path) -> None:
+    p = write_log(tmp_path / "z.clf", [(0.0, 0.0)] * 5)
+    with open_log(p) as log:
+        assert all(t.cmd is None for t in log.ticks())
+        desc = log.describe()
+    assert desc.cmd_stream is None
+    assert "ODOM tv/rv are all zero: no recorded velocity commands" in desc.notes
+    with pytest.raises(LogFormatError, match=r"z\.clf: no command stream 'ODOM': every ODOM tv and rv is 0"):
+        CarmenReader(p, cmd_topic="ODOM")
+
+
+def test_commands_start_at_the_first_non_zero_velocity(tmp_path: Path) -> None:
+    """Zeros before the first non-zero tv/rv are no command; from it on every ODOM line is one (a zero then
+    is a recorded stop)."""
+    vel = [(0.0, 0.0)] * 3 + [(0.2, 0.0), (0.0, 0.0), (0.0, 0.1)]
+    with open_log(write_log(tmp_path / "a.clf", vel)) as log:
+        cmds = [t.cmd for t in log.ticks()]
+    assert cmds[:3] == [None, None, None]
+    assert [(c.v_mps, c.w_radps) for c in cmds[3:] if c is not None] == [(0.2, 0.0), (0.0, 0.0), (0.0, 0.1)]
+
+
+def test_non_zero_velocities_after_the_head_are_found(tmp_path: Path) -> None:
+    """The head (50 scans) is all zero: a scan of the ODOM lines, or a complete pass, finds the later tv;
+    the ticks are the same whichever way it was found (the pass never looks ahead)."""
+    vel = [(0.0, 0.0)] * 80 + [(0.2, 0.0)] * 3
+    p = write_log(tmp_path / "late.clf", vel)
+    assert odom_has_commands(p)
+    with open_log(p) as log:
+        desc = log.describe()  # describe never reads ahead: not known yet
+        assert desc.cmd_stream is None
+        assert "ODOM tv/rv: not known before the log is read" in desc.notes
+        assert log.records_commands()  # asked before a pass: the scan of the ODOM lines
+        assert log.describe().cmd_stream == "ODOM"
+        first = [t.cmd for t in log.ticks()]
+    with open_log(p) as log:
+        second = [t.cmd for t in log.ticks()]
+        assert log.describe().cmd_stream == "ODOM"  # known from the pass
+    assert first == second
+    assert first[79] is None
+    assert [(c.v_mps, c.w_radps) for c in first[80:] if c is not None] == [(0.2, 0.0)] * 3
+
+
+def test_cmd_topic_odom_is_accepted_and_other_names_are_refused(tmp_path: Path) -> None:
+    p = write_log(tmp_path / "a.clf", [(0.3, 0.1)] * 3)
+    with CarmenReader(p, cmd_topic="ODOM") as log:
+        assert [t.cmd.v_mps for t in log.ticks() if t.cmd is not None] == [0.3] * 3
+    with pytest.raises(LogFormatError, match=r"no command stream '/cmd_vel'.*tv/rv \(candidates: ODOM\)"):
+        CarmenReader(p, cmd_topic="/cmd_vel")
+    no_odom = tmp_path / "n.clf"
+    no_odom.write_text(flaser(1.0, 0.0))
+    with pytest.raises(LogFormatError, match=r"no command stream 'ODOM'.*\(candidates: none\)"):
+        CarmenReader(no_odom, cmd_topic="ODOM")
+
+
+def test_commands_with_the_odometry_embedded_in_flaser(tmp_path: Path) -> None:
+    """odom_topic=FLASER takes the pose from the scan line; ODOM still gives the commands."""
+    p = write_log(tmp_path / "a.clf", [(0.2, 0.1)] * 4)
+    with open_log(p, odom_topic="FLASER") as log:
+        ticks = list(log.ticks())
+        assert log.describe().cmd_stream == "ODOM"
+    assert all(t.cmd is not None and t.cmd.v_mps == pytest.approx(0.2) for t in ticks)
+    assert ticks[1].odom.x == pytest.approx(0.015)  # the FLASER triple, not the ODOM pose
+
+
+def test_the_sample_log_records_velocities() -> None:
+    sample = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
+    with open_log(sample) as log:
+        assert log.describe().cmd_stream == "ODOM"
+        moving = [t.cmd for _, t in zip(range(200), log.ticks(), strict=False)
+                  if t.cmd is not None and (t.cmd.v_mps or t.cmd.w_radps)]
+    assert moving and all(math.isfinite(c.v_mps) for c in moving)
