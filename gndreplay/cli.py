@@ -518,7 +518,7 @@ def run(
     import dataclasses
 
     from .config import load_config
-    from .replay import RunOptions, run_log
+    from .replay import RunOptions, command_gap_warning, run_log
 
     goal_xy = _parse_goal(goal)
     if goal_xy is not None and goal_ahead is not None:
@@ -558,6 +558,8 @@ def run(
     if summary.out_dir != out_dir and not (quiet or json_out):
         typer.echo(f"gndreplay: {out_dir} holds an earlier run; wrote {summary.out_dir} "
                    "(--overwrite replaces it)", err=True)
+    if (gap := command_gap_warning(summary.data)) is not None:
+        typer.echo(f"gndreplay: warning: {gap}", err=True)
     if json_out:
         import json
 
@@ -754,7 +756,7 @@ def simulate(
 
     Writes a run directory like `gndreplay run` plus result.json (outcome, collision, time to goal, path,
     clearance, ...), log.mcap (scan, odometry, commands, ground truth; `gndreplay run` replays it) and
-    fig_world.png. Exit 0 on success, 1 on a collision or time-out, 2 on a bad scenario.
+    fig_world.png. Exit 0 on success, 1 on a collision, a goal missed or a time-out, 2 on a bad scenario.
 
     `gndreplay simulate office --seed 0 --out sample_logs/office.clf.bz2` writes the bundled sample log.
     """
@@ -914,10 +916,11 @@ def batch(
     Each input runs in its own worker process, so a bad, crashing or hung input (over --timeout) fails
     alone and is reported. A scenario (a .yaml file, or shipped ones with --scenarios) runs once per seed
     (--seeds) as `gndreplay simulate` does, each run one row and one JUnit test case: it passes when the
-    robot reaches the goal (a collision or a time-out fails, with the reason); summary.md and scenarios.csv
-    add each scenario's success rate, collisions, time-outs, mean time and minimum clearance over seeds.
-    Exit code: 0 all passed, 1 a threshold was exceeded, 2 an input could not be read. The navigation mode
-    options (--mode, --local, --subgoals, --no-selector) apply to the logs; scenarios carry their own.
+    robot reaches the goal (a collision, a goal missed or a time-out fails, with the reason); summary.md and
+    scenarios.csv add each scenario's success rate, collisions, goals missed, time-outs, mean time and
+    minimum clearance over seeds. Exit code: 0 all passed, 1 a threshold was exceeded, 2 an input could
+    not be read. The navigation mode options (--mode, --local, --subgoals, --no-selector) apply to the logs
+    and to the scenarios (in place of a scenario's own mode / local / subgoals, as `simulate`).
 
     [bold]Examples[/]
 
@@ -942,7 +945,8 @@ def batch(
                            no_selector)
     sim = SimOptions(latency_s=parse_latency(latency), perfect_odometry=perfect_odometry,
                      time_limit_s=time_limit, figures=figures, config=config, preset=preset_name,
-                     planner=planner)
+                     planner=planner, mode=mode, local=local, subgoals=_load_subgoals(subgoals),
+                     no_selector=no_selector)
     job_list = expand_inputs(
         inputs or [], scenarios=scenarios or [], seeds=None if seeds is None else parse_seeds(seeds)
     )
@@ -1045,39 +1049,10 @@ def _with_planner(cfg: Config, planner: str | None) -> Config:
 
 
 def _with_navigation(cfg: Config, mode: str | None, local: str | None, no_selector: bool) -> Config:
-    """``cfg`` with ``[navigation]`` mode, local strategy and selector set from --mode, --local and
-    --no-selector (None / False keep the config's).
+    """``cfg`` with --mode, --local and --no-selector applied (``sim.closedloop.with_navigation``)."""
+    from .sim.closedloop import with_navigation
 
-    Raises:
-        ConfigError: an unknown mode or strategy (one line naming the option).
-    """
-    from .config import apply_overrides
-
-    mode, local = _nav_choices(mode, local)
-    nav: dict[str, object] = {}
-    if mode is not None:
-        nav["mode"] = mode
-    if local is not None:
-        nav["local"] = {"strategy": local}
-    if no_selector:
-        nav["selector"] = False
-    return apply_overrides(cfg, {"navigation": nav}) if nav else cfg
-
-
-def _nav_choices(mode: str | None, local: str | None) -> tuple[str | None, str | None]:
-    """--mode and --local, lower-cased and checked.
-
-    Raises:
-        ConfigError: an unknown mode or strategy (one line naming the option and the choices).
-    """
-    from .errors import ConfigError
-    from .pipeline.local import LOCAL_STRATEGIES
-    from .pipeline.stack import NAV_MODES
-
-    for option, value, choices in (("--mode", mode, NAV_MODES), ("--local", local, LOCAL_STRATEGIES)):
-        if value is not None and value.lower() not in choices:
-            raise ConfigError(f"{option}: expected one of {', '.join(choices)}, got {value!r}")
-    return (None if mode is None else mode.lower()), (None if local is None else local.lower())
+    return with_navigation(cfg, mode, local, no_selector)
 
 
 def _load_subgoals(path: Path | None) -> tuple[Subgoal, ...]:
@@ -1095,19 +1070,11 @@ def _load_subgoals(path: Path | None) -> tuple[Subgoal, ...]:
 
 def _with_scenario_navigation(spec: ScenarioSpec, mode: str | None, local: str | None,
                               subgoals: tuple[Subgoal, ...]) -> ScenarioSpec:
-    """The scenario with --mode, --local and --subgoals in place of its own ``mode``, ``local`` and
-    ``subgoals`` (the scenario's keys override [navigation]; the command line overrides the scenario)."""
-    import dataclasses
+    """The scenario with --mode, --local and --subgoals in place of its own (``sim.closedloop.
+    scenario_navigation``)."""
+    from .sim.closedloop import scenario_navigation
 
-    mode, local = _nav_choices(mode, local)
-    changes: dict[str, object] = {}
-    if mode is not None:
-        changes["mode"] = mode
-    if local is not None:
-        changes["local"] = local
-    if subgoals:
-        changes["subgoals"] = subgoals
-    return dataclasses.replace(spec, **changes) if changes else spec  # type: ignore[arg-type]
+    return scenario_navigation(spec, mode, local, subgoals)
 
 
 def _with_matcher(cfg: Config, matcher: str) -> Config:

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
 from .errors import ConfigError
+from .io.subgoals import check_small_file
 from .pipeline.follow import FollowParams
 from .pipeline.local import LocalParams
 from .pipeline.model import GRID_200, GRID_400, GridParams
@@ -281,6 +282,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (NdParams, "smax_rad"): Range(0.0, 2.0 * math.pi, lo_open=True, hi_open=True),
     (NdParams, "gap_m"): _pos(10.0),
     (NdParams, "contact_m"): _pos(1.0),
+    (NdParams, "commit_rad"): Range(0.0, math.pi),
     (SupervisorParams, "budget_match_s"): _pos(_TIME),
     (SupervisorParams, "budget_model_s"): _pos(_TIME),
     (SupervisorParams, "budget_planner_s"): _pos(_TIME),
@@ -558,6 +560,7 @@ def load_config(path: Path | None = None, *, preset_name: str | None = None) -> 
     with the TOML file's tables applied. Errors name the file and the key."""
     table: dict[str, Any] = {}
     if path is not None:
+        check_small_file(Path(path), "config file", 1 << 20)  # never open a FIFO or read a device
         try:
             with open(path, "rb") as f:
                 table = tomllib.load(f)

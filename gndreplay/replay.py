@@ -37,6 +37,7 @@ from .errors import ConfigError, LogFormatError
 from .evaluation import write_tum
 from .fsutil import check_output_dir, format_stamp, resolve_output_dir, staging_dir
 from .geometry import relative, wrap_angle
+from .io.subgoals import FOLLOW_NEEDS_SUBGOALS
 from .pipeline.model import RobotCentredGrid
 from .pipeline.stack import MODULES, NavigationStack, TickResult, warm_up
 from .pipeline.supervisor import Mode
@@ -49,21 +50,28 @@ if TYPE_CHECKING:
 __all__ = [
     "BUDGET_FLAGS",
     "COMMAND_COLUMNS",
+    "COMMAND_GAP_WARN_SHARE",
+    "NO_COMMAND_REASONS",
     "REFLEXIVE_MODES",
     "STAGES",
+    "STALE_COMMAND_REASONS",
     "RunOptions",
     "RunSink",
     "RunSummary",
     "StagedSink",
     "assign_goals",
+    "check_local_option",
     "check_navigation",
+    "command_gap_warning",
     "corrected_stream",
     "episodes",
     "interventions",
+    "local_strategy_used",
     "recorded_flags",
     "run_replay",
     "runs",
     "summarise",
+    "tick_edges",
     "warm_up_all",
 ]
 
@@ -238,7 +246,9 @@ class RunSummary:
 
 
 #: commands.csv's columns: the command, what produced it (GND mode or reflexive rule, ND+ situation, flags),
-#: then the audit: desired and active navigation mode, why they differ ("" when they do not), the subgoal.
+#: then the audit: desired and active navigation mode, the takeover reason (why the active mode is not the
+#: desired one, or why the desired module stood still: "teleop: no command", "teleop: command stale"; ""
+#: when the desired module's own command won), the subgoal.
 COMMAND_COLUMNS = (
     "t", "v", "vy", "w", "mode", "situation", "flags", "desired", "active", "takeover", "subgoal",
 )  # fmt: skip
@@ -412,12 +422,28 @@ def episodes(keys: Sequence[str]) -> list[tuple[int, int]]:
     return [(int(i), int(j)) for i, j in zip(start, end, strict=True) if keys[i]]
 
 
-def _span(t_ns: Sequence[int], first: int, end: int) -> dict[str, Any]:
-    """An episode's start [s since the first tick], duration and ticks. It lasts until the tick after it
-    (when control came back), or until the last tick when it runs to the end of the run."""
-    stop = t_ns[end] if end < len(t_ns) else t_ns[end - 1]
-    return {"t_start_s": (t_ns[first] - t_ns[0]) / 1e9, "duration_s": (stop - t_ns[first]) / 1e9,
+def tick_edges(t: ArrayLike) -> NDArray[np.float64]:
+    """(K + 1,) edges of the ticks' time spans: each tick lasts until the next one, the last for the median
+    tick period (1 s for a single tick). The one definition of a tick's span: summary.json's episodes,
+    report.md and the figures' bands all use it."""
+    tt = np.asarray(t, dtype=np.float64)
+    if tt.size == 0:
+        return np.zeros(1)
+    dt = float(np.median(np.diff(tt))) if tt.size > 1 else 1.0
+    return np.concatenate([tt, [tt[-1] + dt]])
+
+
+def _span(edges: NDArray[np.float64], first: int, end: int) -> dict[str, Any]:
+    """An episode's start [s since the first tick], duration (``tick_edges``: until the tick after it, or
+    one tick period past the last tick at the end of the run) and ticks."""
+    return {"t_start_s": float(edges[first]), "duration_s": float(edges[end] - edges[first]),
             "ticks": end - first}
+
+
+#: Takeover reasons the stack records on a teleop tick whose desired module stands still for want of a
+#: usable command (``pipeline.stack``'s teleop command check): ``no_command_ticks`` / ``stale_command_ticks``.
+NO_COMMAND_REASONS = ("teleop: no command", "teleop: command not finite")
+STALE_COMMAND_REASONS = ("teleop: command stale",)
 
 
 def interventions(
@@ -430,14 +456,19 @@ def interventions(
     not the desired one are one takeover (its reason and active mode: those of its first tick); the
     reflexive overrides (``modes`` in ``REFLEXIVE_MODES``: emergency stops, safe replacements, stale data,
     trap escapes): consecutive ticks of the same rule are one. Each episode has ``t_start_s`` (since the
-    first tick), ``duration_s`` (until the tick after it, or the last tick at the end of the run) and
-    ``ticks``. Pure: behaviour only, no wall clock.
+    first tick), ``duration_s`` (``tick_edges``: until the tick after it; at the end of the run, one median
+    tick period past its last tick) and
+    ``ticks``. ``no_command_ticks`` / ``stale_command_ticks``: ticks whose teleop command was missing or not
+    finite / older than the timeout (the robot stood still for want of a driver's command, with active ==
+    desired: not takeovers, but a replay where they are many did not test the driver's commands). Pure:
+    behaviour only, no wall clock.
     """
+    edges = tick_edges((np.asarray(t_ns, dtype=np.int64) - (t_ns[0] if len(t_ns) else 0)) / 1e9)
     taken = ["takeover" if a != d else "" for d, a in zip(desired, active, strict=True)]
     rules = [m if m in REFLEXIVE_MODES else "" for m in modes]
-    takeovers = [{**_span(t_ns, i, j), "desired": desired[i], "active": active[i], "reason": reasons[i]}
+    takeovers = [{**_span(edges, i, j), "desired": desired[i], "active": active[i], "reason": reasons[i]}
                  for i, j in episodes(taken)]
-    emergencies = [{**_span(t_ns, i, j), "rule": rules[i]} for i, j in episodes(rules)]
+    emergencies = [{**_span(edges, i, j), "rule": rules[i]} for i, j in episodes(rules)]
     return {
         "desired": dict(sorted(Counter(desired).items())),
         "active": dict(sorted(Counter(active).items())),
@@ -445,7 +476,25 @@ def interventions(
         "takeovers": takeovers,
         "reflexive_ticks": sum(1 for x in rules if x),
         "emergencies": emergencies,
+        "no_command_ticks": sum(1 for r in reasons if r in NO_COMMAND_REASONS),
+        "stale_command_ticks": sum(1 for r in reasons if r in STALE_COMMAND_REASONS),
     }
+
+
+#: Share of ticks without a usable teleop command above which ``command_gap_warning`` speaks.
+COMMAND_GAP_WARN_SHARE = 0.2
+
+
+def command_gap_warning(summary: dict[str, Any]) -> str | None:
+    """One line when more than ``COMMAND_GAP_WARN_SHARE`` of a run's ticks had no usable teleop command
+    (missing, not finite or stale: the robot stood still, so the audit says little about the driver's
+    commands), else None. ``summary``: summary.json's content."""
+    iv, n = summary.get("interventions") or {}, int(summary.get("ticks", 0) or 0)
+    missing, stale = int(iv.get("no_command_ticks", 0) or 0), int(iv.get("stale_command_ticks", 0) or 0)
+    if n == 0 or missing + stale <= COMMAND_GAP_WARN_SHARE * n:
+        return None
+    return (f"{missing + stale} of {n} ticks ({100.0 * (missing + stale) / n:.0f} %) had no usable teleop "
+            f"command ({missing} none or not finite, {stale} stale): the robot stood still on them")
 
 
 def summarise(
@@ -531,14 +580,38 @@ def warm_up_all(cfg: Config, on_compile: Callable[[str], None] | None = None) ->
 
 
 def check_navigation(cfg: Config, options: RunOptions) -> None:
-    """Refuse, before any work, a navigation mode the run cannot drive: "follow" without subgoals.
+    """Refuse, before any work, a navigation mode the run cannot drive ("follow" without subgoals) and
+    subgoals the mode would silently ignore (any mode but "follow").
 
     Raises:
-        ConfigError: one line saying what is missing.
+        ConfigError: one line saying what is missing or unused.
     """
-    if cfg.navigation.mode == "follow" and not options.subgoals:
-        raise ConfigError("navigation mode follow needs subgoals: give --subgoals FILE (x y theta [kind] per "
-                          "line)")
+    mode = cfg.navigation.mode
+    if mode == "follow" and not options.subgoals:
+        raise ConfigError(f"{FOLLOW_NEEDS_SUBGOALS}: give --subgoals FILE (x y theta [kind] per line)")
+    if mode != "follow" and options.subgoals:
+        raise ConfigError(f"--subgoals: only navigation mode follow uses subgoals (mode is {mode}): "
+                          "give --mode follow or drop --subgoals")
+
+
+def local_strategy_used(cfg: Config) -> bool:
+    """Whether ``cfg``'s navigation runs a local strategy: mode "local", or "teleop" / "follow" with the
+    mode selector (local navigation takes over); never "gnd" (GND's own ND+, no selector)."""
+    nav = cfg.navigation
+    return nav.mode == "local" or (nav.mode in ("teleop", "follow") and nav.selector)
+
+
+def check_local_option(cfg: Config, local: str | None) -> None:
+    """Refuse ``--local`` given (``local`` not None) for a navigation that runs no local strategy.
+
+    Raises:
+        ConfigError: one line naming the option and the mode.
+    """
+    if local is not None and not local_strategy_used(cfg):
+        nav = cfg.navigation
+        why = f"mode {nav.mode}" + (" without the mode selector" if nav.mode != "gnd" else "")
+        raise ConfigError(f"--local {local}: {why} runs no local strategy (mode local, or teleop / follow "
+                          "with the selector, do): drop --local")
 
 
 #: Stages ``run_replay`` reports through ``on_stage``, in order.

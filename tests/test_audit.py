@@ -20,9 +20,11 @@ from gndreplay.replay import (
     RunOptions,
     _command_row,
     _Recorder,
+    command_gap_warning,
     episodes,
     interventions,
     summarise,
+    tick_edges,
 )
 from gndreplay.report.markdown import MAX_EPISODE_ROWS, interventions_section
 from gndreplay.report.rundir import RunDirError, read_commands
@@ -79,8 +81,8 @@ def test_consecutive_takeover_ticks_are_one_takeover_with_its_duration() -> None
     # ticks 2-4 (a change of reason inside does not split it): from 0.4 s until tick 5 at 1.0 s
     assert first == {"t_start_s": pytest.approx(0.4), "duration_s": pytest.approx(0.6), "ticks": 3,
                      "desired": "teleop", "active": "local", "reason": TAKE}
-    # ticks 6-7 run to the end of the run: until the last tick
-    assert second["t_start_s"] == pytest.approx(1.2) and second["duration_s"] == pytest.approx(0.2)
+    # ticks 6-7 run to the end of the run: one tick period past the last tick (tick_edges)
+    assert second["t_start_s"] == pytest.approx(1.2) and second["duration_s"] == pytest.approx(0.4)
     assert second["ticks"] == 2 and second["reason"] == GRID
 
 
@@ -90,7 +92,8 @@ def test_reflexive_overrides_are_episodes_per_rule() -> None:
     assert [(e["rule"], e["ticks"]) for e in iv["emergencies"]] == [
         ("EMERGENCY", 1), ("SAFE_SLOW", 1), ("EMERGENCY", 1)]
     assert [e["t_start_s"] for e in iv["emergencies"]] == pytest.approx([1.0, 1.2, 1.4])
-    assert [e["duration_s"] for e in iv["emergencies"]] == pytest.approx([0.2, 0.2, 0.0])
+    # a one-tick EMERGENCY at the end of the run lasts one tick period, like every one-tick episode
+    assert [e["duration_s"] for e in iv["emergencies"]] == pytest.approx([0.2, 0.2, 0.2])
     assert set(REFLEXIVE_MODES) == {"EMERGENCY", "SAFE_SLOW", "SAFE_TURN", "SAFE_REVERSE", "STALE", "ESCAPE"}
 
 
@@ -98,7 +101,7 @@ def test_no_intervention_in_a_clean_gnd_run() -> None:
     t = [T0 + k * DT for k in range(4)]
     iv = interventions(t, ["gnd"] * 4, ["gnd"] * 4, [""] * 4, ["mpND", "mND", "ROTATE", "GOAL"])
     assert iv == {"desired": {"gnd": 4}, "active": {"gnd": 4}, "takeover_ticks": 0, "takeovers": [],
-                  "reflexive_ticks": 0, "emergencies": []}
+                  "reflexive_ticks": 0, "emergencies": [], "no_command_ticks": 0, "stale_command_ticks": 0}
     assert interventions([], [], [], [], [])["takeovers"] == []
 
 
@@ -160,7 +163,49 @@ def test_fig_modes_shades_each_takeover_and_bands_each_rule(tmp_path: Path) -> N
     ax_c, ax_d, ax_a, ax_r = fig.axes[:4]
     spans = sorted((p.get_x(), p.get_x() + p.get_width()) for p in ax_c.patches)
     assert spans == [pytest.approx((0.4, 1.0)), pytest.approx((1.2, 1.6))]  # the last runs one period on
+    # the figure and summary.json (hence report.md) share one definition of an episode's span
+    iv = audit()
+    assert spans == [pytest.approx((e["t_start_s"], e["t_start_s"] + e["duration_s"]))
+                     for e in iv["takeovers"]]
     assert "2 takeovers (5 ticks), 3 reflexive overrides (3 ticks)" in ax_c.get_title()
     assert sorted(bars.get_label() for bars in ax_r.collections) == ["EMERGENCY", "SAFE_SLOW"]
     assert sorted(bars.get_label() for bars in ax_a.collections) == ["local", "teleop"]
     assert [bars.get_label() for bars in ax_d.collections] == ["teleop"]
+
+
+def test_episode_spans_follow_tick_edges_on_irregular_ticks() -> None:
+    """Irregular tick periods: every episode spans tick_edges (the figure's bands), the last one the median
+    period past its last tick; a single tick lasts 1 s."""
+    t = [T0, T0 + 100_000_000, T0 + 300_000_000, T0 + 400_000_000, T0 + 500_000_000]
+    modes = ["mpND", "EMERGENCY", "EMERGENCY", "mpND", "STALE"]
+    iv = interventions(t, ["gnd"] * 5, ["gnd"] * 5, [""] * 5, modes)
+    edges = tick_edges((np.asarray(t) - T0) / 1e9)
+    assert edges.tolist() == pytest.approx([0.0, 0.1, 0.3, 0.4, 0.5, 0.6])
+    assert [(e["rule"], e["t_start_s"], e["duration_s"]) for e in iv["emergencies"]] == [
+        ("EMERGENCY", pytest.approx(0.1), pytest.approx(0.3)),
+        ("STALE", pytest.approx(0.5), pytest.approx(0.1)),
+    ]
+    one = interventions([T0], ["gnd"], ["gnd"], [""], ["EMERGENCY"])["emergencies"]
+    assert one == [{"t_start_s": 0.0, "duration_s": 1.0, "ticks": 1, "rule": "EMERGENCY"}]
+
+
+def test_ticks_without_a_usable_teleop_command_are_counted_and_reported() -> None:
+    """The stack records "teleop: no command" / "... not finite" / "... stale" while the desired mode stays
+    active (the robot stands still): not takeovers, but counted, shown in report.md and warned about."""
+    reasons = ["teleop: no command", "teleop: no command", "", "teleop: command stale",
+               "teleop: command not finite", "", "", "", "", ""]
+    n = len(reasons)
+    t = [T0 + k * DT for k in range(n)]
+    iv = interventions(t, ["teleop"] * n, ["teleop"] * n, reasons, ["mpND"] * n)
+    assert iv["takeovers"] == [] and iv["takeover_ticks"] == 0
+    assert (iv["no_command_ticks"], iv["stale_command_ticks"]) == (3, 1)
+    text = "\n".join(interventions_section(iv, n))
+    assert ("Ticks without a usable teleop command (the robot stood still): 3 (30.0 %) with none or a "
+            "non-finite one, 1 (10.0 %) with a stale one.") in text
+    warning = command_gap_warning({"ticks": n, "interventions": iv})
+    assert warning == ("4 of 10 ticks (40 %) had no usable teleop command (3 none or not finite, 1 stale): "
+                       "the robot stood still on them")
+    # at most 20 %: quiet; a run without the counts (an older summary) too
+    assert command_gap_warning({"ticks": 20, "interventions": iv}) is None
+    assert command_gap_warning({"ticks": 0, "interventions": {}}) is None
+    assert "usable teleop command" not in "\n".join(interventions_section(audit(), 8))

@@ -172,12 +172,23 @@ def result_json(outcome: str, *, end: float = 12.5, clearance: float | None = 0.
 def test_metrics_of_a_run_from_its_result_and_timing() -> None:
     timing = {"sim_ms_per_step": 0.5, "stack_ms_per_tick": 4.0, "steps": 10}
     assert metrics_from_result(result_json("success"), timing) == {
-        "success": 1, "collisions": 0, "timeouts": 0, "time_to_goal_s": 12.5, "clearance_m": 0.4,
-        "path_length_m": 3.25, "security_time_pct": 12.0, "sim_ms_per_step": 0.5, "stack_ms_per_tick": 4.0,
+        "success": 1, "collisions": 0, "goal_missed": 0, "timeouts": 0, "time_to_goal_s": 12.5,
+        "clearance_m": 0.4, "path_length_m": 3.25, "security_time_pct": 12.0, "sim_ms_per_step": 0.5,
+        "stack_ms_per_tick": 4.0,
     }
     hit = result_json("collision", end=3.1, clearance=None, contact={"t_s": 3.1, "object": "door"})
     m = metrics_from_result(hit, {})
-    assert (m["success"], m["collisions"], m["timeouts"]) == (0, 1, 0)
+    assert (m["success"], m["collisions"], m["goal_missed"], m["timeouts"]) == (0, 1, 0, 0)
+    # the stack stopped at the goal it believed, 0.34 m from the true one: its own outcome, not a time-out
+    short = {**result_json("goal_missed", end=21.0), "ticks": 200, "takeovers": 3,
+             "active_modes": {"gnd": 150, "local": 50},
+             "goal_missed": {"stack_goal_reached_s": 19.6, "stopped_s": 20.0, "true_distance_m": 0.34,
+                             "tolerance_m": 0.3}}
+    ms = metrics_from_result(short, {})
+    assert (ms["success"], ms["goal_missed"], ms["timeouts"], ms["goal_miss_m"]) == (0, 1, 0, 0.34)
+    assert (ms["takeovers"], ms["local_ticks_pct"]) == (3.0, 25.0)
+    assert outcome_note(short) == ("goal missed at 21.00 s: the stack stopped at the goal, the true axle "
+                                   "0.340 m from it (tolerance 0.3 m)")
     assert "time_to_goal_s" not in m and "clearance_m" not in m  # null in result.json: not measured
     assert outcome_note(hit) == "collision with door at 3.10 s"
     moved_into = {"t_s": 4.0, "object": "person", "hit_by_mover": True}
@@ -224,7 +235,8 @@ def run_row(group: str, seed: int, outcome: str, time_s: float | None = None, cl
             status: str = "pass", stack_p99: float = 5.0) -> InputResult:
     metrics: dict[str, float] = {
         "success": int(outcome == "success"), "collisions": int(outcome == "collision"),
-        "timeouts": int(outcome == "timeout"), "clearance_m": clearance, "stack_p99_ms": stack_p99,
+        "goal_missed": int(outcome == "goal_missed"), "timeouts": int(outcome == "timeout"),
+        "clearance_m": clearance, "stack_p99_ms": stack_p99,
     }
     if time_s is not None:
         metrics["time_to_goal_s"] = time_s
@@ -240,6 +252,7 @@ def rows_fixture() -> list[InputResult]:
         run_row("u_trap", 3, "collision", clearance=0.0, status="fail"),
         InputResult("u_trap-s4", "/s/u_trap.yaml", "error", error="crashed", group="u_trap", seed=4),
         run_row("enclosed", 1, "timeout", clearance=0.8, status="fail"),
+        run_row("enclosed", 2, "goal_missed", clearance=0.9, status="fail"),
     ]
 
 
@@ -247,11 +260,13 @@ def test_aggregates_over_seeds_known_answers() -> None:
     th = Thresholds(limits={**DEFAULT_LIMITS, "min_success_rate": 0.5, "collision_rate": 0.0})
     u_trap, enclosed = aggregate_scenarios(rows_fixture(), th)
     assert (u_trap.scenario, u_trap.seeds, u_trap.runs, u_trap.errors) == ("u_trap", (1, 2, 3, 4), 4, 1)
-    assert (u_trap.successes, u_trap.collisions, u_trap.timeouts) == (2, 1, 0)
+    assert (u_trap.successes, u_trap.collisions, u_trap.goal_missed, u_trap.timeouts) == (2, 1, 0, 0)
     assert u_trap.metrics == {
-        "success_rate": 2 / 3, "collision_rate": 1 / 3, "timeout_rate": 0.0, "mean_time_to_goal_s": 25.0,
-        "clearance_m": 0.0, "stack_p99_ms": 9.0,
+        "success_rate": 2 / 3, "collision_rate": 1 / 3, "goal_missed_rate": 0.0, "timeout_rate": 0.0,
+        "mean_time_to_goal_s": 25.0, "clearance_m": 0.0, "stack_p99_ms": 9.0,
     }
+    assert (enclosed.runs, enclosed.goal_missed, enclosed.timeouts) == (2, 1, 1)
+    assert (enclosed.metrics["goal_missed_rate"], enclosed.metrics["timeout_rate"]) == (0.5, 0.5)
     assert u_trap.failures == ("collision_rate 0.3333 > 0",)
     assert u_trap.status == "error"  # a run errored: the worst of runs and thresholds
     assert enclosed.metrics["success_rate"] == 0.0 and "mean_time_to_goal_s" not in enclosed.metrics
@@ -269,15 +284,19 @@ def test_reports_carry_the_runs_and_the_aggregates() -> None:
     rows = rows_fixture()
     aggs = aggregate_scenarios(rows, th)
     md = summary_md(rows, aggs)
-    assert "6 inputs: 3 pass, 2 fail, 1 error" in md
+    assert "7 inputs: 3 pass, 3 fail, 1 error" in md
     assert "| office | pass | 10 |" in md  # logs keep their table
     assert "| u_trap-s2 | pass | 2 | success | 30.00 | 0.1200 |" in md
-    assert ("| u_trap | ERROR | 4 | 2/3 (67 %) | 1 | 0 | 1 | 25.00 | 0.0000 | 9.000 |  |") in md
-    assert "| enclosed | FAIL | 1 | 0/1 (0 %) | 0 | 1 | 0 |  | 0.8000 | 5.000 | success_rate 0 < 0.5 |" in md
+    assert "| enclosed-s2 | FAIL | 2 | goal_missed |" in md
+    # columns: runs, success, collisions, goal missed, time-outs, errors, mean time, clearance, stack p99
+    assert ("| u_trap | ERROR | 4 | 2/3 (67 %) | 1 | 0 | 0 | 1 | 25.00 | 0.0000 | 9.000 |  |") in md
+    assert ("| enclosed | FAIL | 2 | 0/2 (0 %) | 0 | 1 | 1 | 0 |  | 0.8000 | 5.000 | success_rate 0 < 0.5 |"
+            in md)
     table = list(csv.DictReader(scenarios_csv(aggs).splitlines()))
-    assert [(r["scenario"], r["status"], r["success_rate"], r["seeds"]) for r in table] == [
-        ("u_trap", "error", "0.667", "1 2 3 4"),
-        ("enclosed", "fail", "0.000", "1"),
+    assert [(r["scenario"], r["status"], r["success_rate"], r["goal_missed"], r["goal_missed_rate"],
+             r["timeouts"], r["seeds"]) for r in table] == [
+        ("u_trap", "error", "0.667", "0", "0.000", "0", "1 2 3 4"),
+        ("enclosed", "fail", "0.000", "1", "0.500", "1", "1 2"),
     ]
     root = ET.fromstring(junit_xml(rows, aggs))
     runs, over_seeds = root.findall("testsuite")
@@ -286,7 +305,9 @@ def test_reports_carry_the_runs_and_the_aggregates() -> None:
         "gndreplay.batch.scenarios", "2", "1")
     failure = over_seeds.findall("testcase")[1].find("failure")
     assert failure is not None and failure.get("message") == "success_rate 0 < 0.5"
-    assert root.get("tests") == "8" and root.get("failures") == "3" and root.get("errors") == "1"
+    assert root.get("tests") == "9" and root.get("failures") == "4" and root.get("errors") == "1"
+    enclosed_out = over_seeds.findall("testcase")[1].findtext("system-out") or ""
+    assert "goal_missed: 1" in enclosed_out and "timeouts: 1" in enclosed_out
     # no aggregate limits: one test case per input (per scenario x seed) and nothing more
     assert len(ET.fromstring(junit_xml(rows, aggregate_scenarios(rows))).findall("testsuite")) == 1
 
@@ -434,7 +455,7 @@ def test_cli_batch_runs_scenarios_beside_a_log_and_a_bad_scenario_file(tmp_path:
         ("u_trap", "2", "2", "0", "0.000"),
     ]
     md = (out / "summary.md").read_text()
-    assert "## Scenarios over seeds" in md and "| u_trap | FAIL | 2 | 0/2 (0 %) | 0 | 2 | 0 |" in md
+    assert "## Scenarios over seeds" in md and "| u_trap | FAIL | 2 | 0/2 (0 %) | 0 | 0 | 2 | 0 |" in md
 
 
 def test_cli_batch_passes_the_scenario_options(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -464,3 +485,53 @@ def test_cli_batch_passes_the_scenario_options(tmp_path: Path, monkeypatch: pyte
         result = CliRunner().invoke(app, ["batch", "--scenarios", "enclosed", *bad])
         assert result.exit_code == 2, result.stderr
         assert result.stderr.startswith(f"gndreplay: error: {message}"), result.stderr
+
+
+def test_scenario_runs_take_the_navigation_options_as_simulate_does(tmp_path: Path) -> None:
+    """--mode / --local / --subgoals replace the scenario's own keys, --no-selector the config's selector;
+    a mode the scenario cannot run is that run's error (naming the file), never a silent GND run."""
+    from gndreplay.batch.scenarios import run_scenario, scenario_scores
+    from gndreplay.types import Subgoal
+
+    room = write(tmp_path, "room.yaml", ROOM_XR4000)
+    job = Job("room-s0", room, kind="scenario", seed=0, group="room")
+    base = SimOptions(time_limit_s=1.0, figures=False, perfect_odometry=True)
+
+    def nav(out: str, sim: SimOptions) -> tuple[dict[str, Any], dict[str, float]]:
+        run = run_scenario(job, tmp_path / out, sim)
+        res = json.loads((run.out_dir / "result.json").read_text())
+        return res, scenario_scores(run.out_dir)[0]
+
+    res, _ = nav("plain", base)
+    assert (res["navigation"]["mode"], res["navigation"]["selector"], res["navigation"]["local"]) == (
+        "gnd", True, "nd")
+    res, scores = nav("local", SimOptions(time_limit_s=1.0, figures=False, perfect_odometry=True,
+                                          mode="LOCAL", local="wall-left", no_selector=True))
+    assert (res["navigation"]["mode"], res["navigation"]["selector"], res["navigation"]["local"]) == (
+        "local", False, "wall-left")
+    assert scores["takeovers"] == res["takeovers"]
+    assert res["active_modes"] == {"local": res["ticks"]} and scores["local_ticks_pct"] == 100.0
+    stop = (Subgoal(2.0, 2.0, 0.0, "stop"),)
+    res, _ = nav("follow", SimOptions(time_limit_s=1.0, figures=False, mode="follow", subgoals=stop))
+    assert (res["navigation"]["mode"], res["navigation"]["subgoals"]) == ("follow", 1)
+    with pytest.raises(ConfigError, match=r"room.yaml: teleop: missing"):
+        run_scenario(job, tmp_path / "teleop", SimOptions(mode="teleop"))
+    with pytest.raises(ConfigError, match=r"--mode: expected one of gnd, teleop, follow, local, got 'drive'"):
+        run_scenario(job, tmp_path / "drive", SimOptions(mode="drive"))
+
+
+def test_goals_missed_have_their_own_thresholds_per_run_and_over_seeds(tmp_path: Path) -> None:
+    from gndreplay.batch import check_limits
+
+    th = load_thresholds(write(tmp_path, "t.toml", (
+        '[inputs."u_trap"]\nmin_success = false\ngoal_missed = 0\ngoal_missed_rate = 0.25\ntakeovers = 3\n')))
+    run = Job("u_trap-s1", Path("u_trap.yaml"), kind="scenario", seed=1, group="u_trap")
+    limits = th.limits_for(run)
+    assert (limits["goal_missed"], limits["takeovers"]) == (0, 3) and "min_success" not in limits
+    assert th.aggregate_limits("u_trap", Path("u_trap.yaml")) == {"goal_missed_rate": 0.25}
+    row = run_row("u_trap", 1, "goal_missed", status="fail")
+    assert check_limits(row.metrics, limits) == ("goal_missed 1 > 0",)
+    agg = aggregate_scenarios([row, run_row("u_trap", 2, "success", 10.0)], th)[0]
+    assert agg.failures == ("goal_missed_rate 0.5 > 0.25",)
+    with pytest.raises(ConfigError, match=r"goal_missed_rate is a fraction of the runs"):
+        load_thresholds(write(tmp_path, "bad.toml", "[thresholds]\ngoal_missed_rate = 2\n"))

@@ -6,13 +6,14 @@ report.md, commands.csv, fig_modes.png and results.mcap. Bad combinations are on
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 from rosbags.rosbag1 import Writer as Writer1
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 from typer.testing import CliRunner
 
@@ -60,14 +61,27 @@ def wall_ranges(x: float, max_range: float = 20.0) -> np.ndarray:
     return r
 
 
-def write_wall_bag(path: Path, *, commands: bool = True) -> Path:
-    """A ROS 1 bag: /scan (LaserScan), /odom (Odometry) and, with ``commands``, /cmd_vel (Twist)."""
-    ts = get_typestore(Stores.ROS1_NOETIC)
+#: Ticks of the wall bag without a driver's command: none yet at the start, then a gap of 7 ticks: the last
+#: command (tick 19, 5 ms before it) is older than the stack's 0.5 s command timeout at tick 24 (scan stamp
+#: 1 ms after the tick: 0.506 s), so ticks 24-26 have a stale one
+NO_CMD_TICKS = (0, 1)
+GAP_TICKS = tuple(range(20, 27))
+STALE_TICKS = (24, 25, 26)
+
+
+def write_wall_bag(path: Path, *, commands: bool = True, kind: str = "ros1") -> Path:
+    """A bag: /scan (LaserScan), /odom (Odometry) and, with ``commands``, /cmd_vel (Twist in a ROS 1 bag,
+    TwistStamped in a ROS 2 MCAP bag: ``kind="mcap"``) except on ``NO_CMD_TICKS`` and ``GAP_TICKS``."""
+    ros1 = kind == "ros1"
+    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
     T = ts.types
+    ser = ts.serialize_ros1 if ros1 else ts.serialize_cdr
 
     def hdr(t: int, frame: str) -> Any:
         stamp = T["builtin_interfaces/msg/Time"](sec=t // NS_PER_S, nanosec=t % NS_PER_S)
-        return T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame)
+        if ros1:
+            return T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame)
+        return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
 
     def v3(x: float = 0.0, y: float = 0.0, z: float = 0.0) -> Any:
         return T["geometry_msgs/msg/Vector3"](x=x, y=y, z=z)
@@ -76,15 +90,19 @@ def write_wall_bag(path: Path, *, commands: bool = True) -> Path:
         return T["geometry_msgs/msg/Twist"](linear=v3(x=v), angular=v3())
 
     cov = np.zeros(36)
-    scan_t, odom_t, twist_t = "sensor_msgs/msg/LaserScan", "nav_msgs/msg/Odometry", "geometry_msgs/msg/Twist"
-    with Writer1(path) as w:
+    scan_t, odom_t = "sensor_msgs/msg/LaserScan", "nav_msgs/msg/Odometry"
+    twist_t = "geometry_msgs/msg/Twist" if ros1 else "geometry_msgs/msg/TwistStamped"
+    writer: Any = Writer1(path) if ros1 else Writer2(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    with writer as w:
         c_scan = w.add_connection("/scan", scan_t, typestore=ts)
         c_odom = w.add_connection("/odom", odom_t, typestore=ts)
         c_cmd = w.add_connection("/cmd_vel", twist_t, typestore=ts) if commands else None
         for k in range(N):
             t = T0 + k * DT
-            if c_cmd is not None:
-                w.write(c_cmd, t - 5_000_000, ts.serialize_ros1(twist(V), twist_t))
+            if c_cmd is not None and k not in NO_CMD_TICKS + GAP_TICKS:
+                tc = t - 5_000_000
+                msg = twist(V) if ros1 else T[twist_t](header=hdr(tc, "base_link"), twist=twist(V))
+                w.write(c_cmd, tc, ser(msg, twist_t))
             point = T["geometry_msgs/msg/Point"](x=robot_x(k), y=0.0, z=0.0)
             yaw0 = T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
             pose = T["geometry_msgs/msg/Pose"](position=point, orientation=yaw0)
@@ -92,13 +110,13 @@ def write_wall_bag(path: Path, *, commands: bool = True) -> Path:
                 header=hdr(t, "odom"), child_frame_id="base_link",
                 pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
                 twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist(V), covariance=cov))
-            w.write(c_odom, t, ts.serialize_ros1(odom, odom_t))
+            w.write(c_odom, t, ser(odom, odom_t))
             scan = T[scan_t](
                 header=hdr(t, "base_link"), angle_min=float(ANGLES[0]), angle_max=float(ANGLES[-1]),
                 angle_increment=float(ANGLES[1] - ANGLES[0]), time_increment=0.0, scan_time=0.1,
                 range_min=0.05, range_max=20.0, ranges=wall_ranges(robot_x(k)).astype(np.float32),
                 intensities=np.zeros(0, dtype=np.float32))
-            w.write(c_scan, t + 1_000_000, ts.serialize_ros1(scan, scan_t))
+            w.write(c_scan, t + 1_000_000, ser(scan, scan_t))
     return path
 
 
@@ -112,8 +130,9 @@ def write_wall_carmen(path: Path, *, tv: float = V) -> Path:
     return path
 
 
-def check_takeover(run: Path) -> dict[str, Any]:
-    """The run's audit shows the driver taken over before the wall, the same in every file."""
+def check_takeover(run: Path, *, gaps: bool = False) -> dict[str, Any]:
+    """The run's audit shows the driver taken over before the wall, the same in every file; with ``gaps``
+    (the bag fixture) the ticks without a command or with a stale one carry their reason, not a takeover."""
     summary = json.loads((run / "summary.json").read_text())
     iv = summary["interventions"]
     assert iv["desired"] == {"teleop": N}
@@ -135,7 +154,14 @@ def check_takeover(run: Path) -> dict[str, Any]:
     gap = WALL_X - cfg.robot.front_m - np.array([robot_x(i) for i in range(N)])
     assert 0.0 < gap[k] <= reach + 0.5 * cfg.grid.cell_m + 1e-9 and gap[k - 1] > reach - 1e-9
     assert np.all(cmds.v_mps[taken] < V)  # local navigation slowed the robot down
-    assert (cmds.takeover[taken] == first["reason"]).any() and np.all(cmds.takeover[~taken] == "")
+    assert (cmds.takeover[taken] == first["reason"]).any()
+    missing, stale = (NO_CMD_TICKS, STALE_TICKS) if gaps else ((), ())
+    expected = np.array(["teleop: no command" if k in missing else "teleop: command stale" if k in stale
+                         else "" for k in range(N)])
+    assert cmds.takeover[~taken].tolist() == expected[~taken].tolist()
+    assert not taken[list(missing + stale)].any()  # standing still for want of a command: no takeover
+    assert np.all(cmds.v_mps[list(missing + stale)] == 0.0)
+    assert (iv["no_command_ticks"], iv["stale_command_ticks"]) == (len(missing), len(stale))
     report = (run / "report.md").read_text()
     section = report.split("## Interventions", 1)[1].split("\n## ", 1)[0]
     assert "| teleop | local | " + first["reason"] + " |" in section
@@ -147,7 +173,8 @@ def test_run_teleop_on_a_bag_with_twist_commands_reports_the_takeover(tmp_path: 
     bag = write_wall_bag(tmp_path / "wall.bag")
     res = invoke("run", bag, "--mode", "teleop", "--goal", "2.5,0", "--out", tmp_path / "run", "--mcap", "-q")
     assert res.exit_code == 0, res.output
-    check_takeover(tmp_path / "run")
+    assert "no usable teleop command" not in res.stderr  # 5 of 60 ticks: under the 20 % warning
+    check_takeover(tmp_path / "run", gaps=True)
     from rosbags.highlevel import AnyReader
 
     with AnyReader([tmp_path / "run" / "results.mcap"]) as reader:
@@ -155,6 +182,18 @@ def test_run_teleop_on_a_bag_with_twist_commands_reports_the_takeover(tmp_path: 
         active = [reader.deserialize(raw, c.msgtype).data for c, _, raw in reader.messages(connections=conns)]
     assert len(active) == N and set(active) == {"teleop", "local"}
     assert active == read_commands(tmp_path / "run" / "commands.csv").active.tolist()
+
+
+def test_run_teleop_on_a_ros2_mcap_bag_with_twist_stamped_commands(tmp_path: Path) -> None:
+    bag = write_wall_bag(tmp_path / "wall2", kind="mcap")
+    for log in (bag, next(bag.glob("*.mcap"))):  # the ROS 2 bag folder and its bare MCAP file
+        out = tmp_path / f"run-{log.suffix or 'dir'}"
+        res = invoke("run", log, "--mode", "teleop", "--goal", "2.5,0", "--out", out, "-q")
+        assert res.exit_code == 0, res.output
+        check_takeover(out, gaps=True)
+        section = (out / "report.md").read_text().split("## Interventions", 1)[1]
+        assert ("Ticks without a usable teleop command (the robot stood still): 2 (3.3 %) with none or a "
+                "non-finite one, 3 (5.0 %) with a stale one") in section
 
 
 def test_run_teleop_on_a_carmen_log_with_odom_tv_rv_reports_the_takeover(tmp_path: Path) -> None:
@@ -167,13 +206,12 @@ def test_run_teleop_on_a_carmen_log_with_odom_tv_rv_reports_the_takeover(tmp_pat
 
 def test_no_selector_leaves_the_driver_alone(tmp_path: Path) -> None:
     log = write_wall_carmen(tmp_path / "wall.clf")
-    res = invoke("run", log, "--mode", "teleop", "--no-selector", "--local", "wall-left", "--goal", "2.5,0",
+    res = invoke("run", log, "--mode", "teleop", "--no-selector", "--goal", "2.5,0",
                  "--out", tmp_path / "run", "-q", "--no-figures")
     assert res.exit_code == 0, res.output
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["interventions"]["takeovers"] == [] and summary["interventions"]["active"] == {"teleop": N}
-    nav = summary["config"]["navigation"]
-    assert nav["selector"] is False and nav["local"]["strategy"] == "wall-left"
+    assert summary["config"]["navigation"]["selector"] is False
     cmds = read_commands(tmp_path / "run" / "commands.csv")
     assert np.all(cmds.v_mps[5:] == pytest.approx(V))  # the recorded command, unchanged, into the wall
 
@@ -207,6 +245,23 @@ def test_follow_needs_subgoals_and_bad_options_are_one_line(tmp_path: Path) -> N
     assert not (tmp_path / "a").exists() and not (tmp_path / "s").exists()
 
 
+def test_options_a_mode_would_ignore_are_refused(tmp_path: Path) -> None:
+    """--subgoals outside mode follow, --local where no local strategy runs: one line, nothing written (not
+    silently ignored while summary.json lists them)."""
+    log = write_wall_carmen(tmp_path / "wall.clf")
+    goals = tmp_path / "goals.txt"
+    goals.write_text("1.0 0.0 0.0 stop\n")
+    for mode in ("gnd", "teleop", "local"):
+        res = invoke("run", log, "--mode", mode, "--subgoals", goals, "--out", tmp_path / "a", "-q")
+        assert_clean_error(res, f"--subgoals: only navigation mode follow uses subgoals (mode is {mode})")
+    assert_clean_error(invoke("run", log, "--local", "contour", "--out", tmp_path / "a", "-q"),
+                       "--local contour: mode gnd runs no local strategy")
+    res = invoke("run", log, "--mode", "teleop", "--no-selector", "--local", "wall-left", "--out",
+                 tmp_path / "a", "-q")
+    assert_clean_error(res, "--local wall-left: mode teleop without the mode selector runs no local strategy")
+    assert not (tmp_path / "a").exists()
+
+
 def test_follow_with_subgoals_records_the_subgoal_per_tick(tmp_path: Path) -> None:
     log = write_wall_carmen(tmp_path / "wall.clf")
     goals = tmp_path / "goals.txt"
@@ -219,4 +274,23 @@ def test_follow_with_subgoals_records_the_subgoal_per_tick(tmp_path: Path) -> No
     assert summary["interventions"]["desired"] == {"follow": N}
     cmds = read_commands(tmp_path / "run" / "commands.csv")
     assert cmds.subgoal.min() >= 0 and np.all(np.diff(cmds.subgoal) >= 0)  # worked through in order
-    assert math.isfinite(float(cmds.v_mps.sum()))
+    # the first subgoal (x = 1.0) is reached when the recorded robot (x = 0.03 k) comes within the follower's
+    # reach_m of it, not before; then the stop subgoal (x = 1.8): the follower brakes for it, and once the
+    # robot stands on it the path is done (index 2 = past the last subgoal) with a GOAL stop at v = 0
+    reach = PRESETS["wheelchair"].navigation.follow.reach_m
+    k1 = int(np.argmax(cmds.subgoal >= 1))
+    assert abs(robot_x(k1) - 1.0) <= reach + 0.01 < abs(robot_x(k1 - 1) - 1.0) + 0.03
+    k2 = int(np.argmax(cmds.subgoal >= 2))
+    assert k2 > k1 and abs(robot_x(k2) - 1.8) <= reach and np.all(cmds.subgoal[k2:] == 2)
+    assert np.all(cmds.modes[k2:] == "GOAL") and np.all(cmds.v_mps[k2:] == 0.0)
+    v = cmds.v_mps[k1:k2]
+    assert v[0] == pytest.approx(V) and 0.0 < v[v > 0.0][-1] < V  # slowing down towards the stop
+
+
+def test_simulate_refuses_subgoals_on_a_scenario_that_does_not_follow(tmp_path: Path) -> None:
+    goals = tmp_path / "goals.txt"
+    goals.write_text("1.0 0.0 0.0 stop\n")
+    res = invoke("simulate", "u_trap", "--subgoals", goals, "--out", tmp_path / "s")
+    assert_clean_error(res, "--subgoals: only navigation mode follow uses subgoals (scenario u_trap has "
+                       "mode gnd)")
+    assert not (tmp_path / "s").exists()

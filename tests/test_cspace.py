@@ -215,3 +215,22 @@ def test_a_scanned_85_cm_door_is_open_for_the_chair_and_a_75_cm_one_closed(angle
         free = free_cspace(cells, cell_m=0.05, inflate_m=0.35 + 0.05)
         labels, _ = ndi.label(free, structure=np.ones((3, 3)))
         assert bool(labels[a] != 0 and labels[a] == labels[b]) is expected, door_m
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_free_cspace_is_the_threshold_of_the_exact_distance_on_random_grids(seed: int) -> None:
+    """The disc sweep against the exact transform's threshold (dx^2 + dy^2 <= r2 blocked, r2 the floor of
+    the squared effective radius in cells): grids of 1 to 120 cells a side (radii taller than the grid
+    among them), every obstacle density, both unknown modes: the same mask, cell for cell."""
+    rng = np.random.default_rng(seed)
+    for _ in range(40):
+        shape = (int(rng.integers(1, 121)), int(rng.integers(1, 121)))
+        p = rng.dirichlet([1, 3, 0.5])
+        cells = rng.choice([UNKNOWN, FREE, OCCUPIED], size=shape, p=p).astype(np.uint8)
+        for inflate in (0.0, 0.03, 0.1, 0.375, 0.425, 1.3, 4.0):
+            r2 = np.floor(max(inflate / 0.05 - 0.5, 0.0) ** 2 * (1.0 + 1e-9))
+            for unknown_is_free in (True, False):
+                obstacle = (cells == OCCUPIED) | (~np.bool_(unknown_is_free) & (cells == UNKNOWN))
+                expected = squared_distance_cells(obstacle) > r2
+                got = free_cspace(cells, cell_m=0.05, inflate_m=inflate, unknown_is_free=unknown_is_free)
+                np.testing.assert_array_equal(got, expected)

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from gndreplay.pipeline.nd import NdParams, nd_step
+from gndreplay.pipeline.nd import NdMemory, NdParams, nd_step
 from gndreplay.pipeline.supervisor import SupervisorParams, footprint_signed_distance, safe_command
-from gndreplay.robot import WHEELCHAIR_ROBOT, XR4000_ROBOT
+from gndreplay.robot import WHEELCHAIR_ROBOT, XR4000_ROBOT, RobotConfig
 
 F64 = NDArray[np.float64]
 CHAIR = WHEELCHAIR_ROBOT
@@ -159,3 +159,65 @@ def test_chair_backs_out_of_a_narrow_corridor_towards_a_target_behind() -> None:
     assert res.v_mps < 0.0
     circle = nd_step(pts, (-2.0, 0.3), XR4000_ROBOT)
     assert circle.w_radps > 0.0
+
+
+def _go_round(robot: RobotConfig, half_w: float, commit: bool, *, dt: float = 0.2,
+              seconds: float = 60.0) -> tuple[F64, int, float]:
+    """Kinematic loop (exact motion, holonomic too) with the axle 1 m before the middle of a 0.6 m deep box
+    ``2 half_w`` wide, facing it, towards a target fixed 1.2 m behind it; ND+'s memory held as a world
+    bearing as the stack holds it (``commit``), or none. Returns the final pose, the number of turn (above a
+    quarter of wmax: not the small corrections of the steering) direction flips before the robot passed
+    the box's face, and the smallest clearance."""
+    box = _outline(3.2, 3.8, -half_w, half_w)
+    cells = np.unique(np.floor(box / CELL_M), axis=0) * CELL_M + 0.5 * CELL_M
+    pose, target = np.array([2.2, 0.0, 0.0]), np.array([[5.0, 0.0]])
+    held: float | None = None
+    flips, last, min_clear = 0, 0.0, math.inf
+    for _ in range(round(seconds / dt)):
+        prev = NdMemory(math.remainder(held - pose[2], math.tau)) if commit and held is not None else None
+        res = nd_step(to_robot(pose, cells), to_robot(pose, target)[0], robot, NdParams(), prev)
+        held = None if res.memory is None else pose[2] + res.memory.subgoal_rad
+        min_clear = min(min_clear, res.min_clearance_m)
+        turn = math.copysign(1.0, res.w_radps) if abs(res.w_radps) > 0.25 * robot.wmax_radps else 0.0
+        if turn and last and turn != last and pose[0] < 3.2:
+            flips += 1
+        last = turn or last
+        if robot.drive == "differential":
+            pose = arc(pose, res.v_mps, res.w_radps, dt)
+        else:
+            c, s = math.cos(pose[2]), math.sin(pose[2])
+            pose = pose + dt * np.array([c * res.v_mps - s * res.vy_mps, s * res.v_mps + c * res.vy_mps,
+                                         res.w_radps])
+        if pose[0] > 4.5 and abs(pose[1]) < half_w:  # round the box, behind it
+            break
+    return pose, flips, min_clear
+
+
+@pytest.mark.parametrize(("robot", "half_w"), [(CHAIR, 1.2), (XR4000_ROBOT, 1.5)])
+def test_commitment_keeps_the_turn_direction_in_front_of_a_wide_obstacle(robot: RobotConfig,
+                                                                         half_w: float) -> None:
+    """Issue 10 item 3: facing the middle of a wide box with the target behind it, the two ways round are
+    equally near the goal and ND+ choosing afresh each tick swaps them as the robot turns (it dithers in
+    place); with its previous choice passed back in it keeps one side and gets round: the turn changes
+    direction at most once (away to one side, then back towards the target)."""
+    pose, flips, min_clear = _go_round(robot, half_w, commit=True)
+    assert pose[0] > 4.5 and abs(pose[1]) < half_w  # behind the box
+    assert flips <= 1
+    assert min_clear > 0.0
+    _, flips_free, _ = _go_round(robot, half_w, commit=False)
+    assert flips_free > 10  # the input class is the one that dithered: without memory it swaps sides
+
+
+def test_chair_in_a_door_keeps_its_axis_when_the_way_turns_beyond_it() -> None:
+    """The chair's body in a doorway (wheelchair_office_exit, the grid's points there): a long left reveal
+    0.41 m left of the axle, a short right jamb 0.44 m right, the way turning right just past it (target
+    42 deg right). The target ray crosses the left reveal 0.6 m behind the axle; that pair of points along
+    one wall (0.7 m apart, narrower than the door) was taken for the passage and turned the direction
+    sideways (-2 rad: backing up) on some ticks and not others, so the chair went back and forth in the
+    door. The door's own axis is kept: ahead, forward."""
+    xl, xr = np.arange(-0.9, 0.26, 0.05), np.arange(0.05, 0.21, 0.05)
+    pts = np.vstack([np.column_stack([xl, np.full(xl.size, 0.41)]),
+                     np.column_stack([xr, np.full(xr.size, -0.44)]),
+                     np.column_stack([np.full(5, -0.9), np.linspace(-0.44, -1.0, 5)])])
+    res = nd_step(pts, (0.74, -0.67), CHAIR)
+    assert abs(res.direction_rad) < 0.3 and res.v_mps > 0.0

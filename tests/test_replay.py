@@ -224,7 +224,10 @@ def test_every_dev_log_runs_with_one_command_per_scan(
     assert summary.ticks == scans
     rows = (summary.out_dir / "commands.csv").read_text().splitlines()
     assert len(rows) == scans + 1
-    assert summary.data["modes"].get("mpND", 0) > scans // 2  # the planner finds its way most of the time
+    # the planner finds its way most of the time (the mode column also shows the reflexive loop's
+    # overrides, so the planner's own flags are counted)
+    failed = sum(1 for row in rows[1:] if "PLANNER_NO_PATH" in row or "GOAL_IN_OBSTACLE" in row)
+    assert scans - failed > scans // 2
 
 
 def test_motion_agreement_of_a_run_shorter_than_the_horizon() -> None:

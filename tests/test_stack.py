@@ -11,7 +11,14 @@ import pytest
 from gndreplay.config import PRESETS, Config
 from gndreplay.geometry import compose
 from gndreplay.pipeline.nd import Situation
-from gndreplay.pipeline.stack import NavigationStack, StackParams, TickResult, make_planner
+from gndreplay.pipeline.selector import intention_xy
+from gndreplay.pipeline.stack import (
+    NavigationStack,
+    StackParams,
+    TickResult,
+    _intention_changed,
+    make_planner,
+)
 from gndreplay.pipeline.supervisor import Mode
 from gndreplay.sim.world import box, cast_rays, polygon, regular_polygon, wall
 from gndreplay.types import Flag, Pose2D, Scan, Tick
@@ -539,3 +546,20 @@ def test_follower_is_told_the_command_executed_last_tick() -> None:
     t = 1_000_000_000 + 4 * 200_000_000
     stack.step(_tick(cfg, ROOM, Pose2D(0.2, 1.0, 0.0), 4, t), Pose2D(0.2, 1.0, 0.0), (0.0, 0.0))
     assert follower.trajectory is not None and follower.trajectory.kappa[0] == pytest.approx(0.5)
+
+
+def test_a_counter_steering_driver_keeps_the_held_teleop_target() -> None:
+    """teleop_into_wall: local navigation turns the chair left round the cabinet and the driver, still
+    aiming down his line, steers right (w changes sign). Re-aiming the held target on that change swung it
+    from side to side with the chair, and ND+ turned it left and right in place for 80 s. The target is
+    aimed again only when his intention points elsewhere (over 45 deg from it) or he reverses."""
+    turned = 0.4  # the chair turned 0.4 rad left since the takeover: the held target is 0.4 rad right
+    held = 4.0 * np.array([math.cos(-turned), math.sin(-turned)])
+    before, after = (0.3, 0.0, 0.0), (0.3, 0.0, -0.1)  # straight on, then steering back towards the line
+    rel = intention_xy(*after, 1.0)
+    assert rel is not None
+    assert not _intention_changed(before, after, held, rel)
+    away = intention_xy(0.0, 0.0, 0.5, 1.0)  # a turn in place to the left: he wants to go elsewhere
+    assert away is not None and _intention_changed(before, (0.0, 0.0, 0.5), held, away)
+    back = intention_xy(-0.3, 0.0, 0.0, 1.0)  # reversing
+    assert back is not None and _intention_changed(before, (-0.3, 0.0, 0.0), held, back)

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import pytest
 
 from gndreplay.errors import ConfigError
-from gndreplay.io.subgoals import load_subgoals, subgoals_from_rows
+from gndreplay.io.subgoals import MAX_SUBGOAL_FILE_BYTES, load_subgoals, subgoals_from_rows
 from gndreplay.types import Subgoal
 
 
@@ -38,6 +39,8 @@ def test_good_file(tmp_path: Path) -> None:
     ("2e6 0 0", "|x| must be <= 1e+06"),
     ("0 -1000001 0", "|y| must be <= 1e+06"),
     ("1 2 0 backwards", "kind must be one of stop, forward, reverse"),
+    ("1 2 1e300", "|theta| must be <= 1000 rad"),
+    ("1 2 -1001", "|theta| must be <= 1000 rad"),
 ])
 def test_bad_line_names_file_and_line(tmp_path: Path, line: str, what: str) -> None:
     p = write(tmp_path, f"# route\n0 0 0\n\n{line}\n5 5 0\n")
@@ -60,12 +63,32 @@ def test_empty_file(tmp_path: Path, text: str) -> None:
 def test_unreadable_files(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="subgoal file not found"):
         load_subgoals(tmp_path / "missing.txt")
-    with pytest.raises(ConfigError, match="cannot read the subgoal file"):
-        load_subgoals(tmp_path)  # a folder
+    with pytest.raises(ConfigError, match="is a folder, not a subgoal file"):
+        load_subgoals(tmp_path)
     binary = tmp_path / "bin.txt"
     binary.write_bytes(b"\xff\xfe\x00 1 2 3\n")
     with pytest.raises(ConfigError, match="cannot read the subgoal file"):
         load_subgoals(binary)
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this platform")
+def test_a_fifo_is_refused_without_opening_it(tmp_path: Path) -> None:
+    """Reading a FIFO with no writer would block for ever: refused from its kind, never opened."""
+    fifo = tmp_path / "goals.fifo"
+    os.mkfifo(fifo)
+    with pytest.raises(ConfigError) as e:
+        load_subgoals(fifo)
+    assert str(e.value) == f"{fifo}: is a FIFO, not a subgoal file (never opened)"
+
+
+def test_a_file_above_the_size_cap_is_refused_before_reading(tmp_path: Path) -> None:
+    big = tmp_path / "big.txt"
+    big.write_text("0 0 0\n" * (MAX_SUBGOAL_FILE_BYTES // 6 + 1))
+    with pytest.raises(ConfigError, match=r"big\.txt: \d+ bytes, more than the 1 MB a subgoal file may have"):
+        load_subgoals(big)
+    ok = tmp_path / "ok.txt"
+    ok.write_text("0 0 0\n" * (MAX_SUBGOAL_FILE_BYTES // 6 - 1))  # just under the cap: read
+    assert len(load_subgoals(ok)) == MAX_SUBGOAL_FILE_BYTES // 6 - 1
 
 
 def test_rows_share_the_validation() -> None:
@@ -78,6 +101,7 @@ def test_rows_share_the_validation() -> None:
         ([[1, 2, True]], r"s.yaml: subgoals\[0\]: theta must be a number"),
         ([[1, 2, 0, "sideways"]], r"s.yaml: subgoals\[0\]: kind must be one of"),
         ([[1, 2, 0], [1, float("nan"), 0]], r"s.yaml: subgoals\[1\]: y must be finite"),
+        ([[1, 2, 1e300]], r"s.yaml: subgoals\[0\]: \|theta\| must be <= 1000 rad"),
         ([[1, 2]], r"s.yaml: subgoals\[0\]: expected 'x y theta \[kind\]'"),
     ]:
         with pytest.raises(ConfigError, match=msg):

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from gndreplay.pipeline.model import FREE, OCCUPIED, UNKNOWN, GridParams, RobotCentredGrid
+from gndreplay.pipeline.selector import swept_area_occupied
 from gndreplay.pipeline.supervisor import (
     Mode,
     SafeCommand,
@@ -21,6 +22,7 @@ from gndreplay.pipeline.supervisor import (
     safe_command,
     safety_reach_m,
     swept_collision,
+    swept_touch,
     unconfirmed_cells,
 )
 from gndreplay.robot import WHEELCHAIR_ROBOT, XR4000_ROBOT, RobotConfig
@@ -80,13 +82,105 @@ def test_swept_collision_holonomic_sideways() -> None:
     assert not swept_collision(left, 0.0, 0.0, XR4000_ROBOT, P, vy_mps=-0.3)
 
 
+def known_free(radius_m: float) -> np.ndarray:
+    """``escape_command``'s not_free_xy for a grid known FREE all around."""
+    assert radius_m > WHEELCHAIR_ROBOT.rear_m + P.escape_clearance_m
+    return np.zeros((0, 2))
+
+
 def test_escape_prefers_forward_then_backward() -> None:
     v, ok = escape_command(np.array([[3.0, 0.0]]), WHEELCHAIR_ROBOT, P)
     assert ok and v == pytest.approx(0.3 * 0.3)
-    v, ok = escape_command(np.array([[1.0, 0.0]]), WHEELCHAIR_ROBOT, P)
+    v, ok = escape_command(np.array([[1.0, 0.0]]), WHEELCHAIR_ROBOT, P, not_free_xy=known_free, cell_m=0.05)
     assert ok and v == pytest.approx(-0.09)
-    v, ok = escape_command(np.array([[1.0, 0.0], [-0.6, 0.1]]), WHEELCHAIR_ROBOT, P)
+    v, ok = escape_command(np.array([[1.0, 0.0], [-0.6, 0.1]]), WHEELCHAIR_ROBOT, P, not_free_xy=known_free,
+                           cell_m=0.05)
     assert not ok and v == 0.0
+
+
+def test_escape_never_backs_blind() -> None:
+    """Without the grid behind (the lasers see only the front half) there is no backward escape, as there
+    is no SAFE_REVERSE: the scan's empty rear half says nothing."""
+    v, ok = escape_command(np.array([[1.0, 0.0]]), WHEELCHAIR_ROBOT, P)
+    assert not ok and v == 0.0
+    v, ok = escape_command(np.array([[3.0, 0.0]]), WHEELCHAIR_ROBOT, P, prefer_backward=True)
+    assert ok and v == pytest.approx(0.09)  # forward instead
+
+
+def test_escape_backward_first_when_preferred() -> None:
+    clear_ahead = np.array([[3.0, 0.0]])
+    v, ok = escape_command(clear_ahead, WHEELCHAIR_ROBOT, P, prefer_backward=True, not_free_xy=known_free,
+                           cell_m=0.05)
+    assert ok and v == pytest.approx(-0.09)
+    # a raw hit behind (e.g. a 360 deg laser) still forbids backing: forward then
+    hit_behind = np.array([[3.0, 0.0], [-0.9, 0.2]])
+    v, ok = escape_command(hit_behind, WHEELCHAIR_ROBOT, P, prefer_backward=True, not_free_xy=known_free,
+                           cell_m=0.05)
+    assert ok and v == pytest.approx(0.09)
+
+
+@pytest.mark.parametrize(
+    ("cell_xy", "blocks"),
+    [
+        ((-0.95, 0.0), True),  # 0.55 m beyond the rear edge, on the axis: within the clearance
+        ((-1.02, 0.0), True),  # beyond it, but the cell reaches into it (grown by half a cell)
+        ((-1.05, 0.0), False),
+        ((-0.6, 0.39), True),  # beside the corridor's edge (0.35 + 0.02), within half a cell
+        ((-0.6, 0.42), False),
+        ((0.5, 0.0), False),  # ahead: backing away from it
+    ],
+)
+def test_escape_backward_needs_every_cell_behind_known_free(cell_xy: tuple[float, float],
+                                                            blocks: bool) -> None:
+    blocked_ahead = np.array([[1.0, 0.0]])
+    radii: list[float] = []
+
+    def not_free(radius_m: float) -> np.ndarray:
+        radii.append(radius_m)
+        return np.array([cell_xy])
+
+    v, ok = escape_command(blocked_ahead, WHEELCHAIR_ROBOT, P, not_free_xy=not_free, cell_m=0.05)
+    assert (ok, v) == ((False, 0.0) if blocks else (True, pytest.approx(-0.09)))
+    # the cells asked for cover the corridor behind and its half-cell growth
+    assert radii == [pytest.approx(np.hypot(0.4 + 0.6 + 0.025, 0.35 + 0.02 + 0.025))]
+
+
+def u_trap(pose: Pose2D, bottom_x: float) -> tuple[RobotCentredGrid, np.ndarray]:
+    """A U around the chair (world = robot frame at ``pose`` = origin): side walls 0.6 m from its axis from
+    1 m behind to ``bottom_x``, closed there; the mouth behind known FREE. Returns the grid and the raw scan
+    of what the laser (0.72 m ahead, front half) sees of the U."""
+    walls = [(-1.0, 0.6, bottom_x, 0.6), (-1.0, -0.6, bottom_x, -0.6), (bottom_x, -0.6, bottom_x, 0.6)]
+    grid = grid_with_wall(pose, *walls[0])
+    scan = []
+    for w in walls:
+        t = np.linspace(0.0, 1.0, 400)[:, None]
+        rc = grid.world_to_cell(np.hstack([w[0] + t * (w[2] - w[0]), w[1] + t * (w[3] - w[1])]))
+        grid.cells[rc[:, 0], rc[:, 1]] = OCCUPIED
+        pts = wall_points(pose, *w)
+        scan.append(pts[pts[:, 0] > 0.72])
+    return grid, np.vstack(scan)
+
+
+def test_u_trap_escape_backs_out_when_the_course_points_behind() -> None:
+    """The chair faces the bottom of a U with room before it: forward, the default, drives deeper into the
+    U; with the course behind (prefer_backward) it backs out through the known-free mouth; with the mouth
+    never seen it does not back, and with the bottom close too there is no escape."""
+    pose = Pose2D(0.0, 0.0, 0.0)
+    grid, scan = u_trap(pose, 2.2)  # 0.6 m clearance ahead of the front edge (0.8 m): 1.4 m < 2.2 m
+
+    def not_free(radius_m: float) -> np.ndarray:
+        return np.vstack([grid.cell_points(pose, radius_m, state) for state in (UNKNOWN, OCCUPIED)])
+
+    kw = {"not_free_xy": not_free, "cell_m": CELL}
+    assert escape_command(scan, CHAIR, P, **kw) == (pytest.approx(0.09), True)
+    assert escape_command(scan, CHAIR, P, prefer_backward=True, **kw) == (pytest.approx(-0.09), True)
+    rc = grid.world_to_cell([[-0.8, 0.0]])[0]
+    grid.cells[rc[0] - 2 : rc[0] + 3, rc[1] - 2 : rc[1] + 3] = UNKNOWN  # the mouth, never seen
+    assert escape_command(scan, CHAIR, P, prefer_backward=True, **kw) == (pytest.approx(0.09), True)
+    grid, scan = u_trap(pose, 1.2)
+    assert escape_command(scan, CHAIR, P, prefer_backward=True, **kw) == (pytest.approx(-0.09), True)
+    grid.cells[rc[0] - 2 : rc[0] + 3, rc[1] - 2 : rc[1] + 3] = UNKNOWN
+    assert escape_command(scan, CHAIR, P, prefer_backward=True, **kw) == (0.0, False)
 
 
 def test_trap_detector_needs_alternating_stopped_rotations() -> None:
@@ -301,3 +395,68 @@ def test_a_commanded_reverse_must_avoid_unknown_cells() -> None:
     unseen = safe_command(-0.09, 0.0, 0.0, np.zeros((0, 2)), np.zeros((0, 2)), r, P, cell_m=0.05,
                           unknown_xy=lambda: behind)
     assert unseen.rule is Mode.EMERGENCY and unseen.v_mps == 0.0
+
+
+# ---- one obstacle test for the reflexive loop and the mode selector ----------------------------------
+
+
+def door_jambs(gap_m: float) -> np.ndarray:
+    """Jamb points ``gap_m`` beside each side of the chair's middle (robot frame)."""
+    xs = np.array([0.125, 0.175])
+    side = CHAIR.width_m / 2.0 + gap_m
+    return np.vstack([np.column_stack([xs, np.full(2, side)]), np.column_stack([xs, np.full(2, -side)])])
+
+
+def test_swept_touch_names_the_source_and_adds_the_margin() -> None:
+    ahead = np.array([[0.95, 0.0]])  # 0.15 m ahead of the front edge; 0.3 m/s sweeps 0.18 m
+    none = np.zeros((0, 2))
+    assert swept_touch(0.3, 0.0, 0.0, ahead, none, CHAIR, P, cell_m=CELL) == "scan"
+    assert swept_touch(0.3, 0.0, 0.0, none, ahead, CHAIR, P, cell_m=CELL) == "grid"
+    assert swept_touch(0.3, 0.0, 0.0, ahead, ahead, CHAIR, P, cell_m=CELL) == "scan"  # the scan first
+    assert swept_touch(0.0, 0.0, 0.0, ahead, ahead, CHAIR, P, cell_m=CELL) == ""
+    assert swept_touch(-0.3, 0.0, 0.0, ahead, ahead, CHAIR, P, cell_m=CELL) == ""
+    # 0.04 m beside the chair: a slight turn approaches; a hit is outside the 0.02 m margin, a cell (grown
+    # by 0.025 m) inside it; a selector margin of 0.05 m catches the hit too
+    jambs = door_jambs(0.04)
+    assert swept_touch(0.1, 0.0, 0.05, jambs, none, CHAIR, P, cell_m=CELL) == ""
+    assert swept_touch(0.1, 0.0, 0.05, none, jambs, CHAIR, P, cell_m=CELL) == "grid"
+    assert swept_touch(0.1, 0.0, 0.05, jambs, none, CHAIR, P, cell_m=CELL, margin_m=0.05) == "scan"
+
+
+def test_selector_treats_scan_confirmed_cells_as_the_safety_check_does() -> None:
+    """The jamb cells hold the scan's hits: both the safety check and the selector (margin 0) check them
+    through the hits and let a slight turn through; unconfirmed (no scan), both flag the grid."""
+    jambs = door_jambs(0.04)
+    none = np.zeros((0, 2))
+    for scan, where in ((jambs, ""), (none, "grid")):
+        safe = safe_command(0.1, 0.0, 0.05, scan, jambs, CHAIR, P, cell_m=CELL)
+        assert swept_area_occupied(0.1, 0.0, 0.05, scan, jambs, CHAIR, P, cell_m=CELL, margin_m=0.0) == where
+        assert (safe.rule is None) == (where == "")
+
+
+def test_selector_at_margin_zero_agrees_with_the_safety_check() -> None:
+    """Over a spread of commands and a cluttered neighbourhood (some cells confirmed by hits, some not),
+    the selector with no margin flags a command exactly when ``safe_command`` replaces it."""
+    rng = np.random.default_rng(3)
+    cells = (np.floor(rng.uniform(-1.5, 1.5, (60, 2)) / CELL) + 0.5) * CELL
+    cells = cells[footprint_signed_distance(cells, CHAIR) > 0.05]
+    scan = cells[cells[:, 0] > 0.72][::2] + rng.uniform(-0.02, 0.02, (1, 2))  # hits in half the cells ahead
+    flagged = 0
+    for v in (-0.2, 0.0, 0.1, 0.3):
+        for w in (-0.5, -0.1, 0.0, 0.1, 0.5):
+            where = swept_area_occupied(v, 0.0, w, scan, cells, CHAIR, P, cell_m=CELL, margin_m=0.0)
+            assert (where == "") == (safe_command(v, 0.0, w, scan, cells, CHAIR, P, cell_m=CELL).rule is None)
+            flagged += where != ""
+    assert 0 < flagged < 19  # the spread covers both outcomes
+
+
+@pytest.mark.parametrize("n_side", [3, 15])  # 9 and 225 cells
+def test_unconfirmed_cells_keeps_exactly_the_cells_without_a_hit(n_side: int) -> None:
+    rng = np.random.default_rng(n_side)
+    ij = np.stack(np.meshgrid(np.arange(n_side), np.arange(n_side)), axis=-1).reshape(-1, 2)
+    cells = ij * 0.2 + 0.025  # cell centres 0.2 m apart
+    confirmed = rng.random(cells.shape[0]) < 0.5
+    hits_in = cells[confirmed] + rng.uniform(-0.024, 0.024, (int(confirmed.sum()), 2))  # inside the cell
+    hits_far = cells[~confirmed] + 0.1  # between cells, 0.14 m from any centre
+    kept = unconfirmed_cells(cells, np.vstack([hits_in, hits_far]), CELL)
+    assert kept.tolist() == cells[~confirmed].tolist()

@@ -38,7 +38,7 @@ def test_odom_tv_rv_become_the_ticks_commands(tmp_path: Path) -> None:
         ticks = list(log.ticks())
         desc = log.describe()
     assert desc.cmd_stream == "ODOM"
-    assert "commands: ODOM tv/rv" in desc.notes
+    assert "commands: ODOM tv/rv (ODOM is both the odometry and the command stream)" in desc.notes
     assert len(ticks) == 6
     for k, tick in enumerate(ticks):  # the last ODOM at or before the scan (50 ms before it)
         assert tick.cmd is not None
@@ -117,3 +117,103 @@ def test_the_sample_log_records_velocities() -> None:
         moving = [t.cmd for _, t in zip(range(200), log.ticks(), strict=False)
                   if t.cmd is not None and (t.cmd.v_mps or t.cmd.w_radps)]
     assert moving and all(math.isfinite(c.v_mps) for c in moving)
+
+
+def test_odom_lines_starting_after_the_head_are_commands(tmp_path: Path) -> None:
+    """Scans first, ODOM only after the head: no ODOM in the head settles nothing; the ODOM lines are read
+    as commands (and found by ``records_commands`` before a pass)."""
+    lines = [flaser(100 + 0.1 * k, 0.0) for k in range(200)]
+    for k in range(200, 260):
+        lines += [odom(100 + 0.1 * k, 0.01 * k, 0.3, 0.1), flaser(100 + 0.1 * k + 0.05, 0.01 * k)]
+    p = tmp_path / "late_odom.clf"
+    p.write_text("".join(lines))
+    with open_log(p) as log:
+        assert log.describe().cmd_stream is None  # not known before reading ahead
+        assert log.records_commands()
+        assert log.describe().cmd_stream == "ODOM"
+        ticks = list(log.ticks())
+    cmds = [t.cmd for t in ticks]
+    assert cmds[:200] == [None] * 200
+    assert all(c is not None and (c.v_mps, c.w_radps) == (0.3, 0.1) for c in cmds[200:])
+    with open_log(p) as log:  # without asking first: the pass reads them all the same
+        assert sum(t.cmd is not None for t in log.ticks()) == 60
+        assert log.describe().cmd_stream == "ODOM"
+
+
+def test_a_corrupt_log_is_not_said_to_have_no_commands(tmp_path: Path) -> None:
+    """The scan of the ODOM lines meets corrupt compressed data before any non-zero tv/rv: the log's
+    one-line error (naming the last line read), not "no recorded velocity commands"."""
+    import gzip
+    import random
+
+    rng = random.Random(0)  # noisy ranges: the scans compress poorly, so the cut lands among them
+    text = "".join(f"FLASER 5 {' '.join(f'{rng.uniform(1, 3):.4f}' for _ in range(5))} 0 0 0 0 0 0 "
+                   f"{100 + 0.1 * k:.3f} host 0.0\n" for k in range(5000))
+    text += "".join(odom(700 + 0.1 * k, 0.0, 0.3, 0.0) for k in range(10))
+    data = gzip.compress(text.encode())
+    p = tmp_path / "cut.clf.gz"
+    p.write_bytes(data[: len(data) // 2])
+    with pytest.raises(LogFormatError, match=r"cut\.clf\.gz: truncated or corrupt data after line \d+"):
+        odom_has_commands(p)
+    with open_log(p) as log, pytest.raises(LogFormatError, match="truncated or corrupt data after line"):
+        log.records_commands()
+
+
+def test_strict_does_not_stop_on_a_bad_odom_line_used_for_nothing(tmp_path: Path) -> None:
+    """Odometry from the FLASER lines: a malformed ODOM line (read for its commands only) is counted and
+    skipped, even in strict mode; a malformed scan line still stops a strict run."""
+    lines = [odom(100 + 0.1 * k, 0.0, 0.2, 0.0) + flaser(100 + 0.1 * k + 0.05, 0.0) for k in range(5)]
+    lines[2] = "ODOM 0 0 0 fast 0 0 100.200 host 0.0\n" + flaser(100.25, 0.0)
+    p = tmp_path / "bad_odom.clf"
+    p.write_text("".join(lines))
+    with open_log(p, odom_topic="FLASER", strict=True) as log:
+        ticks = list(log.ticks())
+        assert log.report.malformed == 1
+    assert len(ticks) == 5 and ticks[2].cmd is not None and ticks[2].cmd.t_ns == round(100.1 * 1e9)
+    with open_log(p, strict=True) as log, pytest.raises(LogFormatError, match=r"bad_odom\.clf line 5: ODOM"):
+        list(log.ticks())  # ODOM is the odometry here: strict stops on it
+
+
+def test_describe_says_when_odom_is_both_odometry_and_commands(tmp_path: Path) -> None:
+    with open_log(write_log(tmp_path / "a.clf", [(0.2, 0.0)] * 3)) as log:
+        desc = log.describe()
+    assert desc.cmd_stream == "ODOM" and desc.odom_source.startswith("ODOM")
+    assert "commands: ODOM tv/rv (ODOM is both the odometry and the command stream)" in desc.notes
+    with open_log(write_log(tmp_path / "b.clf", [(0.2, 0.0)] * 3), odom_topic="FLASER") as log:
+        assert "commands: ODOM tv/rv" in log.describe().notes  # the scan lines give the odometry
+
+
+BASE = {"name": "t", "start": [0, 0, 0], "time_limit": 5, "world": {"walls": {"n": [-2, 3, 13, 3]}}}
+
+
+@pytest.mark.parametrize(("extra", "what"), [
+    ({"mode": "teleop", "goal": [1, 0], "teleop": {"commands": [[0, 1e300, -1e300], [1, 0, 0]]}},
+     r"teleop\.commands\[0\]: \|value\| must be <= 100"),
+    ({"mode": "teleop", "goal": [1, 0], "teleop": {"commands": [[0, 0.1, 0], [1e300, 0, 0]]}},
+     r"teleop\.commands\[1\]: \|value\| must be <= 1e\+06"),
+    ({"mode": "teleop", "teleop": {"track": {"points": [[0, 0], [1e300, 0]], "speed": 0.3}}},
+     r"teleop\.track\.points\[1\]: \|value\| must be <= 1e\+06"),
+    ({"mode": "teleop", "teleop": {"track": {"points": [[0, 0], [1e-300, 0]], "speed": 0.3}}},
+     r"teleop\.track\.points: two consecutive points are closer than 0\.001 m"),
+    ({"mode": "teleop", "teleop": {"track": {"points": [[0, 0], [1, 0]], "speed": 1e300}}},
+     r"teleop\.track\.speed: \|value\| must be <= 100"),
+    ({"mode": "teleop", "teleop": {"track": {"points": [[0, 0], [1, 0]], "speed": 0.3, "lookahead": 1e300}}},
+     r"teleop\.track\.lookahead: \|value\| must be <= 100"),
+    ({"mode": "follow", "goal": [1e300, 0], "subgoals": [[1, 0, 0, "stop"]]},
+     r"goal: \|value\| must be <= 1e\+06"),
+    ({"mode": "follow", "subgoals": [[1, 0, 1e300, "stop"]]},
+     r"subgoals\[0\]: \|theta\| must be <= 1000 rad"),
+    ({"start": [0, 0, 1e300], "goal": [1, 0]}, r"start: \|value\| must be <= 1000"),
+])
+def test_scenario_navigation_values_are_bounded(extra: dict[str, object], what: str) -> None:
+    """1e300 in a scenario's teleop script, track, goal or subgoal is one line naming file and key (it
+    used to give RuntimeWarnings and NaN commands)."""
+    from gndreplay.errors import ConfigError
+    from gndreplay.sim.scenario_file import parse_scenario
+
+    with pytest.raises(ConfigError, match=r"^run\.yaml: " + what) as e:
+        parse_scenario({**BASE, **extra}, "run.yaml")
+    assert "\n" not in str(e.value)
+    ok = {"mode": "teleop",
+          "teleop": {"track": {"points": [[0, 0], [1, 0]], "speed": 100.0, "lookahead": 100}}}
+    assert parse_scenario({**BASE, **ok}, "run.yaml").teleop is not None  # the bounds themselves are fine

@@ -9,10 +9,19 @@ import math
 import numpy as np
 import pytest
 
+from gndreplay.pipeline import tunnel
 from gndreplay.pipeline.cspace import free_cspace
 from gndreplay.pipeline.model import FREE, OCCUPIED
 from gndreplay.pipeline.nf1 import Nf1Params, _visible, plan
-from gndreplay.pipeline.tunnel import _CHECK_AFTER, TunnelParams, TunnelPlanner, _cast_rays, tunnel_plan
+from gndreplay.pipeline.tunnel import (
+    _CHECK_AFTER,
+    TunnelParams,
+    TunnelPlanner,
+    _cast_rays,
+    _ray_state,
+    _rays,
+    tunnel_plan,
+)
 from gndreplay.robot import WHEELCHAIR_ROBOT, XR4000_ROBOT, RobotConfig
 from gndreplay.types import Flag
 
@@ -249,15 +258,69 @@ def test_rays_stop_where_a_walk_over_every_sample_stops(seed: int) -> None:
     g = clutter(seed, n_blocks=40)
     free = free_cspace(g, cell_m=CELL_M, inflate_m=0.4)
     clear = g != OCCUPIED
-    theta = np.arange(360) * 2.0 * math.pi / 360
+    sin_t, cos_t, offsets, exact = _rays(360, free.shape)
+    assert 0 < exact.sum() <= 8  # the rays with sin or cos = +-1/2 walk with _march; the others by table
+    state = _ray_state(free, clear)
     rng = np.random.default_rng(seed)
     cells = np.argwhere(free)
-    for r0, c0 in cells[rng.integers(len(cells), size=6)].astype(float):
-        got = _cast_rays(free, clear, r0, c0, np.sin(theta), np.cos(theta))
-        for k, a in enumerate(theta):
-            t, border = unit_walk(free, r0, c0, math.sin(a), math.cos(a), 0.0)
-            w, wborder = (t, True) if border else unit_walk(clear, r0, c0, math.sin(a), math.cos(a), t)
+    for r0, c0 in cells[rng.integers(len(cells), size=6)]:
+        got = _cast_rays(free, clear, state, int(r0), int(c0), sin_t, cos_t, offsets, exact)
+        for k in range(360):
+            t, border = unit_walk(free, float(r0), float(c0), sin_t[k], cos_t[k], 0.0)
+            ray = (float(r0), float(c0), sin_t[k], cos_t[k])
+            w, wborder = (t, True) if border else unit_walk(clear, *ray, t)
             assert (got[0][k], got[1][k], got[2][k], got[3][k]) == (t, border, w, wborder)
+
+
+def office(seed: int) -> np.ndarray:
+    """A random office floor: a lattice of 3 m rooms whose walls have 1 m doors, and furniture."""
+    rng = np.random.default_rng(seed)
+    g = empty()
+    for k in range(30, N - 20, 60):
+        for axis in range(2):
+            line = np.full(N, OCCUPIED, np.uint8)
+            for a in range(-30, N, 60):  # one door between each two crossing walls
+                d = max(a + 3 + int(rng.integers(3, 34)), 0)
+                line[d : d + 20] = FREE
+            if axis == 0:
+                g[k : k + 3, :] = np.maximum(g[k : k + 3, :], line)
+            else:
+                g[:, k : k + 3] = np.maximum(g[:, k : k + 3], line[:, None])
+    for _ in range(12):
+        r, c = rng.integers(5, N - 25, size=2)
+        h, w = rng.integers(6, 20, size=2)
+        g[r : r + h, c : c + w] = OCCUPIED
+    return g
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_table_rays_give_the_same_searches_as_unit_walks(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Whole plans on random offices (goals 5 m away and beyond the border), searched once with the rays'
+    offset tables and once with every ray walking by ``_march`` (all flagged exact): the same outcome, node
+    count, node chain, tunnel and course, on searches long enough to matter."""
+    radius = ROBOTS[name].inner_radius_m + TunnelParams().margin_m
+    runs: dict[bool, list[tuple]] = {}
+    for reference in (False, True):
+        if reference:
+            def all_exact(n_rays: int, shape: tuple[int, ...]) -> tuple:
+                sin_t, cos_t, offsets, exact = tunnel._ray_table(n_rays, shape[1] + 2, 2)
+                return sin_t, cos_t, offsets, np.ones_like(exact)
+            monkeypatch.setattr(tunnel, "_rays", all_exact)
+        out = runs.setdefault(reference, [])
+        for seed in range(3):
+            g = office(seed)
+            free = free_cspace(g, cell_m=CELL_M, inflate_m=radius)
+            rng = np.random.default_rng(seed)
+            cells = np.argwhere(free[N // 4 : 3 * N // 4, N // 4 : 3 * N // 4]) + N // 4
+            for r0, c0 in cells[rng.integers(len(cells), size=4)]:
+                a = rng.uniform(-math.pi, math.pi)
+                for dist in (100.0, 600.0):
+                    goal = (r0 + 0.5 + dist * math.sin(a), c0 + 0.5 + dist * math.cos(a))
+                    res = tunnel_plan(g, (int(r0), int(c0)), goal, cell_m=CELL_M, radius_m=radius)
+                    out.append((res.flag, res.nodes_expanded, res.path_cells.tolist(),
+                                res.waypoints_cells.tolist(), res.direction_rad if res.ok else None))
+    assert runs[False] == runs[True]
+    assert max(r[1] for r in runs[False]) > _CHECK_AFTER  # searches past the connectivity check too
 
 
 def test_goal_in_obstacle_and_expansion_budget() -> None:

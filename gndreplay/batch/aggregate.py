@@ -29,7 +29,8 @@ class ScenarioAggregate:
         path: its file.
         seeds: the seeds run, in batch order.
         runs, errors: runs in the batch, and those that ended in an error (not scored).
-        successes, collisions, timeouts: completed runs by outcome.
+        successes, collisions, goal_missed, timeouts: completed runs by outcome (goal_missed: the stack
+            stopped at what it believed the goal, the true axle outside the tolerance).
         metrics: ``AGGREGATE_METRICS`` (absent when nothing to aggregate) and ``stack_p99_ms`` (worst run).
         limits: the aggregate thresholds checked (empty: none asked for).
         failures: one message per aggregate threshold exceeded.
@@ -44,6 +45,7 @@ class ScenarioAggregate:
     successes: int
     collisions: int
     timeouts: int
+    goal_missed: int = 0
     metrics: Mapping[str, float] = field(default_factory=dict)
     limits: Mapping[str, float] = field(default_factory=dict)
     failures: tuple[str, ...] = ()
@@ -67,7 +69,7 @@ def _metrics(done: Sequence[InputResult]) -> dict[str, float]:
     n = len(done)
     out: dict[str, float] = {}
     for rate, metric in (("success_rate", "success"), ("collision_rate", "collisions"),
-                         ("timeout_rate", "timeouts")):
+                         ("goal_missed_rate", "goal_missed"), ("timeout_rate", "timeouts")):
         out[rate] = _count(done, metric) / n if n else math.nan
     times = [r.metrics["time_to_goal_s"] for r in done if "time_to_goal_s" in r.metrics]
     if times:
@@ -104,6 +106,7 @@ def aggregate_scenarios(
                 successes=_count(done, "success"),
                 collisions=_count(done, "collisions"),
                 timeouts=_count(done, "timeouts"),
+                goal_missed=_count(done, "goal_missed"),
                 metrics=metrics,
                 limits=limits,
                 failures=check_limits(metrics, limits),

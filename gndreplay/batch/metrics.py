@@ -90,11 +90,18 @@ def relation_metrics(stats: RelationStats) -> dict[str, float]:
 
 #: Scenario run metric -> where it comes from: the outcome (1 or 0), a result.json field, or a
 #: sim_timing.json field (wall clock). A field that is null (no time to goal after a collision, no obstacle
-#: ever in range) gives no metric.
+#: ever in range) gives no metric. ``goal_missed``: the stack reported GOAL_REACHED and stopped with the true
+#: axle outside the goal tolerance (its localisation error), apart from the time-outs; ``takeovers``: onsets
+#: of an active navigation mode other than the desired one; ``local_ticks_pct``: share of ticks local
+#: navigation was the active mode [%].
 SCENARIO_METRICS: Mapping[str, str] = {
     "success": "outcome == success",
     "collisions": "outcome == collision",
+    "goal_missed": "outcome == goal_missed",
     "timeouts": "outcome == timeout",
+    "goal_miss_m": "goal_missed.true_distance_m",
+    "takeovers": "takeovers",
+    "local_ticks_pct": "100 * active_modes.local / ticks",
     "time_to_goal_s": "time_to_goal_s",
     "clearance_m": "min_clearance_m",
     "path_length_m": "path_length_m",
@@ -102,12 +109,15 @@ SCENARIO_METRICS: Mapping[str, str] = {
     "sim_ms_per_step": "sim_ms_per_step",
     "stack_ms_per_tick": "stack_ms_per_tick",
 }
-_OUTCOME_COUNTS = {"success": "success", "collisions": "collision", "timeouts": "timeout"}
+_OUTCOME_COUNTS = {"success": "success", "collisions": "collision", "goal_missed": "goal_missed",
+                   "timeouts": "timeout"}
 #: Metrics of one scenario over its seeds (runs that did not end in an error): the fractions of runs that
-#: reached the goal, collided, timed out; the mean time to goal of the successes; the smallest clearance.
+#: reached the goal, collided, stopped short of it (goal missed), timed out; the mean time to goal of the
+#: successes; the smallest clearance.
 AGGREGATE_METRICS: tuple[str, ...] = (
     "success_rate",
     "collision_rate",
+    "goal_missed_rate",
     "timeout_rate",
     "mean_time_to_goal_s",
     "min_clearance_m",
@@ -118,10 +128,18 @@ def metrics_from_result(result: Mapping[str, Any], timing: Mapping[str, Any]) ->
     """The ``SCENARIO_METRICS`` of one closed-loop run from its result.json and sim_timing.json."""
     outcome = result.get("outcome")
     out: dict[str, float] = {name: int(outcome == value) for name, value in _OUTCOME_COUNTS.items()}
+    missed = result.get("goal_missed")
+    ticks = result.get("ticks")
+    active = result.get("active_modes")
+    derived = {
+        "goal_miss_m": missed.get("true_distance_m") if isinstance(missed, Mapping) else None,
+        "local_ticks_pct": (100.0 * float(active.get("local", 0)) / ticks if isinstance(active, Mapping)
+                            and isinstance(ticks, int) and ticks > 0 else None),
+    }
     for name, key in SCENARIO_METRICS.items():
         if name in out:
             continue
-        value = result.get(key, timing.get(key))
+        value = derived[name] if name in derived else result.get(key, timing.get(key))
         if isinstance(value, int | float) and not isinstance(value, bool):
             out[name] = float(value)
     return out
@@ -139,4 +157,10 @@ def outcome_note(result: Mapping[str, Any]) -> str:
         return f"{who} {contact.get('object')}" + (f" at {t:.2f} s" if isinstance(t, int | float) else "")
     if outcome == "timeout":
         return f"timeout{at}: goal not reached"
+    missed = result.get("goal_missed")
+    if outcome == "goal_missed" and isinstance(missed, Mapping):
+        d, tol = missed.get("true_distance_m"), missed.get("tolerance_m")
+        far = (f": the stack stopped at the goal, the true axle {d:.3f} m from it (tolerance {tol:g} m)"
+               if isinstance(d, int | float) and isinstance(tol, int | float) else "")
+        return f"goal missed{at}{far}"
     return f"{outcome}{at}"

@@ -49,7 +49,11 @@ METRIC_COLUMNS: tuple[str, ...] = (
     "relations_matched",
     "success",
     "collisions",
+    "goal_missed",
     "timeouts",
+    "goal_miss_m",
+    "takeovers",
+    "local_ticks_pct",
     "time_to_goal_s",
     "clearance_m",
     "path_length_m",
@@ -87,12 +91,15 @@ _MD_SCENARIO_METRICS: tuple[tuple[str, str], ...] = (
     ("clearance m", "clearance_m"),
     ("path m", "path_length_m"),
     ("stack p99 ms", "stack_p99_ms"),
+    ("takeovers", "takeovers"),
+    ("local %", "local_ticks_pct"),
     ("sim ms/step", "sim_ms_per_step"),
 )
 #: scenarios.csv: the aggregate columns after the counts.
 _AGGREGATE_COLUMNS: tuple[str, ...] = (
     "success_rate",
     "collision_rate",
+    "goal_missed_rate",
     "timeout_rate",
     "mean_time_to_goal_s",
     "clearance_m",
@@ -105,6 +112,7 @@ SCENARIO_CSV_COLUMNS: tuple[str, ...] = (
     "errors",
     "successes",
     "collisions",
+    "goal_missed",
     "timeouts",
     *_AGGREGATE_COLUMNS,
     "seeds",
@@ -214,12 +222,13 @@ def summary_md(results: Sequence[InputResult], aggregates: Sequence[ScenarioAggr
         lines += ["", "## Scenarios over seeds", "",
                   "Status: the worst of the scenario's runs and its thresholds over seeds; rates are of the "
                   "completed runs (errors apart); time: mean of the successes; clearance: the smallest of "
-                  "any run; stack p99: the worst run's.", "", *_table(
-            ["scenario", "status", "runs", "success", "collisions", "time-outs", "errors", "mean time s",
-             "min clearance m", "stack p99 ms", "notes"],
-            ["---", "---", *("---:" for _ in range(8)), "---"],
+                  "any run; stack p99: the worst run's; goal missed: the stack stopped at the goal it "
+                  "believed, the true axle outside the tolerance.", "", *_table(
+            ["scenario", "status", "runs", "success", "collisions", "goal missed", "time-outs", "errors",
+             "mean time s", "min clearance m", "stack p99 ms", "notes"],
+            ["---", "---", *("---:" for _ in range(9)), "---"],
             [[a.scenario, _status(a.status), str(a.runs), _pct(a.successes, a.runs - a.errors),
-              str(a.collisions), str(a.timeouts), str(a.errors),
+              str(a.collisions), str(a.goal_missed), str(a.timeouts), str(a.errors),
               _cell("mean_time_to_goal_s", a.metrics.get("mean_time_to_goal_s")),
               _cell("clearance_m", a.metrics.get("clearance_m")),
               _cell("stack_p99_ms", a.metrics.get("stack_p99_ms")), "; ".join(a.failures)]
@@ -240,6 +249,7 @@ def scenarios_csv(aggregates: Sequence[ScenarioAggregate]) -> str:
                 a.errors,
                 a.successes,
                 a.collisions,
+                a.goal_missed,
                 a.timeouts,
                 *(_cell(m, a.metrics.get(m)) for m in _AGGREGATE_COLUMNS),
                 " ".join(str(s) for s in a.seeds),
@@ -306,7 +316,7 @@ def junit_xml(results: Sequence[InputResult], aggregates: Sequence[ScenarioAggre
                 node.text = _x("\n".join(a.failures))
             out = [f"path: {_x(a.path)}", f"seeds: {' '.join(str(s) for s in a.seeds)}",
                    f"runs: {a.runs}", f"errors: {a.errors}", f"successes: {a.successes}",
-                   f"collisions: {a.collisions}", f"timeouts: {a.timeouts}"]
+                   f"collisions: {a.collisions}", f"goal_missed: {a.goal_missed}", f"timeouts: {a.timeouts}"]
             out += [f"{m}: {_cell(m, v)}" for m, v in a.metrics.items()]
             out += [f"limit {k}: {v:g}" for k, v in a.limits.items()]
             ET.SubElement(case, "system-out").text = "\n".join(out)

@@ -22,13 +22,14 @@ File format (every key optional; paths relative to the file's folder)::
     min_success_rate = 0.8       # per scenario over its seeds: at least 80 % of the runs reach the goal
 
 Upper-limit keys are the metric names of :mod:`gndreplay.batch.metrics` (``<module>_<stat>_ms``, the flag
-counts, the ``match_*`` relation errors, the scenario scores ``collisions``, ``timeouts``,
-``time_to_goal_s``, ...); lower limits are ``min_ticks``, ``min_relations_matched``, ``min_success`` and
-``min_clearance_m``. A threshold on a metric an input does not have (relation errors without a relations
-file, scenario scores of a log) is not checked; a metric that is nan (relations given but none matched)
-fails. ``AGGREGATE_KEYS`` (``min_success_rate``, ``collision_rate``, ``timeout_rate``,
-``mean_time_to_goal_s``) bound a scenario's aggregate over its seeds. ``relations`` and ``goal`` apply to
-logs only (a scenario has its own goal and ground truth).
+counts, the ``match_*`` relation errors, the scenario scores ``collisions``, ``goal_missed``,
+``timeouts``, ``takeovers``, ``time_to_goal_s``, ...); lower limits are ``min_ticks``,
+``min_relations_matched``, ``min_success`` and ``min_clearance_m``. A threshold on a metric an input
+does not have (relation errors without a relations file, scenario scores of a log) is not checked; a
+metric that is nan (relations given but none matched) fails. ``AGGREGATE_KEYS`` (``min_success_rate``,
+``collision_rate``, ``goal_missed_rate``, ``timeout_rate``, ``mean_time_to_goal_s``) bound a scenario's
+aggregate over its seeds. ``relations`` and ``goal`` apply to logs only (a scenario has its own goal and
+ground truth).
 """
 
 from __future__ import annotations
@@ -69,6 +70,7 @@ MIN_KEYS: Mapping[str, str] = {
 AGGREGATE_KEYS: tuple[str, ...] = (
     "min_success_rate",
     "collision_rate",
+    "goal_missed_rate",
     "timeout_rate",
     "mean_time_to_goal_s",
 )
@@ -83,9 +85,9 @@ _MAX_KEYS: tuple[str, ...] = (
 THRESHOLD_KEYS: tuple[str, ...] = (*MIN_KEYS, *_MAX_KEYS)
 _INTEGER_KEYS = frozenset(
     (*(k for k in MIN_KEYS if k not in ("min_clearance_m", "min_success_rate")), *COUNT_METRICS,
-     "collisions", "timeouts")
+     "collisions", "goal_missed", "timeouts", "takeovers")
 )
-_RATE_KEYS = frozenset(("min_success_rate", "collision_rate", "timeout_rate"))
+_RATE_KEYS = frozenset(("min_success_rate", "collision_rate", "goal_missed_rate", "timeout_rate"))
 _INPUT_SETTINGS = ("relations", "goal")
 
 #: Thresholds when no file is given: generous bounds that catch a broken or badly slowed stack, not a tuning
@@ -94,7 +96,7 @@ _INPUT_SETTINGS = ("relations", "goal")
 #: dev logs measure (p99 reactor 0.5-5 ms, planner 2-7 ms, stack 2-9 ms, two workers on two cores).
 #: Flag counts (real logs raise hundreds of emergency stops) and relation errors are only checked when a
 #: thresholds file asks for them. Every closed-loop run must reach its goal (``min_success = 1``: a
-#: collision or a time-out fails the run, with the reason).
+#: collision, a goal missed or a time-out fails the run, with the reason).
 DEFAULT_LIMITS: Mapping[str, float] = {
     "min_ticks": 1,
     "min_success": 1,

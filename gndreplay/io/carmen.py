@@ -459,19 +459,20 @@ def _odom_velocity_nonzero(tok: list[bytes]) -> bool:
 def odom_has_commands(path: Path) -> bool:
     """Whether any ODOM line of the log carries a non-zero tv or rv (read until the first one).
 
-    Never raises on damaged data: it answers for the lines it could read (the replay's own pass reports the
-    damage where it happens).
+    Malformed ODOM lines are skipped (the replay's own pass counts them).
+
+    Raises:
+        LogFormatError: the file cannot be opened, or its data is truncated or corrupt before a non-zero
+            ODOM tv/rv was found (the answer would be a guess): one line naming the last line read.
     """
     try:
         fh = _LogFile(path)
-    except OSError:
-        return False
+    except OSError as err:
+        raise LogFormatError(f"{path}: cannot open: {err.strerror or err}") from err
     try:
         for _, line in _lines(path, fh):
             if line.startswith(b"ODOM") and _odom_velocity_nonzero(line.split(None, 7)):
                 return True
-    except LogFormatError:
-        return False
     finally:
         fh.close()
     return False
@@ -717,17 +718,21 @@ class CarmenReader:
 
     # -- description -------------------------------------------------------------------------------
     def _known_commands(self) -> bool | None:
-        """Whether ODOM tv/rv are a command stream, as far as known without reading ahead (None: not yet)."""
-        if self._odom_cmds is None:
-            head = self._head
-            if "ODOM" not in head.names or head.odom_moves:
-                self._odom_cmds = "ODOM" in head.names
+        """Whether ODOM tv/rv are a command stream, as far as known without reading ahead (None: not yet).
+
+        Only a non-zero tv/rv in the head settles it early: ODOM lines may start after the head (scans
+        first, odometry later), so neither "no ODOM in the head" nor "all zero in the head" does."""
+        if self._odom_cmds is None and self._head.odom_moves:
+            self._odom_cmds = True
         return self._odom_cmds
 
     @property
     def has_commands(self) -> bool:
         """Whether the ODOM lines' tv/rv are a command stream: the log has ODOM lines and one of them has a
-        non-zero tv or rv (known from the head or a complete pass, else by one scan of the ODOM lines)."""
+        non-zero tv or rv (known from the head or a complete pass, else by one scan of the ODOM lines).
+
+        Raises:
+            LogFormatError: the log is corrupt before the scan could answer (see ``odom_has_commands``)."""
         known = self._known_commands()
         if known is None:
             known = self._odom_cmds = odom_has_commands(self.path)
@@ -752,7 +757,7 @@ class CarmenReader:
         known = self._known_commands()
         roles: dict[str, StreamRole] = {self.scan_stream: "scan", "PARAM": "param"}
         if self._odom_mode == "stream":
-            roles["ODOM"] = "odom"
+            roles["ODOM"] = "odom"  # the role column has one entry: the note below says when it is both
         elif known:
             roles["ODOM"] = "cmd"
         if self._truth_mode == "stream":
@@ -765,8 +770,10 @@ class CarmenReader:
         notes = [f"max range {self._laser.max_range_m:g} m ({self._laser.max_range_source})"]
         if self._head.all_zero:
             notes.append("timestamps are all zero: index clock")
-        if "ODOM" in self._head.names:
-            notes.append({True: "commands: ODOM tv/rv",
+        if "ODOM" in self._head.names or known is not None:
+            both = (" (ODOM is both the odometry and the command stream)"
+                    if self._odom_mode == "stream" else "")
+            notes.append({True: f"commands: ODOM tv/rv{both}",
                           False: "ODOM tv/rv are all zero: no recorded velocity commands",
                           None: "ODOM tv/rv: not known before the log is read"}[known])
         return LogDescription(
@@ -870,7 +877,8 @@ class CarmenReader:
                 ev = handler(tok)
             except (ValueError, IndexError, OverflowError) as err:
                 self._malformed(
-                    stats, lineno, f"{name} {err}" if isinstance(err, _Bad) else f"{name}: {err}", err
+                    stats, lineno, f"{name} {err}" if isinstance(err, _Bad) else f"{name}: {err}", err,
+                    fatal=self._strict and (key != b"ODOM" or self._odom_mode == "stream"),
                 )
                 continue
             if ev is None:
@@ -885,9 +893,13 @@ class CarmenReader:
         self._close_pass()
         self._stats_counts = dict(counts)
 
-    def _malformed(self, stats: SyncStats, lineno: int, what: str, err: BaseException | None) -> None:
+    def _malformed(self, stats: SyncStats, lineno: int, what: str, err: BaseException | None,
+                   *, fatal: bool | None = None) -> None:
+        """Count a malformed line, or raise (``fatal``; default: strict mode). An ODOM line read only for its
+        commands (odometry from the scan lines) is never fatal: a run that uses no command must not stop on
+        it, and a teleop run sees the gap as ticks without a command (counted in its audit)."""
         where = f"line {lineno}: {what}"
-        if self._strict:
+        if self._strict if fatal is None else fatal:
             raise LogFormatError(f"{self.path} {where}") from err
         stats.add_malformed(where)
 

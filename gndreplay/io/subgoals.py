@@ -9,7 +9,9 @@ File format, one subgoal per line::
 
 Blank lines and ``#`` comments (whole line or trailing) are allowed. Poses are in the corrected odometry
 frame. Every bad line (field count, a non-number, a non-finite value, |x| or |y| above 1e6 m, an unknown
-kind), an empty list or an unreadable file raises ``ConfigError`` with one line naming the file and line.
+kind, |theta| above 1e3 rad), an empty list, an unreadable file, a folder, a FIFO / device / socket (never
+opened: reading one could block for ever) or a file above 1 MB raises ``ConfigError`` with one line naming the
+file and line.
 """
 
 from __future__ import annotations
@@ -21,11 +23,23 @@ from typing import Any, cast, get_args
 
 from ..errors import ConfigError
 from ..types import Subgoal, SubgoalKind
+from .base import special_file_kind
 
-__all__ = ["MAX_ABS_SUBGOAL_M", "load_subgoals", "subgoals_from_rows"]
+__all__ = [
+    "FOLLOW_NEEDS_SUBGOALS", "MAX_ABS_SUBGOAL_M", "MAX_ABS_THETA_RAD", "MAX_SUBGOAL_FILE_BYTES",
+    "check_small_file", "load_subgoals", "subgoals_from_rows",
+]
 
 MAX_ABS_SUBGOAL_M = 1e6
 """Largest |x| or |y| [m] accepted (the readers' bound on positions)."""
+MAX_ABS_THETA_RAD = 1e3
+"""Largest |theta| [rad] accepted (a heading beyond it is a typo, and would lose precision when wrapped)."""
+MAX_SUBGOAL_FILE_BYTES = 1 << 20
+"""Largest subgoal file read (1 MB: tens of thousands of subgoals)."""
+
+FOLLOW_NEEDS_SUBGOALS = "navigation mode follow needs subgoals"
+"""The one text of the "follow without subgoals" refusal; each caller adds where the subgoals come from
+(``f"{FOLLOW_NEEDS_SUBGOALS}: give --subgoals FILE ..."``)."""
 
 _KINDS: tuple[str, ...] = get_args(SubgoalKind)
 
@@ -51,6 +65,8 @@ def _subgoal(fields: Sequence[Any], where: str) -> Subgoal:
     for v, n in ((x, "x"), (y, "y")):
         if abs(v) > MAX_ABS_SUBGOAL_M:
             raise ConfigError(f"{where}: |{n}| must be <= {MAX_ABS_SUBGOAL_M:g} m, got {v!r}")
+    if abs(theta) > MAX_ABS_THETA_RAD:
+        raise ConfigError(f"{where}: |theta| must be <= {MAX_ABS_THETA_RAD:g} rad, got {theta!r}")
     kind = fields[3] if len(fields) == 4 else "forward"
     if kind not in _KINDS:
         raise ConfigError(f"{where}: kind must be one of {', '.join(_KINDS)}, got {kind!r}")
@@ -70,11 +86,38 @@ def subgoals_from_rows(rows: Any, where: str) -> tuple[Subgoal, ...]:
     return tuple(out)
 
 
+def check_small_file(path: Path, what: str, max_bytes: int) -> None:
+    """Refuse, without opening it, a path that is not a regular file of at most ``max_bytes``: missing, a
+    folder, a FIFO / device / socket (reading one could block for ever) or too large.
+
+    Raises:
+        ConfigError: one line naming the path and ``what`` it should be ("subgoal file").
+    """
+    if (kind := special_file_kind(path)) is not None:
+        raise ConfigError(f"{path}: is {kind}, not a {what} (never opened)")
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: {what} not found") from None
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot read the {what}: {' '.join(str(e).split())}") from None
+    if path.is_dir():
+        raise ConfigError(f"{path}: is a folder, not a {what}")
+    if st.st_size > max_bytes:
+        raise ConfigError(f"{path}: {st.st_size} bytes, more than the {max_bytes >> 20} MB a {what} may have")
+
+
 def load_subgoals(path: Path) -> tuple[Subgoal, ...]:
     """Read a subgoal file (format: module docstring)."""
     path = Path(path)
+    check_small_file(path, "subgoal file", MAX_SUBGOAL_FILE_BYTES)
     try:
-        text = path.read_text(encoding="utf-8-sig")  # a BOM from a Windows editor is fine
+        with path.open("rb") as f:  # bounded even if the file grew after the check
+            data = f.read(MAX_SUBGOAL_FILE_BYTES + 1)
+        if len(data) > MAX_SUBGOAL_FILE_BYTES:
+            raise ConfigError(f"{path}: more than the {MAX_SUBGOAL_FILE_BYTES >> 20} MB a subgoal file "
+                              "may have")
+        text = data.decode("utf-8-sig")  # a BOM from a Windows editor is fine
     except FileNotFoundError:
         raise ConfigError(f"{path}: subgoal file not found") from None
     except (OSError, UnicodeDecodeError) as e:

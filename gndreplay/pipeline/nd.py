@@ -57,6 +57,11 @@ Differences from ALGORITHMS.md / the released code, and why
       tangent, and in front the circle of radius ``|front corner| + Ds`` about the rotation centre (what
       the front corners sweep when the vehicle turns, plus Ds). So ``ds`` is ``Ds/4`` behind and
       ``Ds + |front corner| - front`` straight ahead. A circle has ``ds = Ds`` all round (code).
+    * Commitment (issue 10 item 3): given the previous tick's choice (``NdMemory``, held by the caller), the
+      region through the discontinuity whose sub-goal is within ``commit_rad / 2`` of last tick's is kept
+      while navigable and at most ``commit_rad`` farther from the goal than the search's pick. Choosing
+      afresh, a robot facing the middle of a wide obstacle with its goal behind it swapped the two ways
+      round each tick as it turned and dithered in place.
     * Not ported (the supervisor owns them): the code's front emergency stop, and the rectangular robot's
       rear "cutting" correction, which needs the previous velocities.
 
@@ -92,6 +97,7 @@ from ..types import Flag
 from .supervisor import arc_touches, footprint_signed_distance
 
 __all__ = [
+    "NdMemory",
     "NdParams",
     "NdResult",
     "Situation",
@@ -148,6 +154,11 @@ class NdParams:
         gap_m: width [m] a discontinuity must open and the navigability tunnel must keep free; ``None``
             uses the robot's width (rectangle) or diameter (circle), as the code does.
         contact_m: a point inside the robot boundary is moved out to ``E_i + contact_m`` [m] (code: 1 cm).
+        commit_rad: commitment (issue 10 item 3, **choice**): with the previous tick's choice given
+            (``NdMemory``), the region through the discontinuity whose sub-goal lies within
+            ``commit_rad / 2`` of the previous sub-goal is kept while navigable, unless the region the
+            search would pick is nearer the goal by more than ``commit_rad`` (angular distance from the goal
+            sector to the discontinuity). 0 disables it.
     """
 
     n_sectors: int = 180
@@ -157,6 +168,7 @@ class NdParams:
     smax_rad: float = _HALF_PI
     gap_m: float | None = None
     contact_m: float = 0.01
+    commit_rad: float = 0.25 * math.pi
 
     def __post_init__(self) -> None:
         if self.n_sectors < 8 or self.n_sectors % 4:
@@ -175,6 +187,21 @@ class NdParams:
             raise ConfigError(f"reactor.gap_m must be > 0 or None, got {self.gap_m}")
         if not self.contact_m > 0.0:
             raise ConfigError(f"reactor.contact_m must be > 0, got {self.contact_m}")
+        if not 0.0 <= self.commit_rad <= math.pi:
+            raise ConfigError(f"reactor.commit_rad must be in [0, pi], got {self.commit_rad}")
+
+
+@dataclass(frozen=True, slots=True)
+class NdMemory:
+    """The choice ND+ made last tick, passed back in for commitment (``NdParams.commit_rad``); nd_step stays
+    a pure function, the caller holds it.
+
+    Attributes:
+        subgoal_rad: direction [rad] of the sub-goal of the region chosen through a discontinuity, in the
+            robot frame of the tick it is passed to (the caller turns it by the robot's rotation since).
+    """
+
+    subgoal_rad: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -192,6 +219,8 @@ class NdResult:
         region: (first, last) sectors of the selected region, counter-clockwise; None when no region.
         min_clearance_m: smallest exact distance from an obstacle point (within max_range_m) to the real
             footprint [m] (negative: inside it); inf without obstacles.
+        memory: the choice to pass to the next tick (a region through a discontinuity); None for the goal's
+            own region or no region.
     """
 
     situation: Situation
@@ -202,6 +231,7 @@ class NdResult:
     w_radps: float
     region: tuple[int, int] | None
     min_clearance_m: float
+    memory: NdMemory | None = None
 
 
 # --------------------------------------------------------------------------------------------------
@@ -427,10 +457,16 @@ class _Region:
 
 
 def _select_region(dist: F64, ang: F64, bisectors: F64, goal_r: float, goal_a: float, gap_m: float,
-                   ) -> _Region | None:
+                   prev_rad: float | None = None, commit_rad: float = 0.0) -> _Region | None:
     """Free walking area: the goal's region if the goal is in view and navigable, else the first
     navigable discontinuity found searching outward from the goal sector, alternating left and right
-    (the closer first, left on ties); the region is the one on the discontinuity's rising (far) side."""
+    (the closer first, left on ties); the region is the one on the discontinuity's rising (far) side.
+
+    Commitment: with ``prev_rad`` (last tick's sub-goal direction), a navigable discontinuity whose
+    sub-goal lies within ``commit_rad / 2`` of it and which is at most ``commit_rad`` farther from the goal
+    than the first navigable one is taken instead: the region does not change side each time the goal's
+    bearing crosses the middle between two gaps (a goal held by a driver who counter-steers, a robot
+    turning in place between two ways round an obstacle)."""
     n = dist.size
     g = int(sector_of(goal_a, n))
     occ = np.isfinite(dist)
@@ -451,9 +487,14 @@ def _select_region(dist: F64, ang: F64, bisectors: F64, goal_r: float, goal_a: f
             first = last = g
         if _navigable(px, py, goal_r, goal_a, gap_m):
             return _Region(first, last, _Kind.GOAL, goal_a, -1)
-    order = np.lexsort((dl > dr, np.minimum(dl, dr)))
+    near_goal = np.minimum(dl, dr)
+    order = np.lexsort((dl > dr, near_goal))
     nb = bounds.size
+    best: _Region | None = None
+    limit = 0
     for m in order:
+        if best is not None and near_goal[m] > limit:
+            break
         i = int(bounds[m])
         j = (i + 1) % n
         far, near = (j, i) if dist[j] > dist[i] else (i, j)
@@ -465,12 +506,20 @@ def _select_region(dist: F64, ang: F64, bisectors: F64, goal_r: float, goal_a: f
             y = 0.5 * (dist[i] * math.sin(ang[i]) + dist[j] * math.sin(ang[j]))
             a_sub, r_sub = math.atan2(y, x), math.hypot(x, y)
         a_sub = _wrap(float(a_sub))
+        kept = prev_rad is not None and abs(_wrap(a_sub - prev_rad)) <= 0.5 * commit_rad
+        if best is not None and not kept:
+            continue
         if not _navigable(px, py, float(r_sub), a_sub, gap_m):
             continue
         if far == j:  # region counter-clockwise of the boundary: starts at j
-            return _Region(j, int(bounds[(m + 1) % nb]), _Kind.FIRST_EDGE, a_sub, i)
-        return _Region((int(bounds[(m - 1) % nb]) + 1) % n, i, _Kind.LAST_EDGE, a_sub, j)
-    return None
+            region = _Region(j, int(bounds[(m + 1) % nb]), _Kind.FIRST_EDGE, a_sub, i)
+        else:
+            region = _Region((int(bounds[(m - 1) % nb]) + 1) % n, i, _Kind.LAST_EDGE, a_sub, j)
+        if kept or prev_rad is None or commit_rad <= 0.0:
+            return region
+        best = region  # the search's choice; look on for last tick's within commit_rad farther
+        limit = int(near_goal[m]) + int(commit_rad / (2.0 * math.pi / n))
+    return best
 
 
 def _ls2_direction(theta_p: float, c_left: float, c_right: float) -> float:
@@ -508,6 +557,10 @@ def _passage_axis(dist: F64, ang: F64, left: NDArray[np.bool_], right: NDArray[n
     the ray along the region direction ``beta`` crosses ahead of the rotation centre (or at most
     ``behind_m`` behind it), or the robot's own axis crosses between ``behind_m`` behind and ``front_m``
     ahead of the rotation centre (the body is in the passage: it leaves along the axis before turning).
+    A pair on the way must have the ray cross its segment, and behind the rotation centre only a pair
+    around the body counts: where the way turns just beyond a door, the ray crosses a side wall behind the
+    axle, and two points along that wall were taken for the passage on some ticks (the direction flipped
+    between the door's axis ahead and the wall's normal, backing up: wheelchair_office_exit).
 
     Returns (cx, cy, nx, ny): the pair's midpoint and the passage axis, the unit normal of the pair's line
     oriented along ``beta``; None without such a pair. For a door these are the jambs; in a corridor any
@@ -526,8 +579,14 @@ def _passage_axis(dist: F64, ang: F64, left: NDArray[np.bool_], right: NDArray[n
     with np.errstate(divide="ignore", invalid="ignore"):
         t = num / den
         t_body = num / ey  # the same along the robot's own axis (b = +x)
-    on_way = (np.abs(den) > 1e-12) & (t > -behind_m)
+        seg = ((t * bx - rx[None, :]) * ex + (t * by - ry[None, :]) * ey) / w2  # where on the pair's segment
+    # the ray crosses the segment itself, not its line extended; behind the rotation centre only a pair
+    # around the body (a door just passed): two points along one side wall, which the ray crosses behind
+    # the axle when the way turns, are no passage (the direction flipped between the door's axis and the
+    # wall's normal there, wheelchair_office_exit)
     straddles = (ly[:, None] > 0.0) & (ry[None, :] < 0.0)  # one point each side of the body
+    on_way = (np.abs(den) > 1e-12) & (seg >= 0.0) & (seg <= 1.0) & (
+        (t >= 0.0) | ((t > -behind_m) & straddles))
     in_body = straddles & (np.abs(ey) > 1e-12) & (t_body > -behind_m) & (t_body < front_m)
     w2 = np.where((on_way | in_body) & (w2 >= min_width_m * min_width_m), w2, np.inf)
     k = int(np.argmin(w2))
@@ -636,7 +695,7 @@ def _blocked_now(points: F64, law_v: float, law_w: float, v_nd: float, robot: Ro
 
 
 def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
-            params: NdParams = NdParams()) -> NdResult:
+            params: NdParams = NdParams(), prev: NdMemory | None = None) -> NdResult:
     """One ND+ step: sectors, gaps, regions, free walking area, situation, direction and command.
 
     Parameters
@@ -650,6 +709,9 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
         Shape (circle / rectangle about the rotation centre), drive and velocity limits.
     params : NdParams
         Reactor settings.
+    prev : NdMemory, optional
+        The previous tick's ``NdResult.memory`` turned into this tick's robot frame (commitment to the
+        chosen region, ``NdParams.commit_rad``); None: choose afresh.
 
     Returns
     -------
@@ -681,7 +743,8 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
     dist = np.where(occ, np.maximum(dist, geo.boundary + params.contact_m), dist)
 
     goal_r, goal_a = math.hypot(goal[0], goal[1]), _wrap(math.atan2(goal[1], goal[0]))  # -0.0 y: pi
-    region = _select_region(dist, ang, geo.angles, goal_r, goal_a, geo.gap_m)
+    region = _select_region(dist, ang, geo.angles, goal_r, goal_a, geo.gap_m,
+                            None if prev is None else prev.subgoal_rad, params.commit_rad)
     if region is None:
         return NdResult(Situation.NONE, Flag.REACTOR_NO_REGION, math.nan, 0.0, 0.0, 0.0, None, min_clearance)
 
@@ -735,7 +798,8 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
         vy = 0.0
     else:
         v, vy, w = _drive(theta, v_nd, robot)
-    return NdResult(situation, Flag.NONE, theta, v, vy, w, (region.first, region.last), min_clearance)
+    memory = None if region.kind is _Kind.GOAL else NdMemory(region.direction_rad)
+    return NdResult(situation, Flag.NONE, theta, v, vy, w, (region.first, region.last), min_clearance, memory)
 
 
 def _footprint_clearance(points: F64, robot: RobotConfig, max_range_m: float) -> float:

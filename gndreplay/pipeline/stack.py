@@ -26,8 +26,8 @@ from ..types import Command, Flag, Pose2D, Scan, Subgoal, Tick
 from .cspace import free_cspace
 from .follow import FollowParams, PathFollower, first_free_point
 from .local import LocalParams, local_command, polar_map, warm_up_local
-from .model import UNKNOWN, GridParams, RobotCentredGrid
-from .nd import NdParams, Situation, nd_step
+from .model import OCCUPIED, UNKNOWN, GridParams, RobotCentredGrid
+from .nd import NdMemory, NdParams, NdResult, Situation, nd_step
 from .nf1 import Nf1Params, Nf1Planner, Planner, PlanResult, reaches_border
 from .selector import intention_xy, select_mode, swept_area_occupied
 from .supervisor import (
@@ -222,6 +222,9 @@ class NavigationStack:
         self._local_side = 0  # the side the last local strategy command kept its wall / obstacle on
         self._intent: tuple[NDArray[np.float64], tuple[float, float, float]] | None = None  # held teleop
         # target (world) of the takeover in progress, and the driver's command it was aimed from
+        # ND+'s last choice per user ("gnd": GND's reactor, "local": local navigation): the sub-goal's and
+        # the target's world bearings (commitment, NdMemory)
+        self._nd_memory: dict[str, tuple[float, float]] = {}
 
     def step(self, tick: Tick, pose: Pose2D, goal_xy: tuple[float, float], match_ms: float = 0.0,
              match_failed: bool = False) -> TickResult:
@@ -255,7 +258,7 @@ class NavigationStack:
         t0 = time.perf_counter_ns()
         target = self._reactor_target(pose, goal, planned)
         obstacles = self.grid.occupied_points(pose, p.reactor.max_range_m)
-        nd = nd_step(obstacles, target, p.robot, p.reactor)
+        nd = self._nd("gnd", pose, obstacles, target)
         timings["reactor"] = _ms(t0)
 
         over = budget_flags({k: v / 1e3 for k, v in timings.items()}, p.supervisor)
@@ -272,7 +275,7 @@ class NavigationStack:
         mode = gnd_mode(planner_ok, not (nd.flag & Flag.REACTOR_NO_REGION))
         if mode is Mode.MND and planned.ok:  # enforced planner time-out: steer to the goal itself
             target = _to_robot(pose, goal[None, :])[0]
-            nd = nd_step(obstacles, target, p.robot, p.reactor)
+            nd = self._nd("gnd", pose, obstacles, target)
         v, vy, w = nd.v_mps, nd.vy_mps, nd.w_radps
         goal_rel = _to_robot(pose, goal[None, :])[0]
         unreachable = self._unreachable(planned, pose)
@@ -404,15 +407,17 @@ class NavigationStack:
         else the far end. It is fixed in the world when the takeover starts and kept while it lasts: a
         target in the robot frame turns with the robot, so local navigation, turning to pass the obstacle,
         would never see it move aside and would only dither in front of it. It is aimed again when the
-        driver's command changes (a sign of v or w, or a change of a quarter of the robot's limits: the
-        driver asked for something else)."""
+        driver asks for something else (``_intention_changed``: travel reversed, or his intention points
+        away from the held target), not merely because he counter-steers."""
         p = self.params
-        if self._intent is not None and not _command_changed(self._intent[1], cmd, p.robot):
-            return _to_robot(pose, self._intent[0][None, :])[0]
         rel = intention_xy(*cmd, p.planner.lookahead_m)
         if rel is None:
             self._intent = None
             return None
+        if self._intent is not None:
+            held = _to_robot(pose, self._intent[0][None, :])[0]
+            if not _intention_changed(self._intent[1], cmd, held, rel):
+                return held
         bearing = math.atan2(rel[1], rel[0])
         dists = np.arange(p.planner.lookahead_m, TELEOP_REACH * p.planner.lookahead_m + 1e-9, p.grid.cell_m)
         ray = np.column_stack([dists * math.cos(bearing), dists * math.sin(bearing)])
@@ -433,7 +438,7 @@ class NavigationStack:
         p = self.params
         obstacles = self.grid.occupied_points(pose, p.reactor.max_range_m)
         if p.local.strategy == "nd":
-            nd = nd_step(obstacles, target, p.robot, p.reactor)
+            nd = self._nd("local", pose, obstacles, target)
             if nd.flag & Flag.REACTOR_NO_REGION:
                 return Mode.ROTATE, 0.0, 0.0, self._rotate_w(target), nd.situation, nd.direction_rad, nd.flag
             return Mode.MND, nd.v_mps, nd.vy_mps, nd.w_radps, nd.situation, nd.direction_rad, nd.flag
@@ -442,6 +447,23 @@ class NavigationStack:
         self._local_side = lc.side
         mode = _MODULE_MODE["local"]
         return mode, lc.v_mps, lc.vy_mps, lc.w_radps, Situation.NONE, lc.direction_rad, Flag.NONE
+
+    def _nd(self, user: str, pose: Pose2D, obstacles: NDArray[np.float64],
+            target: NDArray[np.float64]) -> NdResult:
+        """ND+ towards ``target`` (robot frame) with commitment: the user's previous choice (its sub-goal
+        held as a world bearing, so the robot's own turning does not move it) is passed back in, unless the
+        target's world bearing moved by more than ``ND_MEMORY_RESET_RAD`` since the previous tick (a new
+        target: choose afresh)."""
+        p = self.params
+        bearing = pose.theta + math.atan2(target[1], target[0])
+        held = self._nd_memory.pop(user, None)
+        prev = None
+        if held is not None and abs(math.remainder(bearing - held[1], math.tau)) <= ND_MEMORY_RESET_RAD:
+            prev = NdMemory(float(wrap_angle(held[0] - pose.theta)))
+        nd = nd_step(obstacles, target, p.robot, p.reactor, prev)
+        if nd.memory is not None:
+            self._nd_memory[user] = (pose.theta + nd.memory.subgoal_rad, bearing)
+        return nd
 
     def _rotate_w(self, goal_rel: NDArray[np.float64]) -> float:
         """ROTATE's turn rate. The direction is chosen towards the goal when ROTATE starts and kept while
@@ -506,6 +528,11 @@ class NavigationStack:
         near = raw[np.hypot(raw[:, 0], raw[:, 1]) <= reach_m]
         return raw, near, self.grid.occupied_points(pose, reach_m)
 
+    def _not_free_points(self, pose: Pose2D, radius_m: float) -> NDArray[np.float64]:
+        """Centres (robot frame) of the cells within ``radius_m`` not known FREE (UNKNOWN or OCCUPIED):
+        where a backward escape may not go (``supervisor.escape_command``)."""
+        return np.vstack([self.grid.cell_points(pose, radius_m, s) for s in (UNKNOWN, OCCUPIED)])
+
     def _reflexive(
         self, tick: Tick, pose: Pose2D, mode: Mode, v: float, vy: float, w: float, flags: Flag,
         unreachable: bool = False, points: _Points | None = None, trap: bool = True,
@@ -554,7 +581,8 @@ class NavigationStack:
                     flags |= Flag.EMERGENCY_STOP
         if trap and self._trap.update(mode, w, (pose.x, pose.y, pose.theta)) and not unreachable:
             flags |= Flag.TRAP_DETECTED
-            v_esc, possible = escape_command(raw, p.robot, p.supervisor)
+            v_esc, possible = escape_command(raw, p.robot, p.supervisor, cell_m=cell_m,
+                                             not_free_xy=partial(self._not_free_points, pose))
             if possible and check(v_esc, 0.0, 0.0).rule is None:
                 self._escape_left, self._escape_v = p.supervisor.escape_ticks - 1, v_esc
                 return Mode.ESCAPE, v_esc, 0.0, 0.0, flags
@@ -572,14 +600,26 @@ _MODULE_MODE: dict[str, Mode] = {"teleop": Mode.TELEOP, "follow": Mode.FOLLOW, "
 
 TELEOP_REACH = 4.0
 """How far a takeover's target may lie along the driver's command, in look-ahead distances."""
+TELEOP_REAIM_RAD = 0.25 * math.pi
+"""A held takeover target is aimed again when the driver's intention points this far from it [rad]
+(**choice**: a quarter turn is a new request, a counter-steer is not)."""
+ND_MEMORY_RESET_RAD = 0.25 * math.pi
+"""ND+'s commitment is dropped when its target's world bearing moves this far in one tick [rad]
+(**choice**: a new target, e.g. a re-aimed takeover or a new route)."""
 
 
-def _command_changed(a: tuple[float, float, float], b: tuple[float, float, float],
-                     robot: RobotConfig) -> bool:
-    """The driver asked for something else: a sign of v, vy or w changed, or a component moved by a quarter
-    of the robot's limit."""
-    lim = (robot.vmax_mps, robot.vmax_mps, robot.wmax_radps)
-    return any(np.sign(x) != np.sign(y) or abs(x - y) > 0.25 * m for x, y, m in zip(a, b, lim, strict=True))
+def _intention_changed(a: tuple[float, float, float], b: tuple[float, float, float],
+                       held_rel: NDArray[np.float64], rel: NDArray[np.float64]) -> bool:
+    """The driver asked for something else: the direction of travel reversed (a sign of v or vy changed),
+    or the new command's intention (robot frame) points more than ``TELEOP_REAIM_RAD`` away from the held
+    target. Compared as bearings, not as commands: a driver who counter-steers while local navigation turns
+    the robot away from his line changes w, even its sign, yet still points at the same place; re-aiming
+    then would swing the target from side to side with the robot and ND+ would dither in front of the
+    obstacle (teleop_into_wall)."""
+    if any(np.sign(x) != np.sign(y) for x, y in zip(a[:2], b[:2], strict=True)):
+        return True
+    diff = math.atan2(rel[1], rel[0]) - math.atan2(held_rel[1], held_rel[0])
+    return abs(math.remainder(diff, math.tau)) > TELEOP_REAIM_RAD
 
 
 def teleop_command(cmd: Command | None, robot: RobotConfig, *, t_ns: int | None = None,
@@ -658,7 +698,7 @@ def _warm_up_gnd(params: StackParams) -> None:
         stack.step(Tick(index=k, t_ns=k, scan=scan, odom=pose), pose, goal)
         k += 1
     if params.planner_kind == "tunnel":  # its search kernels, on cases the synthetic scans above may miss
-        warm_up_planners(params.tunnel)
+        warm_up_planners(params.tunnel, size_cells=params.grid.size_cells)
 
 
 def _finite(x: float) -> float:

@@ -5,7 +5,8 @@ return: mpND (planner OK: the reactor steers to the instantaneous path direction
 the reactor steers to the goal itself) and ROTATE (no free walking area: stop and rotate until the model
 changes). The multi-loop paper adds a reflexive loop below them that overrides everything: brake on an
 imminent collision, stop on stale sensor data, and escape a trap (repeated stopped rotations or
-emergencies) with a slow straight motion where the scan shows room.
+emergencies) with a slow straight motion where there is room: ahead in the scan, behind in the grid
+(backward first when the planned course points behind).
 
 The collision check (``safe_command``) sweeps the real footprint (rectangle or circle) along the commanded
 arc over the braking horizon the robot's acceleration limits give, against the raw current scan *and* the
@@ -45,6 +46,7 @@ __all__ = [
     "safe_command",
     "safety_reach_m",
     "swept_collision",
+    "swept_touch",
     "unconfirmed_cells",
 ]
 
@@ -254,6 +256,36 @@ def unconfirmed_cells(grid_xy: NDArray[np.float64], scan_xy: NDArray[np.float64]
     return keep
 
 
+def swept_touch(
+    v_mps: float,
+    vy_mps: float,
+    w_radps: float,
+    scan_xy: NDArray[np.float64],
+    cells_xy: NDArray[np.float64],
+    robot: RobotConfig,
+    params: SupervisorParams,
+    *,
+    cell_m: float,
+    margin_m: float = 0.0,
+) -> str:
+    """Which obstacles the command's swept footprint touches: "scan", "grid" or "" (none).
+
+    The one obstacle test of the reflexive loop (``safe_command``, margin 0) and the mode selector (its
+    tolerance ``margin_m`` on top). ``scan_xy``: raw hits of the current scan; ``cells_xy``: OCCUPIED cell
+    centres the scan does not confirm (``unconfirmed_cells``, computed once by the caller: safe_command
+    tries several commands against the same cells), grown by half a cell; both robot frame. Touching is
+    ``swept_collision``'s, within emergency_margin_m + ``margin_m`` (+ half a cell for the grid). A still
+    command sweeps nothing; the scan is tried first (it is exact, and usually the smaller set)."""
+    if v_mps == 0.0 and vy_mps == 0.0 and w_radps == 0.0:
+        return ""
+    if swept_collision(scan_xy, v_mps, w_radps, robot, params, vy_mps=vy_mps, grow_m=margin_m):
+        return "scan"
+    grow = 0.5 * cell_m + margin_m
+    if swept_collision(cells_xy, v_mps, w_radps, robot, params, vy_mps=vy_mps, grow_m=grow):
+        return "grid"
+    return ""
+
+
 @dataclass(frozen=True, slots=True)
 class SafeCommand:
     """The command after the collision check, and the rule that replaced it (None: unchanged)."""
@@ -279,7 +311,7 @@ def safe_command(
     """The command if its swept footprint touches nothing, else the safest admissible replacement.
 
     Obstacles: ``scan_xy`` raw hits of the current scan and ``grid_xy`` OCCUPIED cell centres (both robot
-    frame); cell centres are grown by half a cell (``swept_collision``). Replacements, first admissible
+    frame); cell centres are grown by half a cell (``swept_touch``). Replacements, first admissible
     wins: the same arc at 1/2 then 1/4 of the speed (SAFE_SLOW: a shorter braking horizon); the same speed
     straight on (a chair in a door: any turn swings a side towards a jamb it passes parallel), then the
     other turn direction, on the same arc then in place (SAFE_TURN); for a turning command, a straight
@@ -298,9 +330,7 @@ def safe_command(
     grid_xy = unconfirmed_cells(grid_xy, scan_xy, cell_m)
 
     def touches(v: float, vy: float, w: float) -> bool:
-        return swept_collision(scan_xy, v, w, robot, params, vy_mps=vy) or swept_collision(
-            grid_xy, v, w, robot, params, vy_mps=vy, grow_m=grow
-        )
+        return swept_touch(v, vy, w, scan_xy, grid_xy, robot, params, cell_m=cell_m) != ""
 
     def backs_into_unknown(v: float, w: float) -> bool:  # a differential base backing up
         return v < 0.0 and robot.drive == "differential" and unknown_xy is not None and swept_collision(
@@ -333,25 +363,47 @@ def safe_command(
 
 
 def escape_command(
-    points_xy: NDArray[np.float64], robot: RobotConfig, params: SupervisorParams
+    points_xy: NDArray[np.float64],
+    robot: RobotConfig,
+    params: SupervisorParams,
+    *,
+    prefer_backward: bool = False,
+    not_free_xy: Callable[[float], NDArray[np.float64]] | None = None,
+    cell_m: float = 0.0,
 ) -> tuple[float, bool]:
-    """The trap escape: slow straight motion forward, else backward, where the raw scan shows room.
+    """The trap escape: a slow straight motion (escape_v_frac * vmax) forward or backward, where there is
+    room for ``escape_clearance_m`` beyond the footprint's edge in a corridor of the robot's width (+
+    emergency_margin_m). Returns (v [m/s], possible).
 
-    Returns (v [m/s], possible). The laser sees only the front half on the wheelchair, so "backward" is
-    only as good as the scan; the stack also runs every escape tick through ``safe_command`` (scan and
-    grid) and ends the escape when it would touch.
-    """
-    v = params.escape_v_frac * robot.vmax_mps
-    for direction in (1.0, -1.0):
-        reach = params.escape_clearance_m
+    Forward is tried first, unless ``prefer_backward`` (the planned course points behind the robot: in a
+    U-shaped trap, forward pushes deeper into the U). Forward needs no raw hit of ``points_xy`` (robot
+    frame) in its corridor. Backward needs that too, and, since both presets' lasers see only the front
+    half, the corridor behind known free in the grid, as ``safe_command``'s SAFE_REVERSE: no centre of a
+    cell not known FREE (UNKNOWN or OCCUPIED), grown by half a cell (``cell_m``), in it.
+    ``not_free_xy(radius_m)`` returns those centres (robot frame) within ``radius_m``; without it there is
+    no backward escape. The stack also runs every escape tick through ``safe_command`` (scan and grid) and
+    ends the escape when it would touch."""
+    reach = params.escape_clearance_m
+    half = (robot.radius_m if robot.shape == "circle" else robot.width_m / 2.0) + params.emergency_margin_m
+
+    def in_corridor(pts: NDArray[np.float64], direction: float, grow: float) -> bool:
+        x = direction * pts[:, 0]  # distance along the escape direction
+        edge = robot.front_m if direction > 0 else robot.rear_m
+        return bool(np.any((x > -grow) & (x < edge + reach + grow) & (np.abs(pts[:, 1]) <= half + grow)))
+
+    def clear(direction: float) -> bool:
+        if in_corridor(points_xy, direction, 0.0):
+            return False
         if direction > 0:
-            ahead = (points_xy[:, 0] > 0) & (points_xy[:, 0] < robot.front_m + reach)
-        else:
-            ahead = (points_xy[:, 0] < 0) & (points_xy[:, 0] > -robot.rear_m - reach)
-        lateral = np.abs(points_xy[:, 1]) <= robot.width_m / 2.0 + params.emergency_margin_m
-        if robot.shape == "circle":
-            lateral = np.abs(points_xy[:, 1]) <= robot.radius_m + params.emergency_margin_m
-        if not np.any(ahead & lateral):
+            return True
+        if not_free_xy is None:
+            return False
+        grow = 0.5 * cell_m
+        return not in_corridor(not_free_xy(math.hypot(robot.rear_m + reach + grow, half + grow)), -1.0, grow)
+
+    v = params.escape_v_frac * robot.vmax_mps
+    for direction in ((-1.0, 1.0) if prefer_backward else (1.0, -1.0)):
+        if clear(direction):
             return direction * v, True
     return 0.0, False
 

@@ -70,6 +70,11 @@ def interventions_section(iv: Mapping[str, Any] | None, n: int) -> list[str]:
     out += _table(("active mode", "ticks", "share"),
                   [(k, str(v), f"{100.0 * v / n:.1f} %" if n else "-")
                    for k, v in sorted(active.items(), key=lambda kv: (-kv[1], kv[0]))])
+    missing, stale = int(iv.get("no_command_ticks", 0) or 0), int(iv.get("stale_command_ticks", 0) or 0)
+    if missing or stale:
+        pct = [f" ({100.0 * k / n:.1f} %)" if n else "" for k in (missing, stale)]
+        out += [f"Ticks without a usable teleop command (the robot stood still): {missing}{pct[0]} with none "
+                f"or a non-finite one, {stale}{pct[1]} with a stale one.", ""]
     takeovers: Sequence[Mapping[str, Any]] = iv.get("takeovers", []) or []
     out += ["### Takeovers", ""]
     if takeovers:
@@ -84,8 +89,8 @@ def interventions_section(iv: Mapping[str, Any] | None, n: int) -> list[str]:
         out += _more(emergencies)
     else:
         out += ["No emergency stop and no reflexive override.", ""]
-    out += ["Times are seconds since the first tick; an episode lasts until the tick after it (the last tick "
-            "when it runs to the end).", ""]
+    out += ["Times are seconds since the first tick; an episode lasts until the tick after it (one tick "
+            "period past its last tick when it runs to the end).", ""]
     return out
 
 

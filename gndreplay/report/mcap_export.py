@@ -20,8 +20,10 @@ Topics (per tick = every tick the stack ran):
     /gndreplay/timing    std_msgs/Float64MultiArray per tick: match, model, planner, reactor [ms]
     /gndreplay/mode, /gndreplay/situation, /gndreplay/flags   std_msgs/String per tick ("|"-joined flags)
     /gndreplay/active_mode, /gndreplay/takeover               std_msgs/String per tick: the navigation mode
-                                                    whose command won, and the takeover reason ("" when the
-                                                    desired mode won)
+                                                    whose command won, and the takeover reason (why the
+                                                    active mode is not the desired one, or why the desired
+                                                    module stood still, e.g. "teleop: no command"; "" when
+                                                    the desired module's own command won)
 """
 
 from __future__ import annotations

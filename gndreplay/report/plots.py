@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..replay import runs  # runs of equal labels: one definition, shared with the audit
+from ..replay import runs, tick_edges  # one definition of runs and tick spans, shared with the audit
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -175,15 +175,6 @@ def plot_grid(ax: Axes, cells: ArrayLike, extent: Extent) -> None:
     ax.imshow(c, origin="lower", extent=extent, cmap=ListedColormap(list(_GRID_COLORS)), vmin=-0.5,
               vmax=2.5, interpolation="nearest", zorder=1)
     ax.set_aspect("equal")
-
-
-def tick_edges(t: F64) -> F64:
-    """(K + 1,) edges of the ticks' time spans: each tick lasts until the next one (the last: the median
-    period)."""
-    if t.size == 0:
-        return np.zeros(1)
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
-    return np.concatenate([t, [t[-1] + dt]])
 
 
 def plot_bands(ax: Axes, t: ArrayLike, labels: ArrayLike, *, colors: Mapping[str, str],

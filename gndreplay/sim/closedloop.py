@@ -20,7 +20,11 @@ Navigation modes (issue 14): the scenario's ``mode`` / ``local`` override the co
 (``Tick.cmd``, what a log's recorded command would be; otherwise ``Tick.cmd`` is the robot's true velocity,
 as wheel odometry reports it). A teleop run succeeds when the script's time is over or the track's end is
 reached, a follow run when the stack reports the final subgoal reached, any other when the true axle is
-within the supervisor's goal tolerance of the goal; always without contact. Each tick's desired and active
+within the supervisor's goal tolerance of the goal; always without contact. A goal run whose stack reports
+GOAL_REACHED while the true axle is outside that tolerance (its corrected pose is wrong) ends as
+``goal_missed`` once the robot has stood still, the stack still reporting the goal, for
+``SimParams.goal_settle_s``: the robot stopped short because of its localisation error, nothing timed out
+(the success criterion is not loosened). Each tick's desired and active
 modes are counted; a takeover is a tick whose active mode differs from the desired one after one where
 they agreed.
 
@@ -30,6 +34,7 @@ config, seed).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections import Counter
@@ -45,7 +50,7 @@ from ..errors import ConfigError
 from ..geometry import compose, relative
 from ..pipeline.stack import TickResult
 from ..replay import recorded_flags
-from ..types import Command, Flag, Pose2D, Scan, Tick
+from ..types import Command, Flag, Pose2D, Scan, Subgoal, Tick
 from .geometry import (
     Clearance,
     Shapes,
@@ -59,7 +64,10 @@ from .scenario_file import DEFAULT_YIELD_M, ScenarioSpec
 from .teleop import TeleopDriver
 from .world import LaserModel, add_laser_noise
 
-__all__ = ["ClosedLoop", "SimParams", "SimRecord", "arc_step", "navigation_config"]
+__all__ = [
+    "ClosedLoop", "SimParams", "SimRecord", "arc_step", "navigation_choices", "navigation_config",
+    "scenario_navigation", "with_navigation",
+]
 
 F64 = NDArray[np.float64]
 NS = 1_000_000_000
@@ -76,6 +84,9 @@ class SimParams:
         odometry: wheel odometry errors.
         t0_ns: clock of the first scan (the log's time stamps).
         max_iterations: conservative-advancement steps per piece before a near-touch counts as contact.
+        goal_settle_s: how long the robot must stand still with the stack reporting GOAL_REACHED, outside the
+            goal tolerance, before the run ends as ``goal_missed`` (the stop must be the stack's final one,
+            not a pause while it decelerates or the corrected pose settles).
     """
 
     dt_s: float = 0.01
@@ -84,6 +95,7 @@ class SimParams:
     odometry: OdometryNoise = OdometryNoise()
     t0_ns: int = DEFAULT_T0_NS
     max_iterations: int = 10_000
+    goal_settle_s: float = 1.0
 
 
 def arc_step(pose: F64, vx: float, vy: float, w: float, h: float) -> F64:
@@ -124,6 +136,7 @@ class SimRecord:
     flags: Counter[str] = field(default_factory=Counter)
     trap_count: int = 0
     stack_goal_t_s: float | None = None
+    goal_stop_t_s: float | None = None  # since when the stack reports GOAL_REACHED and the robot stands still
     stack_ms: list[float] = field(default_factory=list)
     truth_t: list[float] = field(default_factory=list)  # every piece end
     truth: list[tuple[float, float, float]] = field(default_factory=list)
@@ -158,6 +171,70 @@ def navigation_config(spec: ScenarioSpec, cfg: Config) -> Config:
         raise ConfigError(f"{spec.source}: teleop: missing (mode teleop needs commands or a track)")
     if mode == "follow" and not spec.subgoals:
         raise ConfigError(f"{spec.source}: subgoals: missing (navigation mode follow needs them)")
+    return out
+
+
+def navigation_choices(mode: str | None, local: str | None) -> tuple[str | None, str | None]:
+    """``--mode`` and ``--local``, lower-cased and checked (None stays None).
+
+    Raises:
+        ConfigError: an unknown mode or strategy (one line naming the option and the choices).
+    """
+    from ..pipeline.local import LOCAL_STRATEGIES
+    from ..pipeline.stack import NAV_MODES
+
+    for option, value, choices in (("--mode", mode, NAV_MODES), ("--local", local, LOCAL_STRATEGIES)):
+        if value is not None and value.lower() not in choices:
+            raise ConfigError(f"{option}: expected one of {', '.join(choices)}, got {value!r}")
+    return (None if mode is None else mode.lower()), (None if local is None else local.lower())
+
+
+def with_navigation(cfg: Config, mode: str | None = None, local: str | None = None,
+                    no_selector: bool = False) -> Config:
+    """``cfg`` with ``[navigation]`` mode, local strategy and selector set from ``--mode``, ``--local`` and
+    ``--no-selector`` (None / False keep the config's).
+
+    Raises:
+        ConfigError: an unknown mode or strategy, or --local for a mode that runs no local strategy (one
+            line naming the option).
+    """
+    from ..replay import check_local_option
+
+    mode, local = navigation_choices(mode, local)
+    nav: dict[str, Any] = {}
+    if mode is not None:
+        nav["mode"] = mode
+    if local is not None:
+        nav["local"] = {"strategy": local}
+    if no_selector:
+        nav["selector"] = False
+    out = apply_overrides(cfg, {"navigation": nav}) if nav else cfg
+    check_local_option(out, local)
+    return out
+
+
+def scenario_navigation(spec: ScenarioSpec, mode: str | None = None, local: str | None = None,
+                        subgoals: tuple[Subgoal, ...] = ()) -> ScenarioSpec:
+    """The scenario with ``--mode``, ``--local`` and ``--subgoals`` in place of its own ``mode``, ``local``
+    and ``subgoals`` (the scenario's keys override [navigation]; the command line overrides the scenario).
+
+    Raises:
+        ConfigError: an unknown mode or strategy, or subgoals for a scenario that does not run mode
+            follow (one line naming the option).
+    """
+    from .scenario_file import check_subgoals_used
+
+    mode, local = navigation_choices(mode, local)
+    changes: dict[str, Any] = {}
+    if mode is not None:
+        changes["mode"] = mode
+    if local is not None:
+        changes["local"] = local
+    if subgoals:
+        changes["subgoals"] = tuple(subgoals)
+    out = dataclasses.replace(spec, **changes) if changes else spec
+    if subgoals:
+        check_subgoals_used(out)
     return out
 
 
@@ -295,6 +372,7 @@ class ClosedLoop:
         self._next_mover_record = 0.0
         self._prev_flags = Flag.NONE
         self._prev_taken = False
+        self.goal_task = self.driver is None and self.nav_mode != "follow"  # the goal's tolerance decides
         # clearance bookkeeping: the last exact clearance and an upper bound of every closing speed, so
         # pieces far from everything skip the exact test (their clearance is above the security distance)
         reach = self.radius if self.local is None else float(np.max(np.hypot(*self.local.T)))
@@ -347,6 +425,20 @@ class ClosedLoop:
         self._prev_flags = r.flags
         rec.stack_ms.append(ms)
         self._record_modes(r)
+        self._check_goal_missed(r)
+
+    def _check_goal_missed(self, r: TickResult) -> None:
+        """End a goal run as ``goal_missed`` once the stack has reported GOAL_REACHED with the robot standing
+        still for ``goal_settle_s`` (the true axle outside the tolerance, or the run would have succeeded)."""
+        rec, now = self.rec, self.t_ns / NS
+        if not (self.goal_task and self.outcome is None and r.flags & Flag.GOAL_REACHED
+                and self.vel == (0.0, 0.0, 0.0)):
+            rec.goal_stop_t_s = None
+            return
+        if rec.goal_stop_t_s is None:
+            rec.goal_stop_t_s = now
+        if now - rec.goal_stop_t_s >= self.params.goal_settle_s - 1e-9:
+            self.outcome, self.end_t_s = "goal_missed", now
 
     def _record_modes(self, r: TickResult) -> None:
         """Count the tick's active mode, takeover onsets and their reasons, stretches of one active mode;
@@ -598,7 +690,10 @@ class ClosedLoop:
         """result.json: a pure function of (scenario, config, seed) with a fixed latency.
 
         Fields: ``outcome`` success (the task done, see the module docstring: by default the true axle
-        within the supervisor's goal tolerance of the goal) / collision / timeout; ``end_time_s``;
+        within the supervisor's goal tolerance of the goal) / collision / goal_missed (the stack reported
+        GOAL_REACHED and stopped, the true axle outside the tolerance: ``goal_missed`` holds
+        ``stack_goal_reached_s``, ``stopped_s``, ``true_distance_m`` and ``tolerance_m``, else None) /
+        timeout; ``end_time_s``;
         ``time_to_goal_s``; ``collision``: ``t_s``, ``object`` (the
         element's or mover's id), ``contact_world`` and ``contact_robot`` (the touching point of the
         footprint, world and robot frame), ``robot_moving``, ``hit_by_mover`` (the robot stood still and
@@ -637,6 +732,12 @@ class ClosedLoop:
             "time_limit_s": self.time_limit_s,
             "time_to_goal_s": self.end_t_s if self.outcome == "success" else None,
             "collision": self.contact,
+            "goal_missed": None if self.outcome != "goal_missed" else {
+                "stack_goal_reached_s": rec.stack_goal_t_s,
+                "stopped_s": rec.goal_stop_t_s,
+                "true_distance_m": math.hypot(end[0] - self.goal[0], end[1] - self.goal[1]),
+                "tolerance_m": self.goal_tol,
+            },
             "path_length_m": path,
             "min_clearance_m": None if not math.isfinite(rec.min_clearance_m) else rec.min_clearance_m,
             "security_distance_m": sec,

@@ -45,8 +45,10 @@ TIMING_FILE = "sim_timing.json"
 class SimOutcome:
     """What one closed-loop run gives (the fields of result.json, plus the wall-clock timings).
 
-    ``active_modes`` counts ticks per active navigation mode, ``takeovers`` the onsets of an active mode
-    other than the desired one (see :meth:`ClosedLoop.result`)."""
+    ``outcome`` is success, collision, goal_missed (the stack stopped at what it believed the goal, the true
+    axle outside the tolerance; ``goal_missed`` says how far) or timeout. ``active_modes`` counts ticks per
+    active navigation mode, ``takeovers`` the onsets of an active mode other than the desired one (see
+    :meth:`ClosedLoop.result`)."""
 
     scenario: str
     preset: str
@@ -70,6 +72,7 @@ class SimOutcome:
     stack_ms_per_tick: float
     active_modes: dict[str, int] = field(default_factory=dict)
     takeovers: int = 0
+    goal_missed: dict[str, Any] | None = None
 
     @property
     def success(self) -> bool:

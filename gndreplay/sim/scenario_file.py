@@ -59,17 +59,24 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import ConfigError
+from ..io.subgoals import FOLLOW_NEEDS_SUBGOALS, MAX_ABS_SUBGOAL_M, MAX_ABS_THETA_RAD
 from ..pipeline.local import LOCAL_STRATEGIES
+from ..pipeline.stack import NAV_MODES
 from ..types import Subgoal
 from .geometry import box_vertices, wall_vertices
 from .teleop import DEFAULT_LOOKAHEAD_M, TeleopSpec
 
 __all__ = [
     "DEFAULT_WALL_THICKNESS_M",
+    "MAX_SCRIPT_TIME_S",
+    "MAX_TELEOP_SPEED",
+    "MAX_TRACK_LENGTH_M",
+    "MIN_TRACK_SEGMENT_M",
     "DoorAction",
     "Element",
     "Mover",
     "ScenarioSpec",
+    "check_subgoals_used",
     "load_scenario",
     "parse_scenario",
     "resolve_scenario",
@@ -78,10 +85,19 @@ __all__ = [
 
 F64 = NDArray[np.float64]
 DEFAULT_WALL_THICKNESS_M = 0.1
+#: Bounds of the navigation keys (a value beyond them is a typo, and 1e300 would overflow the arithmetic):
+#: |speed| of teleop commands and the track driver [m/s, rad/s]; track look-ahead / tolerance [m]; times of
+#: a command script [s]; positions (start, goal, track points) as subgoals' [m]; headings [rad].
+MAX_TELEOP_SPEED = 100.0
+MAX_TRACK_LENGTH_M = 100.0
+MAX_SCRIPT_TIME_S = 1e6
+#: Shortest segment of a teleop track [m] (a shorter one has no usable direction).
+MIN_TRACK_SEGMENT_M = 1e-3
+_POSE_LIMITS = (MAX_ABS_SUBGOAL_M, MAX_ABS_SUBGOAL_M, MAX_ABS_THETA_RAD)
+_COMMAND_LIMITS = (MAX_SCRIPT_TIME_S, MAX_TELEOP_SPEED, MAX_TELEOP_SPEED)
 DEFAULT_YIELD_M = 0.3
 _KINDS = ("walls", "boxes", "circles", "polygons")
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
-NAV_MODES = ("gnd", "teleop", "follow", "local")
 
 
 @dataclass(frozen=True, slots=True)
@@ -245,10 +261,14 @@ class _Err:
         return ConfigError(f"{self.source}: {key}: {message}")
 
 
-def _num(v: Any, key: str, err: _Err, *, positive: bool = False, nonneg: bool = False) -> float:
+def _num(v: Any, key: str, err: _Err, *, positive: bool = False, nonneg: bool = False,
+         limit: float | None = None) -> float:
+    """A finite number (> 0 / >= 0 when asked; |x| <= ``limit`` when given)."""
     if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(float(v)):
         raise err(key, f"expected a number, got {v!r}")
     x = float(v)
+    if limit is not None and abs(x) > limit:
+        raise err(key, f"|value| must be <= {limit:g}, got {v!r}")
     if positive and x <= 0.0:
         raise err(key, f"must be > 0, got {v!r}")
     if nonneg and x < 0.0:
@@ -256,11 +276,14 @@ def _num(v: Any, key: str, err: _Err, *, positive: bool = False, nonneg: bool = 
     return x
 
 
-def _nums(v: Any, key: str, err: _Err, sizes: tuple[int, ...]) -> list[float]:
+def _nums(v: Any, key: str, err: _Err, sizes: tuple[int, ...],
+          limits: tuple[float, ...] | None = None) -> list[float]:
+    """A list of ``sizes`` finite numbers; ``limits``: |bound| of each (the last repeats)."""
     if not isinstance(v, list) or len(v) not in sizes:
         want = " or ".join(str(n) for n in sizes)
         raise err(key, f"expected a list of {want} numbers, got {v!r}")
-    return [_num(x, key, err) for x in v]
+    lim = (None,) * len(v) if limits is None else limits + (limits[-1],) * (len(v) - len(limits))
+    return [_num(x, key, err, limit=b) for x, b in zip(v, lim, strict=False)]
 
 
 def _table(v: Any, key: str, err: _Err, allowed: tuple[str, ...],
@@ -353,10 +376,10 @@ def parse_scenario(doc: Any, source: str) -> ScenarioSpec:
     preset = d.get("preset", "wheelchair")
     if preset not in ("wheelchair", "xr4000"):
         raise err("preset", f"expected wheelchair or xr4000, got {preset!r}")
-    sx, sy, st = _nums(d["start"], "start", err, (3,))
+    sx, sy, st = _nums(d["start"], "start", err, (3,), _POSE_LIMITS)
     mode, local, subgoals, teleop = _navigation(d, err)
     if "goal" in d:
-        gx, gy = _nums(d["goal"], "goal", err, (2,))
+        gx, gy = _nums(d["goal"], "goal", err, (2,), _POSE_LIMITS[:2])
     elif subgoals:
         gx, gy = subgoals[-1].x, subgoals[-1].y
     elif teleop is not None and teleop.track is not None:
@@ -437,7 +460,7 @@ def _navigation(d: dict[str, Any], err: _Err) -> tuple[str | None, str | None, t
             raise err("subgoals", f"only with mode: follow (mode is {mode or 'gnd'})")
         subgoals = _subgoals(d["subgoals"], err)
     elif mode == "follow":
-        raise err("subgoals", "missing (mode follow needs them)")
+        raise err("subgoals", f"missing ({FOLLOW_NEEDS_SUBGOALS})")
     teleop = None
     if "teleop" in d:
         if mode != "teleop":
@@ -446,6 +469,18 @@ def _navigation(d: dict[str, Any], err: _Err) -> tuple[str | None, str | None, t
     elif mode == "teleop":
         raise err("teleop", "missing (mode teleop needs commands or a track)")
     return mode, local, subgoals, teleop
+
+
+def check_subgoals_used(spec: ScenarioSpec, option: str = "--subgoals") -> None:
+    """Refuse subgoals on a scenario whose mode does not follow them (the command line's ``option``
+    overriding the scenario's mode or subgoals), as the scenario file itself does.
+
+    Raises:
+        ConfigError: one line naming the option, the scenario and its mode.
+    """
+    if spec.subgoals and spec.mode != "follow":
+        raise ConfigError(f"{option}: only navigation mode follow uses subgoals (scenario {spec.name} has "
+                          f"mode {spec.mode or 'gnd'})")
 
 
 def _subgoals(raw: Any, err: _Err) -> tuple[Subgoal, ...]:
@@ -463,8 +498,8 @@ def _teleop(raw: Any, err: _Err) -> TeleopSpec:
         rows = t["commands"]
         if not isinstance(rows, list) or len(rows) < 2:
             raise err("teleop.commands", f"expected a list of >= 2 [t_s, v, w] rows, got {rows!r}")
-        cmds = np.array([_nums(r, f"teleop.commands[{i}]", err, (3,)) for i, r in enumerate(rows)],
-                        dtype=np.float64)
+        cmds = np.array([_nums(r, f"teleop.commands[{i}]", err, (3,), _COMMAND_LIMITS)
+                         for i, r in enumerate(rows)], dtype=np.float64)
         if cmds[0, 0] < 0.0 or np.any(np.diff(cmds[:, 0]) <= 0.0):
             raise err("teleop.commands", "times must be >= 0 and increasing")
         if cmds[-1, 1] != 0.0 or cmds[-1, 2] != 0.0:
@@ -475,17 +510,18 @@ def _teleop(raw: Any, err: _Err) -> TeleopSpec:
     pts = tr["points"]
     if not isinstance(pts, list) or len(pts) < 2:
         raise err("teleop.track.points", f"expected a list of >= 2 [x, y] points, got {pts!r}")
-    xy = np.array([_nums(q, f"teleop.track.points[{i}]", err, (2,)) for i, q in enumerate(pts)],
-                  dtype=np.float64)
-    if np.any(np.hypot(*np.diff(xy, axis=0).T) <= 0.0):
-        raise err("teleop.track.points", "two consecutive points are equal")
+    xy = np.array([_nums(q, f"teleop.track.points[{i}]", err, (2,), _POSE_LIMITS[:2])
+                   for i, q in enumerate(pts)], dtype=np.float64)
+    if np.any(np.hypot(*np.diff(xy, axis=0).T) < MIN_TRACK_SEGMENT_M):
+        raise err("teleop.track.points", f"two consecutive points are closer than {MIN_TRACK_SEGMENT_M:g} m")
     tol = tr.get("tolerance")
     return TeleopSpec(
         track=xy,
-        speed_mps=_num(tr["speed"], "teleop.track.speed", err, positive=True),
+        speed_mps=_num(tr["speed"], "teleop.track.speed", err, positive=True, limit=MAX_TELEOP_SPEED),
         lookahead_m=_num(tr.get("lookahead", DEFAULT_LOOKAHEAD_M), "teleop.track.lookahead", err,
-                         positive=True),
-        tolerance_m=None if tol is None else _num(tol, "teleop.track.tolerance", err, positive=True),
+                         positive=True, limit=MAX_TRACK_LENGTH_M),
+        tolerance_m=None if tol is None else _num(tol, "teleop.track.tolerance", err, positive=True,
+                                                  limit=MAX_TRACK_LENGTH_M),
     )
 
 
