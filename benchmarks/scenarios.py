@@ -18,7 +18,7 @@ with the mode selector disabled (the desired mode's command goes out: the driver
     .venv/bin/python benchmarks/scenarios.py [--seeds 20] [--scenarios a,b] [--presets wheelchair,xr4000]
         [--jobs 1] [--out DIR] [--jsonl FILE] [--no-selector | --compare-selector]
     .venv/bin/python benchmarks/scenarios.py --table-from FILE      # the table of the runs so far
-    .venv/bin/python benchmarks/scenarios.py --scenarios careless_driver --seeds 5 --compare-selector
+    .venv/bin/python benchmarks/scenarios.py --scenarios teleop_into_wall --seeds 5 --compare-selector
 """
 
 from __future__ import annotations
