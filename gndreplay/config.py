@@ -24,7 +24,7 @@ from .errors import ConfigError
 from .io.subgoals import check_small_file
 from .pipeline.follow import FollowParams
 from .pipeline.local import LocalParams
-from .pipeline.model import GRID_200, GRID_400, GridParams
+from .pipeline.model import GRID_400, GridParams
 from .pipeline.nd import NdParams
 from .pipeline.nf1 import Nf1Params
 from .pipeline.stack import StackParams
@@ -100,6 +100,10 @@ class NavigationConfig:
             tolerances"), so local navigation takes over before the emergency brake would fire.
         cmd_timeout_s: a teleoperation command older than this at the tick's time is no command: stand
             still ("teleop: command stale"; **choice**: 0.5 s, a few command periods of a joystick).
+        selector_hold_s: after a takeover, local navigation keeps the robot until the desired command's
+            swept area has been clear for this long (and while that command moves); 0 is the paper's rule
+            tick by tick ("as soon as the locally desired path is free"), which hands back for single
+            ticks round an obstacle (``selector.arbitrate``; **choice**: 0.6 s, three 5 Hz ticks).
         local: local navigation ([navigation.local]).
         follow: path following ([navigation.follow]).
     """
@@ -108,6 +112,7 @@ class NavigationConfig:
     selector: bool = True
     selector_margin_m: float = 0.05
     cmd_timeout_s: float = 0.5
+    selector_hold_s: float = 0.6
     local: LocalParams = LocalParams()
     follow: FollowParams = FollowParams()
 
@@ -164,8 +169,13 @@ PRESETS: dict[str, Config] = {
     # the wheelchair paper: 1.2 x 0.7 m, differential drive, laser 0.72 m ahead of the axle,
     # (vmax, wmax) = (0.3 m/s, 0.5 rad/s), 400 x 400 x 0.05 m grid, time-outs 0.05 / 0.08 / 0.02 s
     "wheelchair": Config(),
-    # GND on the Nomadic XR4000: circular holonomic base, 10 x 10 m grid of 5 cm cells
-    "xr4000": Config(preset="xr4000", robot=XR4000_ROBOT, laser=XR4000_LASER, grid=GRID_200),
+    # GND on the Nomadic XR4000: circular holonomic base, 5 cm cells. Grid 20 x 20 m (**choice**, sized for
+    # its speed; GND used 10 x 10 m): the robot stays in the central quarter, so the grid reaches at least
+    # 3/8 of its side around it. 10 m gives 3.75 m, 7.5 s at 0.5 m/s (the chair's 20 m grid: 7.5 m, 25 s at
+    # 0.3 m/s); 20 m gives 7.5 m, 15 s, and nearly holds the free space a no-return clears (grid.free_clip_m,
+    # 8 m) from anywhere in the zone. Braking (0.08 m from 0.5 m/s at 1.5 m/s^2) is far below either.
+    # Cost on ACES (xr4000, goal 5 m ahead, median per tick): planner 0.29 -> 0.61 ms, stack 0.75 -> 1.20 ms.
+    "xr4000": Config(preset="xr4000", robot=XR4000_ROBOT, laser=XR4000_LASER, grid=GRID_400),
 }
 
 
@@ -265,6 +275,8 @@ RANGES: dict[tuple[type, str], Range] = {
     (Nf1Params, "escape_m"): _nonneg(_LEN),
     (Nf1Params, "border_search_m"): _nonneg(_LEN),
     (Nf1Params, "unknown_cost"): Range(1.0, 100.0),
+    (Nf1Params, "route_keep_ratio"): Range(0.0, 10.0),
+    (Nf1Params, "route_keep_m"): _nonneg(_LEN),
     (TunnelParams, "margin_m"): _nonneg(10.0),
     (TunnelParams, "n_rays"): _count(8, 100_000),
     (TunnelParams, "jump_m"): _pos(_LEN),
@@ -301,8 +313,10 @@ RANGES: dict[tuple[type, str], Range] = {
     (SupervisorParams, "escape_ticks"): _count(),
     (SupervisorParams, "escape_v_frac"): _FRAC,
     (SupervisorParams, "escape_clearance_m"): _nonneg(_LEN),
+    (SupervisorParams, "blind_memory_s"): _nonneg(3600.0),
     (NavigationConfig, "selector_margin_m"): _nonneg(10.0),
     (NavigationConfig, "cmd_timeout_s"): _pos(_TIME),
+    (NavigationConfig, "selector_hold_s"): _nonneg(_TIME),
     (IdcParams, "min_range_m"): _nonneg(_RANGE_M),
     (IdcParams, "max_range_m"): _pos(_RANGE_M),
     (IdcParams, "keyframe_dist_m"): _pos(_LEN),

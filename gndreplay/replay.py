@@ -435,9 +435,10 @@ def tick_edges(t: ArrayLike) -> NDArray[np.float64]:
 
 def _span(edges: NDArray[np.float64], first: int, end: int) -> dict[str, Any]:
     """An episode's start [s since the first tick], duration (``tick_edges``: until the tick after it, or
-    one tick period past the last tick at the end of the run) and ticks."""
-    return {"t_start_s": float(edges[first]), "duration_s": float(edges[end] - edges[first]),
-            "ticks": end - first}
+    one tick period past the last tick at the end of the run) and ticks; times are rounded to the
+    nanosecond, the stamps' resolution, so 0.2 s does not print as 0.1999999999999993."""
+    return {"t_start_s": round(float(edges[first]), 9),
+            "duration_s": round(float(edges[end] - edges[first]), 9), "ticks": end - first}
 
 
 #: Takeover reasons the stack records on a teleop tick whose desired module stands still for want of a

@@ -94,6 +94,8 @@ def test_reflexive_overrides_are_episodes_per_rule() -> None:
     assert [e["t_start_s"] for e in iv["emergencies"]] == pytest.approx([1.0, 1.2, 1.4])
     # a one-tick EMERGENCY at the end of the run lasts one tick period, like every one-tick episode
     assert [e["duration_s"] for e in iv["emergencies"]] == pytest.approx([0.2, 0.2, 0.2])
+    # rounded to the stamps' nanosecond: summary.json says 0.2, not 0.1999999999999993
+    assert [repr(e["duration_s"]) for e in iv["emergencies"]] == ["0.2", "0.2", "0.2"]
     assert set(REFLEXIVE_MODES) == {"EMERGENCY", "SAFE_SLOW", "SAFE_TURN", "SAFE_REVERSE", "STALE", "ESCAPE"}
 
 

@@ -37,7 +37,7 @@ def test_presets_match_the_papers() -> None:
     xr = PRESETS["xr4000"]
     assert (xr.robot.shape, xr.robot.drive, xr.robot.radius_m) == ("circle", "holonomic", 0.3)
     assert (xr.robot.vmax_mps, xr.robot.wmax_radps) == (0.5, 1.57)
-    assert (xr.grid.size_cells, xr.grid.cell_m) == (200, 0.05)
+    assert (xr.grid.size_cells, xr.grid.cell_m) == (400, 0.05)
 
 
 def test_unknown_preset() -> None:

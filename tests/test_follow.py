@@ -512,3 +512,52 @@ def test_local_target_is_the_first_free_point_past_the_obstacle() -> None:
     assert free_point_ahead(traj, f._s + PARAMS.lookahead_m, grid, inflate_m=inflate,
                             unknown_is_free=True) is None
     assert f.local_target(grid) == (5.0, 0.0)
+
+
+@ROBOTS
+@pytest.mark.parametrize("heading", [1.2, 1.75, 2.5, math.pi, -1.75])
+def test_tracking_never_drives_a_forward_subgoal_backwards(robot: RobotConfig, heading: float) -> None:
+    """Turned away from its trajectory (by 69 deg to 180 deg) within the deviation tolerance, the robot
+    does not back towards the reference (the Kanayama law's speed is negative there): it turns in place
+    to the trajectory's heading (at once the shorter way, and at all when facing exactly backwards)."""
+    f = PathFollower([Subgoal(6.0, 0.0, 0.0)], PARAMS, robot, inflate_m=robot.inner_radius_m)
+    grid = empty_grid()
+    f.step(Pose2D(0.0, 0.0, 0.0), grid)
+    side = math.copysign(0.3, heading)
+    cmd = f.step(Pose2D(1.0, side, heading), grid)
+    assert cmd.event == "" and cmd.v_mps == 0.0 and cmd.mode == "turn"
+    assert cmd.w_radps != 0.0
+    if abs(heading) < math.pi:  # facing exactly backwards, either way round is as short
+        assert math.copysign(1.0, cmd.w_radps) == -math.copysign(1.0, heading)
+
+
+@ROBOTS
+def test_taken_over_the_follower_plans_anew_from_where_it_was_left(robot: RobotConfig) -> None:
+    """Path following along a straight route; local navigation (simulated: ``overridden``) turns the
+    robot 50 deg left and 0.25 m aside, within the deviation tolerance. Told so, the follower plans a new
+    trajectory from that pose (it starts at the robot, along its heading) and its command carries on along
+    the new heading instead of turning hard back to the old line; not told, it keeps the old trajectory and
+    turns back. Either way the route ends at the final subgoal."""
+    subgoals = [Subgoal(8.0, 0.0, 0.0, "stop")]
+    grid = empty_grid()
+    results = {}
+    for told in (True, False):
+        f = PathFollower(subgoals, PARAMS, robot, inflate_m=robot.inner_radius_m)
+        for k in range(10):  # tracking along x at speed
+            f.step(Pose2D(0.03 * k, 0.0, 0.0), grid, v_mps=robot.vmax_mps, w_radps=0.0)
+        pose = Pose2D(0.5, 0.25, math.radians(50.0))
+        cmd = f.step(pose, grid, v_mps=0.1, w_radps=0.3, overridden=told)
+        results[told] = cmd
+        if told:
+            assert cmd.event == "replanned"
+            assert np.allclose(cmd.trajectory_xy[0], (pose.x, pose.y))
+            first = cmd.trajectory_xy[1] - cmd.trajectory_xy[0]
+            assert abs(math.atan2(first[1], first[0]) - pose.theta) < 0.05
+        else:
+            assert cmd.event == ""
+        run = drive(f, pose, grid, robot)
+        assert run.cmds[-1].done
+        end = run.poses[-1]
+        assert math.hypot(end.x - 8.0, end.y) <= PARAMS.reach_m
+    assert results[True].w_radps > results[False].w_radps  # the old line lies to the right
+    assert results[True].v_mps > 0.0

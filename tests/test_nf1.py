@@ -303,10 +303,13 @@ def test_goal_outside_is_projected_onto_border_along_the_line() -> None:
     assert not inside.goal_projected and inside.goal_cell == (10, 20)
 
 
+PROJECT = Nf1Params(frontier_goal=False)  # the papers' projection of a goal beyond the grid
+
+
 def test_projected_goal_behind_wall_is_in_obstacle() -> None:
     free = np.ones((100, 100), dtype=bool)
     free[:, 95:] = False
-    res = plan(free, (50, 50), (50.5, 500.5), cell_m=CELL_M)
+    res = plan(free, (50, 50), (50.5, 500.5), cell_m=CELL_M, params=PROJECT)
     assert res.flag == Flag.GOAL_IN_OBSTACLE and res.goal_projected and res.goal_cell == (50, 99)
 
 
@@ -387,10 +390,11 @@ def test_bad_arguments() -> None:
 def test_projected_goal_on_blocked_border_moves_to_nearest_free_border_cell() -> None:
     free = np.ones((100, 100), dtype=bool)
     free[45:56, 97:] = False  # furniture at the border where the robot-goal line leaves the grid
-    res = plan(free, (50, 50), (50.5, 500.5), cell_m=CELL_M)
+    res = plan(free, (50, 50), (50.5, 500.5), cell_m=CELL_M, params=PROJECT)
     check_valid(res, free, (50, 50))
     assert res.goal_projected and res.goal_cell == (44, 99)  # 6 cells up or down: the tie goes to row-major
-    off = plan(free, (50, 50), (50.5, 500.5), cell_m=CELL_M, params=Nf1Params(border_search_m=0.0))
+    off = plan(free, (50, 50), (50.5, 500.5), cell_m=CELL_M,
+               params=Nf1Params(frontier_goal=False, border_search_m=0.0))
     assert off.flag == Flag.GOAL_IN_OBSTACLE and off.goal_cell == (50, 99)
     inside = plan(free, (50, 50), (50.5, 98.5), cell_m=CELL_M)  # inside the grid: never moved
     assert inside.flag == Flag.GOAL_IN_OBSTACLE and inside.goal_cell == (50, 98)

@@ -12,7 +12,7 @@ import pytest
 from gndreplay.config import PRESETS, Config
 from gndreplay.errors import ConfigError
 from gndreplay.geometry import compose
-from gndreplay.pipeline.selector import intention_xy, select_mode, swept_area_occupied
+from gndreplay.pipeline.selector import Takeover, arbitrate, intention_xy, select_mode, swept_area_occupied
 from gndreplay.pipeline.stack import NavigationStack, StackParams, TickResult, teleop_command
 from gndreplay.pipeline.supervisor import Mode, braking_time_s, footprint_signed_distance
 from gndreplay.sim.closedloop import arc_step
@@ -94,6 +94,45 @@ def test_select_mode_takes_over_only_when_occupied() -> None:
     assert select_mode("teleop", "") == ("teleop", "")
     assert select_mode("teleop", "scan") == ("local", "teleop: swept area occupied (scan)")
     assert select_mode("follow", "grid") == ("local", "follow: swept area occupied (grid)")
+
+
+def _timeline(occupied: list[str], moving: list[bool], hold_s: float, dt_s: float = 0.2) -> list[str]:
+    """Active modes of ``arbitrate`` over a scripted sequence of ticks (path following desired)."""
+    held: Takeover | None = None
+    out = []
+    for k, (occ, mov) in enumerate(zip(occupied, moving, strict=True)):
+        active, reason, held = arbitrate("follow", occ, t_ns=round(k * dt_s * 1e9), held=held,
+                                         hold_s=hold_s, moving=mov)
+        assert (active == "local") == bool(reason)
+        out.append(active)
+    return out
+
+
+def test_hold_keeps_local_navigation_until_the_area_has_been_clear_for_hold_s() -> None:
+    """The paper's rule (hold 0) hands back on the first clear tick: the chattering round an obstacle, one
+    takeover per occupied tick. A 0.5 s hold (0.2 s ticks) keeps local navigation for the clear ticks
+    less than 0.5 s after the last occupied one: one takeover, ending 0.6 s after the last occupied tick."""
+    occ = ["scan", "", "grid", "", "scan", "", "", "", "", ""]
+    moving = [True] * len(occ)
+    paper = _timeline(occ, moving, 0.0)
+    assert paper == ["local" if o else "follow" for o in occ]
+    held = _timeline(occ, moving, 0.5)
+    assert held == ["local"] * 7 + ["follow"] * 3
+    onsets = [k for k in range(len(held)) if held[k] == "local" and (k == 0 or held[k - 1] != "local")]
+    assert onsets == [0]
+
+
+def test_hold_never_delays_a_takeover_nor_moves_a_still_desired_command() -> None:
+    """A takeover starts on the very tick the area is occupied, however long the hold; a desired command
+    that stands still (the driver let go, the follower stopped) ends the hold at once; a clear area with
+    no takeover in progress is never held."""
+    assert _timeline(["", "", "scan"], [True] * 3, 10.0) == ["follow", "follow", "local"]
+    assert _timeline(["scan", "", "", ""], [True, True, False, True], 10.0) == ["local", "local", "follow",
+                                                                              "follow"]
+    active, reason, held = arbitrate("teleop", "", t_ns=5, held=Takeover(0), hold_s=1.0, moving=True)
+    assert (active, held) == ("local", Takeover(0)) and reason.startswith("teleop: swept area clear")
+    assert arbitrate("teleop", "", t_ns=10**9, held=Takeover(0), hold_s=1.0, moving=True) == ("teleop", "",
+                                                                                            None)
 
 
 def test_swept_area_reports_where_it_is_occupied() -> None:

@@ -38,12 +38,17 @@
   subgoal the robot stops at (stop subgoals, the final one, and cusps where the driving direction changes).
   Within ``stabilise_m`` of such a subgoal, point stabilisation of Aicardi et al. (1995) in polar
   coordinates takes over, and within ``settle_m`` a turn in place to the heading asked. A command
-  beyond ``wmax_radps`` is scaled down with its speed (its curvature is kept). A holonomic robot gets
-  vy = 0.
+  beyond ``wmax_radps`` is scaled down with its speed (its curvature is kept). Where the tracking law's
+  speed turns against the driving direction (the reference behind the robot) the robot turns in place to
+  the trajectory's heading instead: a forward subgoal is never driven to backwards, nor a reverse one
+  forwards. A holonomic robot gets vy = 0.
 
 When local navigation takes over (the mode selector), it steers to ``PathFollower.local_target``: the first
 trajectory point beyond the look-ahead point that is free in C-space (the look-ahead point may lie on the
-obstacle blocking the path, where the footprint cannot go), or the subgoal when there is none.
+obstacle blocking the path, where the footprint cannot go), or the subgoal when there is none. The caller
+tells ``step`` when the command executed last tick was not the follower's (``overridden``); the
+trajectory is then planned anew from the robot's pose (event "replanned"), as the paper's follower does
+once local navigation has deviated the robot (Fig. 7).
 
 Everything is a pure function of the subgoals, the parameters and the sequence of poses and grids.
 """
@@ -688,12 +693,17 @@ class PathFollower:
         return FollowCommand(0.0, 0.0, len(self.subgoals), True, event, xy, np.zeros((0, 2)), xy, "idle")
 
     def step(self, pose: Pose2D, grid: RobotCentredGrid, *, v_mps: float | None = None,
-             w_radps: float | None = None) -> FollowCommand:
+             w_radps: float | None = None, overridden: bool = False) -> FollowCommand:
         """The follower's command at ``pose`` (corrected frame) with the current model.
 
         ``v_mps``, ``w_radps``: the robot's current motion (odometry twist or the command executed last
         tick), for the at-rest test of stop subgoals and the start curvature of a new trajectory; None or
-        nan: the follower's own previous command stands for them (right only while it is in control)."""
+        nan: the follower's own previous command stands for them (right only while it is in control).
+        ``overridden``: the command executed last tick was not the follower's (local navigation had taken
+        over, or the reflexive loop replaced it). The trajectory is then planned anew from ``pose``: the
+        paper's path follower, given control back, executes "a newly planned smooth trajectory" (Fig. 7)
+        rather than steering back onto the old one, which runs through the obstacle local navigation was
+        avoiding (turned back towards it, the follower's command is taken over again at the next tick)."""
         if self.done:
             return self._idle("")
         speed = v_mps if v_mps is not None and math.isfinite(v_mps) else self._last_v
@@ -714,6 +724,9 @@ class PathFollower:
             self.trajectory = None
         if self.trajectory is None:
             self._plan(pose, *motion)
+        elif overridden:  # the paper's Fig. 6 and 7: a new trajectory from where the others left the robot
+            self._plan(pose, *motion)
+            events.append("replanned")
         traj = self.trajectory
         assert traj is not None and self._goal is not None
         p = np.array([pose.x, pose.y])
@@ -796,5 +809,11 @@ class PathFollower:
             v_ref = min(v_ref, math.sqrt(2.0 * a_brake * max(traj.s_goal - s, 0.0)))
         v_ref = max(v_ref, p.creep_frac * robot.vmax_mps)
         v, w = kanayama_command((pose.x, pose.y, th), ref, v_ref, p)
+        if v < 0.0:
+            # the reference lies behind the robot (heading error near or beyond 90 deg, pushed or turned
+            # by another module): the law would drive against the subgoal's kind (a forward subgoal
+            # backwards, into space the laser has not seen). Turn in place to the trajectory's heading
+            err = float(wrap_angle(ref[2] - th))
+            return 0.0, float(np.clip(p.k_turn * err, -robot.wmax_radps, robot.wmax_radps)), "turn"
         v, w = _limit(v, w, robot)
         return traj.direction * v, w, "track"

@@ -22,7 +22,8 @@ Two questions are asked of the map:
   the arc bounds every point of the sector from the inside, up to the arc's sag between samples (at most
   ``r (1 - cos(delta / 4))``, 0.2 mm at 5 m with 2 deg sectors). The price is a travel short of the exact
   one by up to about ``r delta tan(incidence)`` (3 cm for a wall 1.5 m away seen at 30 deg from its normal).
-  Speeds and direction choices read it.
+  Speeds and direction choices read it; contour with a target asks it for every sector's direction at once
+  (one compiled loop over directions x arc samples, ``_travel_kernel``).
 
 Every command leaves through one speed law (:func:`_limit`), whatever the strategy: the translation speed is
 ``D / approach_s`` at most, ``D`` the travel in the motion direction of the footprint grown by ``safety_m``
@@ -38,6 +39,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import ConfigError
@@ -256,54 +258,72 @@ def _arcs(polar: PolarMap, robot: RobotConfig) -> tuple[F64, F64]:
 # Travel of the footprint
 
 
-def _travel(qx: F64, qy: F64, dx: F64 | float, dy: F64 | float, robot: RobotConfig, margin_m: float) -> F64:
-    """Distance the footprint (in its own frame) travels along the unit vector (dx, dy) until the point
-    (qx, qy) comes within ``margin_m`` of it; inf if never (broadcasting).
+@njit(cache=True)
+def _travel_kernel(px: F64, py: F64, c: F64, s: F64, turn_first: bool, circle: bool, radius: float,
+                   front: float, rear: float, hw: float, margin: float) -> F64:  # pragma: no cover (numba)
+    """Per direction k (unit vector (c[k], s[k])), the least distance the footprint travels before one of
+    the points (px, py) comes within ``margin`` of it; inf if none ever does. ``turn_first``: the points
+    are first turned into the frame of a footprint facing the direction, which then moves straight ahead.
 
-    A point already within the margin blocks (0) only a motion that brings it closer (distance to a convex
-    set along a line is convex, so a motion that does not bring it closer never does); a point inside the
-    real footprint blocks every motion. The grown rectangle keeps square corners (conservative).
-    """
-    qx, qy, dxa, dya = np.broadcast_arrays(*(np.asarray(z, dtype=np.float64) for z in (qx, qy, dx, dy)))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        if robot.shape == "circle":
-            rad = robot.radius_m + margin_m
-            b = qx * dxa + qy * dya
-            q2 = qx * qx + qy * qy
-            disc = b * b - (q2 - rad * rad)
-            root = np.sqrt(np.maximum(disc, 0.0))
-            t_in, t_out = b - root, b + root
-            hit = (disc >= 0.0) & (t_out >= 0.0)
-            in_real = q2 <= robot.radius_m ** 2
-            closer = b > 0.0
-        else:
-            hw = 0.5 * robot.width_m
-            if isinstance(dx, float) and dx == 1.0 and dy == 0.0:  # straight ahead: no y slab to cross
-                t_in, t_out = qx - robot.front_m - margin_m, qx + robot.rear_m + margin_m
-                hit = (np.abs(qy) <= hw + margin_m) & (t_out >= 0.0)
+    Per point: a point already within the margin blocks (0) only a motion that brings it closer (distance
+    to a convex set along a line is convex, so a motion that does not bring it closer never does); a point
+    inside the real footprint blocks every motion. The grown rectangle keeps square corners
+    (conservative). Entry / exit times of the line through the grown footprint: a quadratic for the
+    circle, two slabs for the rectangle."""
+    inf = np.inf
+    out = np.full(c.size, inf)
+    rad = radius + margin
+    for k in range(c.size):
+        ck, sk = c[k], s[k]
+        best = inf
+        for j in range(px.size):
+            if turn_first:
+                qx = px[j] * ck + py[j] * sk
+                qy = py[j] * ck - px[j] * sk
+                dx, dy = 1.0, 0.0
             else:
-                t_in, t_out = _slab(qx, dxa, -robot.rear_m - margin_m, robot.front_m + margin_m)
-                ty_in, ty_out = _slab(qy, dya, -hw - margin_m, hw + margin_m)
-                t_in, t_out = np.maximum(t_in, ty_in), np.minimum(t_out, ty_out)
-                hit = (t_in <= t_out) & (t_out >= 0.0)
-            nx = qx - np.clip(qx, -robot.rear_m, robot.front_m)
-            ny = qy - np.clip(qy, -hw, hw)
-            in_real = (nx == 0.0) & (ny == 0.0)
-            closer = nx * dxa + ny * dya > 0.0
-    inside = hit & (t_in <= 0.0)
-    out: F64 = np.where(hit, t_in, np.inf)
-    out = np.where(inside, np.where(in_real | closer, 0.0, np.inf), out)
+                qx, qy, dx, dy = px[j], py[j], ck, sk
+            if circle:
+                b = qx * dx + qy * dy
+                q2 = qx * qx + qy * qy
+                disc = b * b - (q2 - rad * rad)
+                root = math.sqrt(max(disc, 0.0))
+                t_in, t_out = b - root, b + root
+                hit = disc >= 0.0 and t_out >= 0.0
+                in_real = q2 <= radius * radius
+                closer = b > 0.0
+            else:
+                if turn_first:  # straight ahead: no y slab to cross
+                    t_in, t_out = qx - front - margin, qx + rear + margin
+                    hit = abs(qy) <= hw + margin and t_out >= 0.0
+                else:
+                    t_in, t_out = _slab(qx, dx, -rear - margin, front + margin)
+                    ty_in, ty_out = _slab(qy, dy, -hw - margin, hw + margin)
+                    t_in, t_out = max(t_in, ty_in), min(t_out, ty_out)
+                    hit = t_in <= t_out and t_out >= 0.0
+                nx = qx - min(max(qx, -rear), front)
+                ny = qy - min(max(qy, -hw), hw)
+                in_real = nx == 0.0 and ny == 0.0
+                closer = nx * dx + ny * dy > 0.0
+            if not hit:
+                continue
+            # within the margin already: blocks only if inside the real footprint or coming closer
+            t = (0.0 if in_real or closer else inf) if t_in <= 0.0 else t_in
+            if t < best:
+                best = t
+        out[k] = best
     return out
 
 
-def _slab(q: F64, d: F64, lo: float, hi: float) -> tuple[F64, F64]:
+@njit(cache=True)
+def _slab(q: float, d: float, lo: float, hi: float) -> tuple[float, float]:  # pragma: no cover (numba)
     """Entry / exit times of the ray ``q - t d`` through the slab [lo, hi] (+-inf when d = 0)."""
-    moving = d != 0.0
-    t1, t2 = (q - hi) / d, (q - lo) / d
-    within = (q >= lo) & (q <= hi)
-    t_in = np.where(moving, np.minimum(t1, t2), np.where(within, -np.inf, np.inf))
-    t_out = np.where(moving, np.maximum(t1, t2), np.where(within, np.inf, -np.inf))
-    return t_in, t_out
+    if d != 0.0:
+        t1, t2 = (q - hi) / d, (q - lo) / d
+        return min(t1, t2), max(t1, t2)
+    if lo <= q <= hi:
+        return -np.inf, np.inf
+    return np.inf, -np.inf
 
 
 def travel_m(polar: PolarMap, directions_rad: ArrayLike, robot: RobotConfig, *, margin_m: float = 0.0,
@@ -324,13 +344,12 @@ def travel_m(polar: PolarMap, directions_rad: ArrayLike, robot: RobotConfig, *, 
         px, py = px[keep], py[keep]
     if px.size == 0:
         return np.full(d.shape, np.inf)
-    c, s = np.cos(d)[:, None], np.sin(d)[:, None]
-    if turn_first:
-        out = _travel(px * c + py * s, py * c - px * s, 1.0, 0.0, robot, margin_m)
-    else:
-        out = _travel(px[None, :], py[None, :], c, s, robot, margin_m)
-    res: F64 = out.min(axis=1)
-    return res
+    circle = robot.shape == "circle"
+    res: F64 = _travel_kernel(px, py, np.cos(d), np.sin(d), turn_first, circle,
+                              robot.radius_m if circle else 0.0, 0.0 if circle else robot.front_m,
+                              0.0 if circle else robot.rear_m, 0.0 if circle else 0.5 * robot.width_m,
+                              float(margin_m))
+    return res.reshape(d.shape)
 
 
 def _turn_limits(polar: PolarMap, robot: RobotConfig, params: LocalParams) -> tuple[float, float]:
@@ -577,7 +596,8 @@ def local_command(polar: PolarMap, target_xy: NDArray[np.float64] | None, robot:
 
 
 def warm_up_local(robot: RobotConfig | None = None) -> None:
-    """Run every strategy once on a small map (compiles ``nd``'s sector kernel before the first tick)."""
+    """Run every strategy once on a small map: compiles ``nd``'s sector kernel and the travel kernel
+    (``_travel_kernel``) before the first tick."""
     rb = robot if robot is not None else RobotConfig()
     pts = np.array([[2.0, 0.0], [0.0, 1.5], [-1.0, -1.0]])
     for s in LOCAL_STRATEGIES[1:]:

@@ -5,7 +5,8 @@ is traced with Bresenham from the laser pose: the cells on the way become FREE, 
 every new scan overwrites what it covers and people who walked away disappear (GND Fig. 2) - except where
 a ray only grazes an occupied cell or is a dropout between returns (``RobotCentredGrid.integrate``). When
 the robot leaves the central control zone the whole array is shifted by an integer number of cells in one
-slice copy (new cells UNKNOWN), so no cell is ever resampled.
+slice copy (new cells UNKNOWN), so no cell is ever resampled. Beside the state, each cell keeps the stamp of
+the last scan that saw it (``seen_ns``): behind a front laser a FREE cell is only as good as its age.
 
 Frames and indices: ``cells[row, col]`` with row along world y and col along world x. The grid sits on a
 world lattice of pitch ``cell_m``: local cell (row, col) is world lattice cell
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numba import njit
@@ -32,6 +34,7 @@ __all__ = [
     "FREE",
     "GRID_200",
     "GRID_400",
+    "NEVER_SEEN",
     "OCCUPIED",
     "PROTECT_MAX_CELLS",
     "UNKNOWN",
@@ -42,8 +45,11 @@ __all__ = [
 ]
 
 UNKNOWN = np.uint8(0)
+_T = TypeVar("_T", bound=np.generic)
 FREE = np.uint8(1)
 OCCUPIED = np.uint8(2)
+NEVER_SEEN = np.iinfo(np.int64).min
+"""``RobotCentredGrid.seen_ns`` of a cell no scan has traced."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,11 +118,12 @@ class IntegrateStats:
     hits: int
 
 
-def shift_cells(cells: NDArray[np.uint8], d_row: int, d_col: int) -> NDArray[np.uint8]:
+def shift_cells(cells: NDArray[_T], d_row: int, d_col: int, fill: int = int(UNKNOWN)) -> NDArray[_T]:
     """Grid contents after moving the grid origin by (d_row, d_col) cells: ``new[r, c] = old[r + d_row,
-    c + d_col]``; cells with no source are UNKNOWN. One slice copy into a fresh (R, C) uint8 array."""
+    c + d_col]``; cells with no source get ``fill`` (UNKNOWN; NEVER_SEEN for the stamps). One slice copy
+    into a fresh array of the same shape and dtype."""
     n_r, n_c = cells.shape
-    out = np.full_like(cells, UNKNOWN)
+    out = np.full_like(cells, fill)
     if abs(d_row) >= n_r or abs(d_col) >= n_c:
         return out
     out[max(-d_row, 0) : n_r - max(d_row, 0), max(-d_col, 0) : n_c - max(d_col, 0)] = cells[
@@ -164,11 +171,12 @@ about 4 deg, are treated as 4 deg)."""
 
 @njit(cache=True)
 def _trace_free(
-    cells: NDArray[np.uint8], c0: int, r0: int, c1: int, r1: int, include_end: bool,
-    sx: float, sy: float, ux: float, uy: float, length: float, protect: float,
+    cells: NDArray[np.uint8], seen: NDArray[np.int64], stamp: int, c0: int, r0: int, c1: int, r1: int,
+    include_end: bool, sx: float, sy: float, ux: float, uy: float, length: float, protect: float,
 ) -> None:
     """Bresenham (8-connected, all octants) from cell (r0, c0) to (r1, c1): mark FREE, the end cell only
-    when ``include_end``. Both ends must be inside the grid.
+    when ``include_end``, and set ``seen`` of every cell marked (or kept OCCUPIED) to ``stamp``. Both ends
+    must be inside the grid.
 
     A cell already OCCUPIED is cleared only when the ray (from (sx, sy), unit direction (ux, uy), ``length``
     long, all in cells) passes within CLEAR_CORE_CELLS of its centre and the cell is not in the ray's last
@@ -182,6 +190,7 @@ def _trace_free(
     while True:
         last = c == c1 and r == r1
         if not last or include_end:
+            seen[r, c] = stamp
             if cells[r, c] != 2:
                 cells[r, c] = 1
             else:
@@ -236,6 +245,8 @@ def _protected_tail(
 @njit(cache=True)
 def _integrate_kernel(
     cells: NDArray[np.uint8],
+    seen: NDArray[np.int64],
+    stamp: int,
     ranges: NDArray[np.float64],
     angles: NDArray[np.float64],
     sx: float,
@@ -318,13 +329,15 @@ def _integrate_kernel(
         if on_surface:
             protect = _protected_tail(px, py, ok, angles, i, a_nb, b_nb, sx, sy, ux, uy, len_c)
         hit = hit and end_inside
-        _trace_free(cells, c0, r0, c1, r1, not (on_surface and end_inside), sx, sy, ux, uy, len_c, protect)
+        _trace_free(cells, seen, stamp, c0, r0, c1, r1, not (on_surface and end_inside), sx, sy, ux, uy,
+                    len_c, protect)
         traced += 1
         end_r[i], end_c[i], is_hit[i] = r1, c1, hit
     hits = 0
     for i in range(m):
         if is_hit[i]:
             cells[end_r[i], end_c[i]] = 2
+            seen[end_r[i], end_c[i]] = stamp
             hits += 1
     return traced, hits
 
@@ -336,6 +349,10 @@ class RobotCentredGrid:
         params: the grid parameters.
         cells: (N, N) uint8 of UNKNOWN / FREE / OCCUPIED, ``cells[row, col]``, row along world y.
             Re-centring replaces the array: read ``grid.cells`` again after each ``integrate``.
+        seen_ns: (N, N) int64, the time stamp of the last scan whose rays crossed or ended in each cell
+            (NEVER_SEEN if none): how old the grid's word on a cell is. A cell behind a front laser keeps
+            the state it had when the laser last saw it; the reflexive loop uses the stamp not to trust
+            old FREE cells there (``unseen_points``, ``supervisor.safe_command``).
     """
 
     def __init__(self, params: GridParams = GRID_400, centre_xy: tuple[float, float] = (0.0, 0.0)) -> None:
@@ -343,6 +360,7 @@ class RobotCentredGrid:
         self.params = params
         n = params.size_cells
         self.cells: NDArray[np.uint8] = np.full((n, n), UNKNOWN, dtype=np.uint8)
+        self.seen_ns: NDArray[np.int64] = np.full((n, n), NEVER_SEEN, dtype=np.int64)
         self._off_row, self._off_col = self._centred_offset(centre_xy[0], centre_xy[1])
 
     # ---- geometry -------------------------------------------------------------------------------
@@ -416,6 +434,7 @@ class RobotCentredGrid:
         off_row, off_col = self._centred_offset(robot_pose.x, robot_pose.y)
         d_row, d_col = off_row - self._off_row, off_col - self._off_col
         self.cells = shift_cells(self.cells, d_row, d_col)
+        self.seen_ns = shift_cells(self.seen_ns, d_row, d_col, int(NEVER_SEEN))
         self._off_row, self._off_col = off_row, off_col
         return d_row, d_col
 
@@ -455,6 +474,8 @@ class RobotCentredGrid:
         # equal 1-D shapes: checked when the Scan was built
         traced, hits = _integrate_kernel(
             self.cells,
+            self.seen_ns,
+            int(scan.t_ns),
             ranges,
             angles,
             lx / p.cell_m - self._off_col,
@@ -481,6 +502,20 @@ class RobotCentredGrid:
         """(K, 2) centres of the cells in ``state`` (UNKNOWN / FREE / OCCUPIED) whose centre is within
         ``radius_m`` of the robot, in the ROBOT frame [m], row-major order. Cells beyond the grid's edge
         are not returned (they are unknown, but the grid does not hold them)."""
+        return self._points(robot_pose, radius_m, state, None)
+
+    def unseen_points(self, robot_pose: Pose2D, radius_m: float, since_ns: int) -> NDArray[np.float64]:
+        """(K, 2) centres of the cells not OCCUPIED that no scan has seen since ``since_ns`` (UNKNOWN, and
+        FREE cells last traced before it), within ``radius_m`` of the robot, ROBOT frame [m], row-major.
+
+        Where the grid's FREE is old news: a mover may have walked in since (the reflexive loop's blind
+        side rule, ``supervisor.safe_command``)."""
+        return self._points(robot_pose, radius_m, None, since_ns)
+
+    def _points(self, robot_pose: Pose2D, radius_m: float, state: np.uint8 | None,
+                since_ns: int | None) -> NDArray[np.float64]:
+        """Robot-frame centres within ``radius_m`` of the cells in ``state``, or (``since_ns``) of the
+        cells not OCCUPIED and not seen since then."""
         p = self.params
         n, c = p.size_cells, p.cell_m
         row, col = self.robot_cell(robot_pose)
@@ -489,7 +524,11 @@ class RobotCentredGrid:
         c0, c1 = max(col - h, 0), min(col + h + 1, n)
         if r0 >= r1 or c0 >= c1:
             return np.zeros((0, 2))
-        rows, cols = np.nonzero(self.cells[r0:r1, c0:c1] == state)
+        window = self.cells[r0:r1, c0:c1]
+        if since_ns is None:
+            rows, cols = np.nonzero(window == state)
+        else:
+            rows, cols = np.nonzero((window != OCCUPIED) & (self.seen_ns[r0:r1, c0:c1] < since_ns))
         dx = (cols + (c0 + self._off_col) + 0.5) * c - robot_pose.x
         dy = (rows + (r0 + self._off_row) + 0.5) * c - robot_pose.y
         keep = dx * dx + dy * dy <= radius_m * radius_m

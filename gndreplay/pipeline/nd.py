@@ -71,7 +71,14 @@ of the wheelchair paper's reference [18]; the circle and the holonomic base are 
       than W + 2 Ds lies on the way (the region direction crosses it) or around the body, the direction
       pursues the passage axis (``_passage_axis``, ``_follow_axis``): the axle reaches the axis, and the
       body lies along it, before the front reaches the jambs; ND+'s laws steer the axle only, which
-      enters a door crooked. A region behind keeps ND+'s direction: the chair backs out (below).
+      enters a door crooked. A region behind keeps ND+'s direction: the chair backs out (below). So does
+      a goal in view nearer than the front edge (the target within the chair's own length): pursuing the
+      axis there drives the axle along the passage past a goal beside it, then (the goal now behind)
+      back, for minutes (gnd_exp2_people_room: the goal 0.32 m abeam, between a wall and a person waiting
+      for the chair); ND+'s law turns the axle to it. Along the axis the speed is at least
+      ``_PASSAGE_V_FRAC * vmax``: ND+'s law scales it with the side clearance over Ds, which in a door
+      barely wider than the chair is a crawl the scorecard counts as a stall (wheelchair_office_exit:
+      0.02 m/s for 10 s in its 0.85 m door); the footprint sweeps below keep it off the jambs.
     * Motion law: the command is the first admissible arc of ``_admissible_drive`` (the law's arc, wider
       arcs with the same final heading, the turn in place, straight on, reversing while turning, straight
       back), admissible when the real footprint swept along it does not approach an obstacle point: a
@@ -124,6 +131,10 @@ _SWEEP_MIN_TURN_RAD = 0.3
 _SWEEP_STRAIGHT_M = 1.0
 _STEP_M = 0.05
 _REVERSE_FRAC = 0.3
+# least speed along a passage axis, a fraction of vmax: ND+'s v = vmax * min(c_left, c_right) falls to the
+# side clearance / Ds, 0.02 m/s in a 0.85 m door for the 0.7 m chair (0.2 m in 10 s: a stall); the sweep
+# of the footprint along the arc (``_admissible_drive``) and the reflexive check keep the chair off the jambs
+_PASSAGE_V_FRAC = 0.25
 
 
 class Situation(enum.Enum):
@@ -785,7 +796,9 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
         obs = obs_l if obs_l >= 0 else obs_r
         theta = _blend_away(theta_p, float(ang[obs]), float(ratio[obs]))
 
-    if robot.shape == "rectangle" and robot.drive == "differential" and abs(beta) <= _HALF_PI:
+    axis: tuple[float, float, float, float] | None = None
+    if robot.shape == "rectangle" and robot.drive == "differential" and abs(beta) <= _HALF_PI and (
+            region.kind is not _Kind.GOAL or goal_r > robot.front_m):  # a goal within reach: steer to it
         axis = _passage_axis(dist, ang, occ & left_side, occ & ~left_side, beta,
                              min_width_m=geo.gap_m, max_width_m=geo.gap_m + 2.0 * params.security_m,
                              reach_m=robot.front_m + robot.rear_m + params.security_m,
@@ -793,6 +806,8 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
         if axis is not None:
             theta = _follow_axis(axis, robot.front_m)
     v_nd = robot.vmax_mps * min(c_l, c_r)
+    if axis is not None:  # along a passage the swept-footprint checks, not the side clearance, bound it
+        v_nd = max(v_nd, _PASSAGE_V_FRAC * robot.vmax_mps)
     if robot.shape == "rectangle" and robot.drive == "differential":
         v, w = _admissible_drive(theta, v_nd, robot, pts)
         vy = 0.0

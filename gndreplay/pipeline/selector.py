@@ -5,13 +5,26 @@ estimates, "within certain tolerances", the area that command sweeps: the real f
 commanded arc over the braking horizon (``supervisor.swept_touch``, the very test the reflexive loop
 applies), grown by ``selector_margin_m``. If the raw scan or the grid's occupied cells lie in that area,
 local navigation wins the tick and steers towards the desired mode's intention (``intention_xy`` for
-teleoperation, the follower's target point for path following); on the first tick the desired command's
-area is clear again the desired mode wins again. No hysteresis: the paper's rule, tick by tick.
+teleoperation, the follower's target point for path following).
+
+Handing back (``arbitrate``): the paper returns to the desired mode "as soon as the locally desired path is
+free". Taken tick by tick (``hold_s = 0``, that rule exactly) a hand-back often lasts a single tick: local
+navigation turns the robot away, the desired command from the new heading sweeps clear for one tick and
+turns it back in, and the timeline shows many one-tick takeovers round one obstacle where the paper's
+Fig. 7 shows three local episodes. So we read "free" as "free for a while" (the paper's "within certain
+tolerances"): local navigation keeps the robot until the desired command's swept area has been clear for
+``hold_s`` (**choice**, ``navigation.selector_hold_s``). A takeover still starts on the very tick the area
+is occupied (safety is not delayed), and a desired command that stands still (the driver let go, the
+follower stopped) ends the hold at once: a hold never moves a robot its driver or follower wants still.
+(The path follower itself plans anew from the robot's pose after every tick it was overridden,
+``PathFollower.step``: steering back onto its old trajectory, through the obstacle, was the main source of
+the alternation.)
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,7 +32,7 @@ from numpy.typing import NDArray
 from ..robot import RobotConfig
 from .supervisor import SupervisorParams, swept_touch, unconfirmed_cells
 
-__all__ = ["intention_xy", "select_mode", "swept_area_occupied"]
+__all__ = ["Takeover", "arbitrate", "intention_xy", "select_mode", "swept_area_occupied"]
 
 
 def swept_area_occupied(
@@ -72,10 +85,36 @@ def intention_xy(
     return np.array([lookahead_m * math.cos(bearing), lookahead_m * math.sin(bearing)])
 
 
+@dataclass(frozen=True, slots=True)
+class Takeover:
+    """A takeover in progress, carried from tick to tick by the caller.
+
+    Attributes:
+        last_occupied_ns: the last tick at which the desired command's swept area was occupied.
+    """
+
+    last_occupied_ns: int
+
+
 def select_mode(desired: str, occupied: str) -> tuple[str, str]:
-    """(active mode, takeover reason): the desired mode unless its swept area is occupied (``occupied`` as
-    ``swept_area_occupied`` returns it), then "local" with the reason, e.g. "teleop: swept area occupied
-    (scan)"."""
-    if not occupied:
-        return desired, ""
-    return "local", f"{desired}: swept area occupied ({occupied})"
+    """(active mode, takeover reason) by the paper's rule, tick by tick: the desired mode unless its swept
+    area is occupied (``occupied`` as ``swept_area_occupied`` returns it), then "local" with the reason,
+    e.g. "teleop: swept area occupied (scan)". ``arbitrate`` with ``hold_s = 0``."""
+    active, reason, _ = arbitrate(desired, occupied, t_ns=0, held=None, hold_s=0.0, moving=True)
+    return active, reason
+
+
+def arbitrate(desired: str, occupied: str, *, t_ns: int, held: Takeover | None, hold_s: float,
+              moving: bool) -> tuple[str, str, Takeover | None]:
+    """(active mode, takeover reason, takeover to pass back next tick) with a hold on handing back.
+
+    ``occupied`` (``swept_area_occupied``): "local" with "<desired>: swept area occupied (<where>)", and the
+    takeover's last occupied time set to ``t_ns``. Clear: local navigation keeps the robot, reason
+    "<desired>: swept area clear for less than <hold_s> s (hold)", while a takeover is ``held``, the
+    desired command is ``moving`` and ``t_ns`` is less than ``hold_s`` after the last occupied tick; else
+    the desired mode, no reason, no takeover. ``hold_s = 0`` is the paper's rule tick by tick. Pure."""
+    if occupied:
+        return "local", f"{desired}: swept area occupied ({occupied})", Takeover(t_ns)
+    if held is not None and moving and t_ns - held.last_occupied_ns < round(hold_s * 1e9):
+        return "local", f"{desired}: swept area clear for less than {hold_s:g} s (hold)", held
+    return desired, "", None

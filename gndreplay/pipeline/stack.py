@@ -35,6 +35,7 @@ from .supervisor import (
     SafeCommand,
     SupervisorParams,
     TrapDetector,
+    blind_points,
     budget_flags,
     escape_command,
     gnd_mode,
@@ -220,6 +221,10 @@ class NavigationStack:
         self._v_out = 0.0  # forward speed of the last command out (path following's at-rest test)
         self._w_out = 0.0  # ... and its turn rate (the start curvature of a regenerated trajectory)
         self._local_side = 0  # the side the last local strategy command kept its wall / obstacle on
+        self._looking = False  # the last reflexive check replaced the command by the blind side's turn first
+        self._look_hold: tuple[float, float, int] | None = None  # where and when (x, y, t_ns) local
+        # navigation's command was last replaced by that turn first: local navigation keeps the robot until
+        # it has made its way (``_hold_for_look``)
         self._intent: tuple[NDArray[np.float64], tuple[float, float, float]] | None = None  # held teleop
         # target (world) of the takeover in progress, and the driver's command it was aimed from
         # ND+'s last choice per user ("gnd": GND's reactor, "local": local navigation): the sub-goal's and
@@ -353,6 +358,11 @@ class NavigationStack:
             where = swept_area_occupied(v, vy, w, points[1], points[2], p.robot, p.supervisor,
                                         cell_m=p.grid.cell_m, margin_m=p.selector_margin_m)
             active, why = select_mode(desired, where)
+            if active == desired and self._look_hold is not None:
+                # local navigation turned to look where it is going (the blind side rule's turn first);
+                # handing back now, because the turn cleared the desired command's swept area, would
+                # turn the robot back and the takeover would begin again, turn after turn
+                active, why = "local", f"{desired}: swept area occupied until local navigation turned first"
             reason = why or reason
         if done:
             mode, v, vy, w = Mode.GOAL, 0.0, 0.0, 0.0
@@ -377,6 +387,7 @@ class NavigationStack:
             # begun under local navigation ends when the driver has the robot again)
             mode, v, vy, w, flags = self._reflexive(tick, pose, mode, v, vy, w, flags, points=points,
                                                     trap=active != "teleop")
+        self._hold_for_look(tick, pose, active)
         self._rotate_sign = (1.0 if w > 0.0 else -1.0) if rotating and w != 0.0 else 0.0
         self._v_out, self._w_out = _finite(v), _finite(w)
         return TickResult(
@@ -397,6 +408,29 @@ class NavigationStack:
             takeover_reason=reason,
             subgoal_index=subgoal_index,
         )
+
+    def _hold_for_look(self, tick: Tick, pose: Pose2D, active: str) -> None:
+        """Track the hand-back hold of the blind side rule's turn first under the mode selector.
+
+        When the reflexive loop replaces local navigation's command by a turn in place towards where it was
+        going (``supervisor.safe_command``), the turn itself clears the desired module's swept area (the
+        robot now faces away from the obstacle), and the selector would hand back at once: the path
+        follower turns back to its path, meets the obstacle, local navigation takes over and turns again,
+        over and over (measured: follow_unknown_obstacle on the XR4000 timed out). So local navigation keeps
+        the robot from its turn first until it has moved a footprint diameter (2 * outer radius) from
+        where it last turned first, or for at most the time of one full ROTATE turn (**choice**: local
+        navigation has then either passed the obstacle or found no way; the selector decides again)."""
+        p = self.params
+        if active != "local":
+            self._look_hold = None
+        elif self._looking:
+            self._look_hold = (pose.x, pose.y, tick.t_ns)
+        elif self._look_hold is not None:
+            x, y, t_ns = self._look_hold
+            max_s = 2.0 * math.pi / (p.supervisor.rotate_w_frac * p.robot.wmax_radps)
+            if (math.hypot(pose.x - x, pose.y - y) >= 2.0 * p.robot.outer_radius_m
+                    or (tick.t_ns - t_ns) / 1e9 > max_s):
+                self._look_hold = None
 
     def _teleop_target(self, pose: Pose2D, cmd: tuple[float, float, float]) -> NDArray[np.float64] | None:
         """Local navigation's target (robot frame) while it has taken over from the driver.
@@ -533,6 +567,15 @@ class NavigationStack:
         where a backward escape may not go (``supervisor.escape_command``)."""
         return np.vstack([self.grid.cell_points(pose, radius_m, s) for s in (UNKNOWN, OCCUPIED)])
 
+    def _blind_points(self, scan: Scan, pose: Pose2D, radius_m: float) -> NDArray[np.float64]:
+        """Centres (robot frame) of the cells within ``radius_m`` on the laser's blind side that no scan
+        has seen within blind_memory_s of this scan's stamp (``supervisor.blind_points``)."""
+        memory_ns = round(self.params.supervisor.blind_memory_s * 1e9)
+        unseen = self.grid.unseen_points(pose, radius_m, scan.t_ns - memory_ns)
+        sp = scan.sensor_pose
+        fov = (float(np.min(scan.angles_rad)), float(np.max(scan.angles_rad)))
+        return blind_points(unseen, self.params.robot, (sp.x, sp.y, sp.theta), fov)
+
     def _reflexive(
         self, tick: Tick, pose: Pose2D, mode: Mode, v: float, vy: float, w: float, flags: Flag,
         unreachable: bool = False, points: _Points | None = None, trap: bool = True,
@@ -546,6 +589,7 @@ class NavigationStack:
         ``_safety_points`` of this tick if at hand (any reach at least the loop's: cut down to it).
         ``trap`` False: no trap detection or escape this tick, and an escape in progress ends."""
         p = self.params
+        self._looking = False
         prev, self._prev_t_ns = self._prev_t_ns, tick.t_ns
         if prev is not None and (tick.t_ns - prev) / 1e9 > p.supervisor.stale_scan_s:
             return Mode.STALE, 0.0, 0.0, 0.0, flags | Flag.STALE_SCAN
@@ -558,10 +602,12 @@ class NavigationStack:
             near = near[np.hypot(near[:, 0], near[:, 1]) <= reach]
             grid_xy = grid_xy[np.hypot(grid_xy[:, 0], grid_xy[:, 1]) <= reach]
         unknown_xy = partial(self.grid.cell_points, pose, reach, UNKNOWN)
+        blind_xy = partial(self._blind_points, tick.scan, pose, reach)
+        view = _view_rad(tick.scan)
 
         def check(v: float, vy: float, w: float) -> SafeCommand:
             return safe_command(v, vy, w, near, grid_xy, p.robot, p.supervisor, cell_m=cell_m,
-                                unknown_xy=unknown_xy)
+                                unknown_xy=unknown_xy, blind_xy=blind_xy, view_rad=view)
 
         if not trap:
             self._escape_left = 0
@@ -572,6 +618,7 @@ class NavigationStack:
             self._escape_left = 0
         if mode is not Mode.GOAL:
             safe = check(v, vy, w)
+            self._looking = safe.looking
             if unreachable and safe.rule not in (None, Mode.SAFE_SLOW):
                 self._looked_rad = 2.0 * math.pi
                 return Mode.ROTATE, 0.0, 0.0, 0.0, flags
@@ -699,6 +746,12 @@ def _warm_up_gnd(params: StackParams) -> None:
         k += 1
     if params.planner_kind == "tunnel":  # its search kernels, on cases the synthetic scans above may miss
         warm_up_planners(params.tunnel, size_cells=params.grid.size_cells)
+
+
+def _view_rad(scan: Scan) -> tuple[float, float]:
+    """The laser's field of view in the robot frame: its first and last beam bearings [rad]."""
+    th = scan.sensor_pose.theta
+    return th + float(np.min(scan.angles_rad)), th + float(np.max(scan.angles_rad))
 
 
 def _finite(x: float) -> float:

@@ -14,6 +14,14 @@ grid's occupied cells (the wheelchair's laser sees only its front half: what it 
 seen earlier, and is only in the grid). A command that would touch is replaced by the first admissible one
 of: a slower arc, no turn or the other turn direction, a short reverse through grid cells known FREE, and
 only then a stop; the tick's mode says which rule fired (SAFE_SLOW, SAFE_TURN, SAFE_REVERSE, EMERGENCY).
+
+The blind side (``blind_points``): the grid's FREE is what the laser saw *when it last looked*. In front
+the scan refreshes it every tick; behind a front laser it may be seconds old, and a person may have walked
+in since - neither the scan nor the grid then holds them. So translation whose leading edge is on the blind
+side must not approach cells the laser has not seen within ``blind_memory_s`` (UNKNOWN ones included): the
+unseen space counts as not free for that motion (a holonomic base turns first to look; a differential one,
+which cannot look behind, creeps). The reactor (GND/ND) stays purely sensor-based; this is
+the reflexive loop refusing to move where the sensor has no recent word.
 """
 
 from __future__ import annotations
@@ -36,6 +44,7 @@ __all__ = [
     "SupervisorParams",
     "TrapDetector",
     "arc_touches",
+    "blind_points",
     "braking_time_s",
     "budget_flags",
     "escape_command",
@@ -60,6 +69,7 @@ class Mode(enum.Enum):
     EMERGENCY = "EMERGENCY"  # reflexive: every admissible command would touch an obstacle, stop
     SAFE_SLOW = "SAFE_SLOW"  # reflexive: the command would touch; a slower motion along the same arc
     SAFE_TURN = "SAFE_TURN"  # reflexive: the command would touch; straight on, or the other turn direction
+    # (or, travelling into stale blind space, a turn in place towards it: turn first)
     SAFE_REVERSE = "SAFE_REVERSE"  # reflexive: the command would touch; a short reverse through known free
     STALE = "STALE"  # reflexive: sensor data too old, stop
     ESCAPE = "ESCAPE"  # reflexive: trap detected, slow straight escape
@@ -103,6 +113,14 @@ class SupervisorParams:
         escape_v_frac: escape speed, and speed of the safety check's short reverse, as a fraction of vmax
             (**choice**: 0.3).
         escape_clearance_m: free distance the raw scan must show ahead/behind to escape that way.
+        blind_memory_s: how long a cell outside the laser's current field of view stays trusted as free
+            after the laser last saw it, for translation towards it (``safe_command``'s blind side rule).
+            **Choice**: 1.0 s, five to seven scans of the presets: a person walking at 1 m/s covers 1 m
+            in it, so a cell seen free that recently can only hold someone who was then within about a
+            metre of it; a holonomic base that turns to look where it goes (turn first) refreshes the
+            cells in a fraction of that. Older FREE cells out of view are old news (issue 10: the XR4000
+            backed at 0.45 m/s into a person who had walked in behind it since the laser last looked).
+            0 trusts no cell out of view; a huge value restores the old rule (only UNKNOWN counts).
     """
 
     budget_match_s: float = 0.05
@@ -124,6 +142,7 @@ class SupervisorParams:
     escape_ticks: int = 10
     escape_v_frac: float = 0.3
     escape_clearance_m: float = 0.6
+    blind_memory_s: float = 1.0
 
 
 def gnd_mode(planner_ok: bool, reactor_has_region: bool) -> Mode:
@@ -239,6 +258,26 @@ def swept_collision(
     return arc_touches(points_xy, v_mps, vy_mps, w_radps, t_end, robot, params.emergency_margin_m + grow_m)
 
 
+def blind_points(points_xy: NDArray[np.float64], robot: RobotConfig, laser_pose: tuple[float, float, float],
+                 fov_rad: tuple[float, float]) -> NDArray[np.float64]:
+    """The points (robot frame) on the laser's blind side: bearing from the laser (pose ``laser_pose``
+    (x, y, theta) in the robot frame) outside its field of view ``fov_rad`` (first, last beam angle),
+    and outside the robot's own footprint (no mover can stand under the robot).
+
+    Fed with ``RobotCentredGrid.unseen_points`` (cells not seen within blind_memory_s), these are the
+    cells the safety check treats as not free for translation (``safe_command``). Cells in the field of
+    view that the scan did not reach (in an obstacle's shadow, beyond range) are not among them: any
+    mover there must first cross the view, and the scan and the obstacle in front are checked anyway."""
+    if points_xy.shape[0] == 0:
+        return points_xy
+    lx, ly, lth = laser_pose
+    bearing = np.arctan2(points_xy[:, 1] - ly, points_xy[:, 0] - lx) - lth
+    bearing = np.mod(bearing - fov_rad[0], 2.0 * math.pi)  # 0 at the first beam, counter-clockwise
+    blind = (bearing > fov_rad[1] - fov_rad[0]) & (footprint_signed_distance(points_xy, robot) >= 0.0)
+    out: NDArray[np.float64] = points_xy[blind]
+    return out
+
+
 def unconfirmed_cells(grid_xy: NDArray[np.float64], scan_xy: NDArray[np.float64],
                       cell_m: float) -> NDArray[np.float64]:
     """The occupied cell centres that hold no raw hit of the current scan.
@@ -288,12 +327,14 @@ def swept_touch(
 
 @dataclass(frozen=True, slots=True)
 class SafeCommand:
-    """The command after the collision check, and the rule that replaced it (None: unchanged)."""
+    """The command after the collision check, and the rule that replaced it (None: unchanged);
+    ``looking``: the replacement is the blind side rule's turn first (``safe_command``)."""
 
     v_mps: float
     vy_mps: float
     w_radps: float
     rule: Mode | None
+    looking: bool = False
 
 
 def safe_command(
@@ -307,6 +348,8 @@ def safe_command(
     *,
     cell_m: float,
     unknown_xy: Callable[[], NDArray[np.float64]] | None = None,
+    blind_xy: Callable[[], NDArray[np.float64]] | None = None,
+    view_rad: tuple[float, float] = (-math.pi, math.pi),
 ) -> SafeCommand:
     """The command if its swept footprint touches nothing, else the safest admissible replacement.
 
@@ -323,43 +366,113 @@ def safe_command(
 
     Grid cells that hold a hit of the current scan are checked through the hit (``unconfirmed_cells``).
 
+    The blind side (``blind_xy()``: centres of the cells out of the laser's view not seen within
+    blind_memory_s, ``blind_points``; computed only if needed; without it no such rule): a command whose
+    direction of travel atan2(vy, v) lies outside the laser's view ``view_rad`` (first and last beam
+    bearings in the robot frame: the motion's leading edge is on the blind side) and whose translation,
+    straight over the command's braking horizon, approaches one of those cells (within emergency_margin_m
+    + half a cell, as ``swept_collision``) is replaced like one that touches, and every replacement must
+    pass the same test. Travel into the view is not tested: the scan sees where the motion leads (a
+    sideways component of a circular base also nears the rear quarter of its side, but only grazing it;
+    stopping that would stop nearly every motion of a holonomic base that stood still for a second). Only
+    the translation is tested: turning is how a front laser looks at its blind side (a circular base's
+    turn sweeps nothing; a rectangle's swing stays checked against the scan and the grid's obstacles). A
+    holonomic base tries first to turn in place towards its direction of travel (SAFE_TURN, "turn
+    first"): the scan then covers where it is going, and a later tick translates there on fresh cells. A
+    differential base cannot look behind it: turning in place does not bring its rear into a front
+    laser's view, and in a dead end there is no room to turn round; forbidding the reverse would trap it
+    (measured: the chair then times out in u_trap and gnd_exp1_three_traps). Its reverse into stale cells
+    is slowed to a creep instead (SAFE_SLOW, escape_v_frac * vmax, the turn rate scaled alike): the
+    issue's "reverse where the way behind is known free" with the grid's FREE taken as old news. What the
+    chair's rear may meet there is met at creep speed; only a rear sensor would see it coming.
+
     The reverse only serves a turn: backing off makes room for the sweep of a rectangle turning (the
     wheelchair's problem); for a straight command it would only back off and come again, tick after tick.
     """
     grow = 0.5 * cell_m
     grid_xy = unconfirmed_cells(grid_xy, scan_xy, cell_m)
+    unknown = _once(unknown_xy)
+    blind = _once(blind_xy)
 
     def touches(v: float, vy: float, w: float) -> bool:
         return swept_touch(v, vy, w, scan_xy, grid_xy, robot, params, cell_m=cell_m) != ""
 
     def backs_into_unknown(v: float, w: float) -> bool:  # a differential base backing up
-        return v < 0.0 and robot.drive == "differential" and unknown_xy is not None and swept_collision(
-            unknown_xy(), v, w, robot, params, grow_m=grow
+        return v < 0.0 and robot.drive == "differential" and unknown is not None and swept_collision(
+            unknown(), v, w, robot, params, grow_m=grow
         )
 
-    if (v_mps == 0.0 and vy_mps == 0.0 and w_radps == 0.0) or not (
-        touches(v_mps, vy_mps, w_radps) or backs_into_unknown(v_mps, w_radps)
-    ):
+    creep = params.escape_v_frac * robot.vmax_mps
+
+    def into_blind(v: float, vy: float, w: float) -> bool:  # translation towards cells not seen lately
+        if blind is None or (v == 0.0 and vy == 0.0):
+            return False
+        if robot.drive == "differential" and abs(v) <= creep * (1.0 + 1e-9):
+            return False  # the differential base's creep (see above)
+        if (math.atan2(vy, v) - view_rad[0]) % math.tau <= view_rad[1] - view_rad[0]:
+            return False  # travel within the view
+        t_end = braking_time_s(v, vy, w, robot, params)
+        return arc_touches(blind(), v, vy, 0.0, t_end, robot, params.emergency_margin_m + grow)
+
+    def blocked(v: float, vy: float, w: float) -> bool:
+        return touches(v, vy, w) or backs_into_unknown(v, w) or into_blind(v, vy, w)
+
+    if (v_mps == 0.0 and vy_mps == 0.0 and w_radps == 0.0) or not blocked(v_mps, vy_mps, w_radps):
         return SafeCommand(v_mps, vy_mps, w_radps, None)
-    candidates: list[tuple[float, float, float, Mode]] = [
-        (f * v_mps, f * vy_mps, f * w_radps, Mode.SAFE_SLOW) for f in (0.5, 0.25)
-    ]
+    candidates: list[tuple[float, float, float, Mode]] = []
+    looks = False  # candidates[0] is the turn first
+    if into_blind(v_mps, vy_mps, w_radps):
+        if robot.drive == "holonomic":
+            looks = True
+            candidates.append((0.0, 0.0, _look_w(v_mps, vy_mps, w_radps, robot, params), Mode.SAFE_TURN))
+        else:
+            f = creep / abs(v_mps)
+            candidates.append((f * v_mps, 0.0, f * w_radps, Mode.SAFE_SLOW))
+    candidates += [(f * v_mps, f * vy_mps, f * w_radps, Mode.SAFE_SLOW) for f in (0.5, 0.25)]
     if w_radps != 0.0:
         if v_mps != 0.0 or vy_mps != 0.0:  # the same speed without turning: parallel to what it passes
             candidates.append((v_mps, vy_mps, 0.0, Mode.SAFE_TURN))
         candidates.append((v_mps, vy_mps, -w_radps, Mode.SAFE_TURN))
         if v_mps != 0.0 or vy_mps != 0.0:
             candidates.append((0.0, 0.0, -w_radps, Mode.SAFE_TURN))
-    for v, vy, w, rule in candidates:
-        if not (touches(v, vy, w) or backs_into_unknown(v, w)):
-            return SafeCommand(v, vy, w, rule)
-    if unknown_xy is not None and w_radps != 0.0:
+    for k, (v, vy, w, rule) in enumerate(candidates):
+        if not blocked(v, vy, w):
+            return SafeCommand(v, vy, w, rule, looking=k == 0 and looks)
+    if unknown is not None and w_radps != 0.0:
         v_back = -params.escape_v_frac * robot.vmax_mps
-        if not touches(v_back, 0.0, 0.0) and not swept_collision(
-            unknown_xy(), v_back, 0.0, robot, params, grow_m=grow
+        if not touches(v_back, 0.0, 0.0) and not into_blind(v_back, 0.0, 0.0) and not swept_collision(
+            unknown(), v_back, 0.0, robot, params, grow_m=grow
         ):
             return SafeCommand(v_back, 0.0, 0.0, Mode.SAFE_REVERSE)
     return SafeCommand(0.0, 0.0, 0.0, Mode.EMERGENCY)
+
+
+def _once(f: Callable[[], NDArray[np.float64]] | None) -> Callable[[], NDArray[np.float64]] | None:
+    """``f`` evaluated at most once (the lazy point sets ``safe_command`` may test several commands
+    against)."""
+    if f is None:
+        return None
+    memo: list[NDArray[np.float64]] = []
+
+    def get() -> NDArray[np.float64]:
+        if not memo:
+            memo.append(f())
+        return memo[0]
+
+    return get
+
+
+def _look_w(v_mps: float, vy_mps: float, w_radps: float, robot: RobotConfig,
+            params: SupervisorParams) -> float:
+    """Turn rate of the blind side rule's "turn first": towards the direction of travel atan2(vy, v), at
+    least rotate_w_frac * wmax; the commanded turn direction when the travel points more than 135 deg off
+    straight ahead (either way round is then about as long, and keeping the reactor's choice does not
+    flip the turn when the direction wobbles across 180 deg)."""
+    bearing = math.atan2(vy_mps, v_mps)
+    rate = max(abs(w_radps), params.rotate_w_frac * robot.wmax_radps)
+    if w_radps != 0.0 and abs(bearing) > 0.75 * math.pi:
+        return math.copysign(rate, w_radps)
+    return math.copysign(rate, bearing)
 
 
 def escape_command(
