@@ -393,6 +393,8 @@ def test_params_are_validated() -> None:
         TunnelParams(n_rays=4)
     with pytest.raises(ValueError, match="grid_cells must be"):
         tunnel_plan(np.ones((5, 5), dtype=bool), (2, 2), (3.5, 3.5), cell_m=CELL_M, radius_m=0.3)
+    with pytest.raises(ValueError, match="lookahead_m"):
+        tunnel_plan(empty(), (2, 2), (3.5, 3.5), cell_m=CELL_M, radius_m=0.3, lookahead_m=0.0)
     assert dataclasses.replace(TunnelParams(), n_rays=720).n_rays == 720
 
 
@@ -423,3 +425,33 @@ def test_oblique_passage_taken_whenever_nf1_goes_through(name: str, angle_deg: i
     assert tunnel_is_free(g, robot, res.waypoints_cells)
     if through(nf1.path_cells):
         assert through(res.waypoints_cells)
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+@pytest.mark.parametrize("extra_m", [0.1, 0.15])
+def test_robot_in_the_mouth_of_a_tight_passage_goes_through(name: str, extra_m: float) -> None:
+    """The robot stands in front of a passage barely wider than it (a door of robot width + 0.1 or 0.15 m,
+    whose C-space is a channel a few cells wide), up to 0.6 m before the wall and 3 cells off its axis,
+    wherever its cell is free; the goal lies beyond, straight or 2 m aside. Seen from there the door's edges
+    span more than 90 deg, no straight tunnel from the robot threads the waist off its axis, and the robot
+    took the space of the node in front of the passage: the course still points through (within 60 deg of
+    the axis), never back out to line up (the stall of wheelchair_office_exit, Fig. 5). The course is the
+    bearing of the point 1 m along the tunnel, so a one-cell step onto the axis does not turn it sideways."""
+    robot = ROBOTS[name]
+    g = empty()
+    wall_with_passage(g, 1.5, -6.0, 6.0, 0.0, 2 * robot.inner_radius_m + extra_m)
+    free = free_cspace(g, cell_m=CELL_M, inflate_m=robot.inner_radius_m + TunnelParams().margin_m)
+    p = planner(robot)
+    n_plans = 0
+    for gy, d, dy in itertools.product((-2.0, 0.0, 2.0), np.arange(0.1, 0.65, 0.05), range(-3, 4)):
+        r, c = to_cell(1.5 - d, 0.0)
+        start = (r + dy, c)
+        if not free[start]:
+            continue
+        res = p.plan(g, start, goal_rc(4.0, gy))
+        n_plans += 1
+        assert res.ok, (d, dy, gy)
+        assert math.cos(res.direction_rad) > 0.5, (d, dy, gy, math.degrees(res.direction_rad))
+        assert tunnel_is_free(g, robot, res.waypoints_cells)
+        assert len(crossing_y(res.waypoints_cells, 1.5)) == 1
+    assert n_plans >= 100

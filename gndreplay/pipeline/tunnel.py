@@ -28,17 +28,29 @@ Choices:
   beside a ray that reaches the grid border is where "an obstacle ends". A node goes on the far ray (the
   first ray past the corner), ``advance_m`` beyond the near range, or halfway to the far range when that is
   closer. The far ray grazes the corner, so when the tunnel to that point is blocked the ray tilted away
-  from the corner by 1, 2 and 4 cells (at the corner's range) is tried.
+  from the corner by 1, 2 and 4 cells (at the corner's range) is tried, each tilt at most to the middle
+  of the bundle of rays past the corner that reach that far. Why the cap: seen from the mouth of a passage
+  barely wider than the robot, the rays that thread its C-space channel form a bundle of a few degrees,
+  narrower than a one-cell tilt at the corner's range; the uncapped tilt jumped over the bundle onto a
+  blocked ray, so no node went through and the search backed out (wheelchair_office_exit, below).
 * **Passages are found in the workspace** (the paper's "discontinuity between obstacles", Fig. 3a): the
   same rays continue from their C-space end to the first obstacle cell. Where two adjacent ranges jump by
   more than the tunnel width, the gap runs from the near hit to the closest hit on the far side (within
-  90 deg); a gap wider than the tunnel and at most ``passage_max_m`` wide gets a node in front of it on its
+  180 deg: a door seen from close to its wall spans more than 90 deg); a gap wider than the tunnel and at
+  most ``passage_max_m`` wide gets a node in front of it on its
   axis (dilation radius + 2 cells from its waist, the free C-space cell nearest its middle) and one through
   it, as far beyond, joined to the node in front (or to the node that already took that space); passages
   are placed before the C-space nodes of the same expansion. Why: the C-space of a passage barely wider
   than the robot is a one- or two-cell waist that rays from afar almost never thread, and a straight
   tunnel through it must follow its axis. A too narrow passage gets no node (its gap is not
   wider than the tunnel) and, were a node placed, its tunnel would be blocked (Fig. 3a, nodes 2 and 3).
+  **Robot in the mouth**: when the robot's own node took the space of the node in front (it stands
+  between that point and the waist, maybe a cell or two off the axis), a node goes at its foot on the axis
+  whatever the spacing (only for the robot's node, so no cascade), and the node through the passage joins
+  it. Why: off the axis no straight tunnel threads a one-cell waist, the front node was refused, and the
+  search backed out to a node behind to line up: the course reversed, and with one-cell changes of the
+  grid flipped between forwards and backwards from tick to tick; the chair rocked in the door for the
+  rest of the run (wheelchair_office_exit, 18 of 20 seeds timed out at HEAD b409ad7).
 * **Rays march** in unit steps of their parameter (the samples t = 0, 1, 2, ... cells, each rounded to its
   cell), the C-space ray from the node, the workspace ray on from where the C-space one stopped. Each ray
   reads a per-ray table of flat index offsets (built once per ray count and row length, cached, built by
@@ -81,9 +93,12 @@ Choices:
   complete at cell level (rays sample directions): NF1 may find a way the tunnel planner misses; the
   converse cannot happen (a free tunnel chain is a 4-connected path of free cells).
 * **Tunnel and course**: the node chain is string-pulled (from each node, skip to the farthest later node
-  whose tunnel is free, so the polyline is made of free tunnels); the course is the direction of its first
-  tunnel, the paper's "main course of the first part of the tunnel". The stack puts the reactor's target
-  ``lookahead_m`` along it, as for NF1's instantaneous direction.
+  whose tunnel is free, so the polyline is made of free tunnels); the course, the paper's "main course of
+  the first part of the tunnel", is the bearing of the point ``lookahead_m`` (the stack's
+  ``planner.lookahead_m``, 1 m) along the polyline, as NF1's instantaneous direction (``nf1.path_direction``).
+  Why not the direction of the first tunnel: the first tunnel may be a step of a cell or two (onto a
+  passage's axis, above), whose direction is sideways. The stack puts the reactor's target
+  ``lookahead_m`` along the course.
 
 Cost (``benchmarks/planner.py``, one core): a plan is the C-space (about 0.3-0.5 ms on 400 x 400), plus,
 unless the goal is in sight, about 30 us per expansion (360 rays, about 60 % of it; the rest the passage and
@@ -104,7 +119,7 @@ from ..geometry import wrap_angle
 from ..types import Flag
 from .cspace import free_cspace
 from .model import FREE, OCCUPIED, UNKNOWN
-from .nf1 import PlanResult, _visible, nearest_true, resolve_goal
+from .nf1 import Nf1Params, PlanResult, _visible, nearest_true, path_direction, resolve_goal
 
 __all__ = ["TunnelParams", "TunnelPlanner", "tunnel_plan", "warm_up_planners"]
 
@@ -112,6 +127,8 @@ __all__ = ["TunnelParams", "TunnelPlanner", "tunnel_plan", "warm_up_planners"]
 _FOUND, _EXHAUSTED, _BUDGET = 0, 1, 2
 # expansions without the goal before the search asks whether start and goal are connected at all
 _CHECK_AFTER = 16
+# the course looks this far along the tunnel polyline by default: NF1's default
+_LOOKAHEAD_M = Nf1Params().lookahead_m
 
 
 @dataclass(frozen=True, slots=True)
@@ -333,13 +350,14 @@ def _stamp(taken: NDArray[np.bool_], r: int, c: int, rad: int) -> None:
 def _try_add(
     free: NDArray[np.bool_], taken: NDArray[np.bool_], nr: NDArray[np.int32], nc: NDArray[np.int32],
     parent: NDArray[np.int32], g: NDArray[np.float64], f: NDArray[np.float64], n: int, par: int,
-    rr: int, cc: int, goal_r: int, goal_c: int, spacing: int, hw: float,
+    rr: int, cc: int, goal_r: int, goal_c: int, spacing: int, hw: float, spaced: bool = True,
 ) -> int:
-    """Add node (rr, cc) under ``par`` if it is in the grid, free, not taken and joined to ``par`` by a free
-    tunnel; returns the new node count (``n`` unchanged when it was not added)."""
+    """Add node (rr, cc) under ``par`` if it is in the grid, free, not taken (unless ``spaced`` is False)
+    and joined to ``par`` by a free tunnel; returns the new node count (``n`` unchanged when it was not
+    added)."""
     if rr < 0 or rr >= free.shape[0] or cc < 0 or cc >= free.shape[1] or n >= nr.shape[0]:
         return n
-    if taken[rr, cc] or not free[rr, cc] or not _visible(free, nr[par], nc[par], rr, cc):
+    if (spaced and taken[rr, cc]) or not free[rr, cc] or not _visible(free, nr[par], nc[par], rr, cc):
         return n
     nr[n] = rr
     nc[n] = cc
@@ -394,9 +412,11 @@ def _search(
     closed = np.zeros(cap, np.bool_)
     taken = np.zeros(free.shape, np.bool_)
     dtheta = 2.0 * math.pi / n_rays
-    sin_j = np.empty(n_rays // 4)  # sin of (j + 1) ray steps, the passage search's bound
-    for j in range(n_rays // 4):
-        sin_j[j] = math.sin((j + 1) * dtheta)
+    # the passage search's bound: the distance from a point at range 1 on a ray to a ray (j + 1) steps away,
+    # sin of the angle up to 90 deg, then 1 (the nearest point of the other ray is the origin)
+    sin_j = np.empty(n_rays // 2)
+    for j in range(n_rays // 2):
+        sin_j[j] = math.sin(min((j + 1) * dtheta, 0.5 * math.pi))
     nr[0] = start_r
     nc[0] = start_c
     parent[0] = -1
@@ -450,7 +470,9 @@ def _search(
             b_r = 0.0
             b_c = 0.0
             reach = wr[near] + 1.0
-            for j in range(n_rays // 4):  # the other side: the hit beyond the gap closest to it
+            # the other side: the hit beyond the gap closest to it, up to 180 deg away (a door seen from
+            # its mouth spans more than 90 deg)
+            for j in range(n_rays // 2):
                 if reach * sin_j[j] > passage_max:
                     break  # every later ray passes farther than passage_max from the near hit
                 kk = (far + j * step) % n_rays
@@ -492,6 +514,17 @@ def _search(
             t_r = math.floor(m_r - off * u_r + 0.5)
             t_c = math.floor(m_c - off * u_c + 0.5)
             m = _try_add(free, taken, nr, nc, parent, g, f, n, best, q_r, q_c, goal_r, goal_c, spacing, hw)
+            s_ax = u_r * (r0 - m_r) + u_c * (c0 - m_c)  # how far the expanded node stands in front of it
+            if m == n and best == 0 and s_ax > 0.0 and (q_r - r0) ** 2 + (q_c - c0) ** 2 <= spacing * spacing:
+                # no front node because the search's root took its space: the robot stands in the passage's
+                # mouth, maybe off the axis, where no straight tunnel threads a tight waist; a node at its
+                # foot on the axis, whatever the spacing (else the search backs out to line up: the course
+                # reverses)
+                p_r = math.floor(m_r + s_ax * u_r + 0.5)
+                p_c = math.floor(m_c + s_ax * u_c + 0.5)
+                if p_r != r0 or p_c != c0:
+                    m = _try_add(free, taken, nr, nc, parent, g, f, n, best, p_r, p_c, goal_r, goal_c,
+                                 spacing, hw, False)
             if m == n and not (0 <= t_r < free.shape[0] and 0 <= t_c < free.shape[1]
                                and free[t_r, t_c] and not taken[t_r, t_c]):
                 continue  # no node through the passage whatever its parent (spares the nearest-node scan)
@@ -512,8 +545,16 @@ def _search(
             step = _away(near, far)
             prev = -1
             n_before = n
+            # the rays past the corner that reach d: a tilt stays within their bundle, at most to its middle
+            # (a channel narrower than the tilt, e.g. a door barely wider than the robot seen from its mouth,
+            # is threaded by its middle ray, not jumped over)
+            max_tilt = math.floor(math.atan2(4.0, max(rng[near], 1.0)) / dtheta + 0.5)
+            run = 1
+            while run <= 2 * max_tilt and rng[(far + step * run) % n_rays] >= d:
+                run += 1
             for lateral in (0.0, 1.0, 2.0, 4.0):  # the far ray grazes the corner: tilt away by a few cells
                 tilt = math.floor(math.atan2(lateral, max(rng[near], 1.0)) / dtheta + 0.5)
+                tilt = min(tilt, (run - 1) // 2)
                 kk = (far + step * tilt) % n_rays
                 if kk == prev:
                     continue
@@ -612,6 +653,7 @@ def tunnel_plan(
     radius_m: float,
     unknown_is_free: bool = True,
     params: TunnelParams = TunnelParams(),
+    lookahead_m: float = _LOOKAHEAD_M,
 ) -> PlanResult:
     """Search a chain of free tunnels from the robot cell to the goal (see the module notes).
 
@@ -625,16 +667,21 @@ def tunnel_plan(
             it.
         unknown_is_free: UNKNOWN cells are free (else obstacles), as for NF1's C-space.
         params: planner settings.
+        lookahead_m: the course looks this far along the tunnel polyline [m] (> 0).
     Returns:
         PlanResult: ``waypoints_cells`` the string-pulled tunnel polyline (robot cell first, goal cell last),
-        ``direction_rad`` the course of its first tunnel, ``width_m`` the tunnel width, ``nodes_expanded``;
+        ``direction_rad`` the course (bearing of the point ``lookahead_m`` along it), ``width_m`` the tunnel
+        width, ``nodes_expanded``;
         ``ok`` False with GOAL_IN_OBSTACLE, PLANNER_NO_PATH (no tunnel joins robot and goal) or
         PLANNER_TIMEOUT (``max_expansions`` reached).
     Raises:
-        ValueError: bad grid, robot cell outside the grid, non-finite goal, cell_m <= 0 or radius_m < 0.
+        ValueError: bad grid, robot cell outside the grid, non-finite goal, cell_m <= 0, radius_m < 0 or
+            lookahead_m <= 0.
     """
     if not cell_m > 0.0:
         raise ValueError(f"cell_m must be > 0, got {cell_m!r}")
+    if not lookahead_m > 0.0:
+        raise ValueError(f"lookahead_m must be > 0, got {lookahead_m!r}")
     cells = np.asarray(grid_cells)
     if cells.ndim != 2 or cells.dtype != np.uint8:
         raise ValueError(f"grid_cells must be a 2-D uint8 array, got shape {cells.shape} dtype {cells.dtype}")
@@ -679,9 +726,11 @@ def tunnel_plan(
     cost_cells = float(gs[last]) + math.hypot(goal[0] - nr[last], goal[1] - nc[last])
     seg = np.diff(waypoints, axis=0)
     length_cells = float(np.hypot(seg[:, 0], seg[:, 1]).sum())
-    # robot and goal share a cell (two equal waypoints): head for the goal point itself
-    d = seg[0] if np.any(seg[0]) else g - 0.5 - np.asarray(start, dtype=np.float64)
-    direction = float(wrap_angle(math.atan2(d[0], d[1])))
+    if length_cells > 0.0:
+        direction = path_direction(waypoints, lookahead_m / cell_m)
+    else:  # robot and goal share a cell (two equal waypoints): head for the goal point itself
+        d = g - 0.5 - np.asarray(start, dtype=np.float64)
+        direction = float(wrap_angle(math.atan2(d[0], d[1])))
     return _result(
         True, Flag.NONE, goal, projected, expanded=expanded, width_m=width_m, chain=chain,
         n_escape=n_escape, waypoints=waypoints, direction=direction, length_m=length_cells * cell_m,
@@ -698,22 +747,26 @@ class TunnelPlanner:
         cell_m: cell side [m].
         inner_radius_m: the robot's inner radius (half its width for a rectangle) [m].
         unknown_is_free: plan through UNKNOWN cells.
+        lookahead_m: the course is the bearing of the point this far along the tunnel polyline [m] (the
+            stack's ``planner.lookahead_m``, as NF1's).
     """
 
     def __init__(
-        self, params: TunnelParams, *, cell_m: float, inner_radius_m: float, unknown_is_free: bool
+        self, params: TunnelParams, *, cell_m: float, inner_radius_m: float, unknown_is_free: bool,
+        lookahead_m: float = _LOOKAHEAD_M,
     ) -> None:
         self.params = params
         self.cell_m = cell_m
         self.radius_m = inner_radius_m + params.margin_m
         self.unknown_is_free = unknown_is_free
+        self.lookahead_m = lookahead_m
 
     def plan(
         self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike
     ) -> PlanResult:
         return tunnel_plan(
             grid_cells, start_rc, goal_rc_float, cell_m=self.cell_m, radius_m=self.radius_m,
-            unknown_is_free=self.unknown_is_free, params=self.params,
+            unknown_is_free=self.unknown_is_free, params=self.params, lookahead_m=self.lookahead_m,
         )
 
 
