@@ -9,12 +9,15 @@ p99), match failures, and the relation errors: translational [m] mean ± std and
 relation span (<1 s: the matches' own accuracy; 1-10 s; >10 s: mostly drift, the loop-closing relations),
 rotational [deg] mean and the largest rotational error of a relation < 1 s, relations matched / unmatched
 (for idc from each start the worst relation < 1 s is named: its index in the relations file, its scans).
-Rows: raw odometry; idc (the default matcher); idc without its point-to-line polish (pure IDC); kiss-icp at
-its best setting on the dev logs (KissParams defaults: odometry prior, voxel 0.25 m, range 40 m, initial
-threshold 0.5 m); the same without the odometry prior, as kiss-icp's authors run it.
+Rows: raw odometry; idc (the default matcher); idc without de-skewing of interlaced scans
+(IdcParams.deskew) and idc whose rotation guard only widens (IdcParams.narrow_rotation_guard), for a
+side-by-side comparison (both off: the matcher before them); idc without its point-to-line polish (pure
+IDC); kiss-icp at its best setting on the dev logs (KissParams defaults: odometry prior, voxel 0.25 m, range
+40 m, initial threshold 0.5 m); the same without the odometry prior, as kiss-icp's authors run it.
 ``--kiss-sweep`` also runs the kiss-icp settings that were tried to choose that best setting.
 
-Then idc and kiss-icp run again from later first scans (``--starts``): most of the relation error comes from
+Then idc, its two variants and kiss-icp run again from later first scans (``--starts``; for idc the
+interlace delay it learnt is printed per start): most of the relation error comes from
 the relations that close loops, i.e. from drift, and drift is chaotic (one scan more or less at the start
 moves it by tens of percent), so one run's number is one draw. The medians over the starts are the figures
 to compare.
@@ -41,6 +44,7 @@ import dataclasses  # noqa: E402
 import math  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
+from collections.abc import Callable  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -174,6 +178,12 @@ class LogSummary:
     dec_idc: float = float("nan")
     dec_vs_full_odom: float = float("nan")
     dec_vs_full_idc: float = float("nan")
+    nd_idc0: float = float("nan")  # idc without de-skewing: from scan 0, median over starts, rot max < 1 s
+    nd_idc_med: float = float("nan")
+    nd_rot1s_max: float = float("nan")
+    wg_idc0: float = float("nan")  # idc whose rotation guard only widens: the same three figures
+    wg_idc_med: float = float("nan")
+    wg_rot1s_max: float = float("nan")
 
 
 def run_log(name: str, datasets: Path, kiss: bool, kiss_sweep: bool, starts: list[int],
@@ -189,6 +199,8 @@ def run_log(name: str, datasets: Path, kiss: bool, kiss_sweep: bool, starts: lis
     matchers: list[tuple[str, Matcher]] = [
         ("odom", OdomMatcher()),
         ("idc", IdcMatcher()),
+        ("idc (no de-skew)", IdcMatcher(IdcParams(deskew=False))),
+        ("idc (wide guard)", IdcMatcher(IdcParams(narrow_rotation_guard=False))),
         ("idc (pure IDC)", IdcMatcher(IdcParams(polish_iterations=0))),
     ]
     if kiss:
@@ -201,14 +213,21 @@ def run_log(name: str, datasets: Path, kiss: bool, kiss_sweep: bool, starts: lis
     rows: dict[str, MatcherReport] = {}
     trajs: dict[str, CorrectedTrajectory] = {}
     print(HEADER)
+    idc_delays: dict[str, float] = {}
     for label, matcher in matchers:
         trajs[label] = correct_trajectory(ticks, matcher)
+        if isinstance(matcher, IdcMatcher):
+            idc_delays[label] = matcher.interlace_delay_s
         rows[label] = matcher_report(trajs[label], relations)
         print(_row(label, rows[label]), flush=True)
     idc_s = rows["idc"].relations
     summary = LogSummary(name, baseline, _trans_mean(rows["odom"]), _trans_mean(rows["idc"]),
                          _trans_mean(rows["kiss-icp"]) if kiss else float("nan"),
-                         rot1s_max=_span(idc_s, "<1 s", "rot_max_deg"), idc_ms=rows["idc"].ms_median)
+                         rot1s_max=_span(idc_s, "<1 s", "rot_max_deg"), idc_ms=rows["idc"].ms_median,
+                         nd_idc0=_trans_mean(rows["idc (no de-skew)"]),
+                         nd_rot1s_max=_span(rows["idc (no de-skew)"].relations, "<1 s", "rot_max_deg"),
+                         wg_idc0=_trans_mean(rows["idc (wide guard)"]),
+                         wg_rot1s_max=_span(rows["idc (wide guard)"].relations, "<1 s", "rot_max_deg"))
     if kiss:
         summary.ms_ratio = rows["idc"].ms_median / rows["kiss-icp"].ms_median
         print(f"  idc / kiss-icp median time: {rows['idc'].ms_median:.3f} / "
@@ -218,25 +237,39 @@ def run_log(name: str, datasets: Path, kiss: bool, kiss_sweep: bool, starts: lis
         print(f"  from first scans {starts}: mean translational error [m] and ms per scan (median):")
         errs: dict[str, list[float]] = {}
         times: dict[str, list[float]] = {}
-        makers: list[tuple[str, type[Matcher] | object]] = [("idc", IdcMatcher)]
+        makers: list[tuple[str, Callable[[], Matcher]]] = [
+            ("idc", IdcMatcher), ("idc (no de-skew)", lambda: IdcMatcher(IdcParams(deskew=False))),
+            ("idc (wide guard)", lambda: IdcMatcher(IdcParams(narrow_rotation_guard=False)))]
         if kiss:
             makers.append(("kiss-icp", lambda: KissIcpMatcher(KissParams())))
+        tick_t = np.array([t.t_ns for t in ticks], dtype=np.int64)
         for label, make in makers:
-            reports = [rows[label] if start == 0 else
-                       matcher_report(correct_trajectory(ticks[start:], make()),  # type: ignore[operator]
-                                      relations)
-                       for start in starts]
+            reports: list[MatcherReport] = []
+            delays: list[float] = []
+            for start in starts:
+                matcher = make()
+                reports.append(matcher_report(correct_trajectory(ticks[start:], matcher), relations)
+                               if start else rows[label])
+                if isinstance(matcher, IdcMatcher):
+                    delays.append(matcher.interlace_delay_s if start else idc_delays[label])
             errs[label] = [_trans_mean(r) for r in reports]
             times[label] = [r.ms_median for r in reports]
+            rot_max = max(_span(r.relations, "<1 s", "rot_max_deg") for r in reports)
             if label == "idc":
-                summary.rot1s_max = max(_span(r.relations, "<1 s", "rot_max_deg") for r in reports)
+                summary.rot1s_max = rot_max
+            elif label == "idc (no de-skew)":
+                summary.nd_idc_med, summary.nd_rot1s_max = float(np.median(errs[label])), rot_max
+            elif label == "idc (wide guard)":
+                summary.wg_idc_med, summary.wg_rot1s_max = float(np.median(errs[label])), rot_max
             print(f"  {label:<16s} " + "  ".join(f"{e:6.3f}" for e in errs[label])
                   + f"   median {np.median(errs[label]):.3f}  max {max(errs[label]):.3f};  "
                   + "ms " + " ".join(f"{t:.3f}" for t in times[label]), flush=True)
-            if label == "idc":
-                tick_t = np.array([t.t_ns for t in ticks], dtype=np.int64)
-                print("  idc worst relation < 1 s per start: index (scans) error [deg]: "
+            if label.startswith("idc"):
+                print(f"  {label} worst relation < 1 s per start: index (scans) error [deg]: "
                       + "; ".join(_worst_short(r.relations, relations, tick_t) for r in reports))
+            if label == "idc":
+                print("  idc interlace delay learnt per start [ms]: "
+                      + " ".join(f"{1e3 * d:.1f}" for d in delays))
         summary.idc_med = float(np.median(errs["idc"]))
         line = f"  medians over the starts: idc / baseline {summary.idc_med / baseline:.2f}"
         if kiss:
@@ -263,7 +296,9 @@ def _decimated(ticks: list[Tick], relations: Relations, full_idc: CorrectedTraje
           f"({int((gaps > 10).sum())} > 10 s)")
     print("  matcher            ms/scan    p99  fails   relations: mean  <1 s  >10 s  rot <1 s max  matched"
           "   vs full-rate idc: trans  rot [deg]")
-    for label, matcher in (("odom", OdomMatcher()), ("idc", IdcMatcher())):
+    for label, matcher in (("odom", OdomMatcher()), ("idc", IdcMatcher()),
+                           ("idc (no de-skew)", IdcMatcher(IdcParams(deskew=False))),
+                           ("idc (wide guard)", IdcMatcher(IdcParams(narrow_rotation_guard=False)))):
         traj = correct_trajectory(kept, matcher)
         r = matcher_report(traj, relations)
         s = r.relations
@@ -276,7 +311,7 @@ def _decimated(ticks: list[Tick], relations: Relations, full_idc: CorrectedTraje
               f"{f.rot_mean_deg:9.2f}", flush=True)
         if label == "odom":
             summary.dec_odom, summary.dec_vs_full_odom = s.trans_mean_m, f.trans_mean_m
-        else:
+        elif label == "idc":
             summary.dec_idc, summary.dec_vs_full_idc = s.trans_mean_m, f.trans_mean_m
 
 
@@ -284,12 +319,16 @@ def print_summary(rows: list[LogSummary]) -> None:
     """The must-show table: mean relation error [m] of each log."""
     print("\n| log | odom | idc from scan 0 | idc median over starts | kiss-icp from scan 0 "
           "| kiss-icp median | baseline | idc max rot err, relations < 1 s [deg] | idc ms/scan "
-          "| idc / kiss time | decimated odom / idc | decimated vs full-rate idc: odom / idc |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| idc / kiss time | decimated odom / idc | decimated vs full-rate idc: odom / idc "
+          "| idc without de-skew: from scan 0 / median / max rot err < 1 s "
+          "| idc with the wide guard: from scan 0 / median / max rot err < 1 s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r.name} | {r.odom:.3f} | {r.idc0:.3f} | {r.idc_med:.3f} | {r.kiss0:.3f} "
               f"| {r.kiss_med:.3f} | {r.baseline} | {r.rot1s_max:.2f} | {r.idc_ms:.3f} | {r.ms_ratio:.2f} "
-              f"| {r.dec_odom:.3f} / {r.dec_idc:.3f} | {r.dec_vs_full_odom:.3f} / {r.dec_vs_full_idc:.3f} |")
+              f"| {r.dec_odom:.3f} / {r.dec_idc:.3f} | {r.dec_vs_full_odom:.3f} / {r.dec_vs_full_idc:.3f} "
+              f"| {r.nd_idc0:.3f} / {r.nd_idc_med:.3f} / {r.nd_rot1s_max:.2f} "
+              f"| {r.wg_idc0:.3f} / {r.wg_idc_med:.3f} / {r.wg_rot1s_max:.2f} |")
 
 
 def main(argv: list[str] | None = None) -> int:

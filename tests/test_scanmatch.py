@@ -472,8 +472,8 @@ def _wrong_first_match(m: IdcMatcher, shift: tuple[float, float, float], worse_b
     the odometry's prediction) is left as it is."""
     real = m._match
 
-    def match(px, py, pr, pa, laser_prior, incr, win0_rad=None, coarse=True):  # type: ignore[no-untyped-def]
-        out = real(px, py, pr, pa, laser_prior, incr, win0_rad, coarse)
+    def match(px, py, pr, pa, par, laser_prior, incr, win0_rad=None, coarse=True):  # type: ignore[no-untyped-def]
+        out = real(px, py, pr, pa, par, laser_prior, incr, win0_rad, coarse)
         if win0_rad is not None or out.reason:
             return out
         wrong = idc_compose(out.laser, shift)
@@ -564,3 +564,33 @@ def test_stale_scan_in_a_turn_does_not_derail_the_next_ones(step_deg: float, bac
         out.append((res.ok, *pose_error(res.pose, compose(ODOM0, relative(start, seen)))))
     assert all(ok for ok, *_ in out[8:]), out
     assert max(et for _, et, _ in out[8:]) < 0.01 and max(er for _, _, er in out[8:]) < 0.5, out
+
+
+def test_good_odometry_narrows_the_rotation_guard_to_3_deg() -> None:
+    """A robot whose odometry turns well learns a narrower rotational error model (down to 3 sigmas = 3 deg
+    + 15 % of the turn): a match 4 deg off exact odometry that fits no better than the match near the
+    odometry is then refused, where a fresh matcher (3 sigmas = 10 deg) takes it unchecked. The translation
+    model does not narrow."""
+    shift = (0.0, 0.0, math.radians(4.0))
+    move = motion(0.05, 0.0, 2.0)
+
+    fresh = IdcMatcher()
+    fresh.update(cast(room(), START), Pose2D.from_array(ODOM0))
+    _wrong_first_match(fresh, shift, 0.0)
+    odo_next = compose(ODOM0, move)
+    res = fresh.update(cast(room(), compose(START, move), t_ns=10**8), Pose2D.from_array(odo_next))
+    assert res.ok and 3.5 < pose_error(res.pose, odo_next)[1] < 4.5, res
+
+    m = IdcMatcher()
+    truth, odo = START, ODOM0
+    for i in range(150):  # back and forth, exact odometry: corrections near 0
+        step = motion(0.03 if i % 2 else -0.03, 0.0, 1.0 if i % 4 < 2 else -1.0)
+        truth, odo = compose(truth, step), compose(odo, step)
+        assert m.update(cast(room(), truth, t_ns=i * 10**8), Pose2D.from_array(odo)).ok
+    assert m._odo_scale[1] == pytest.approx(0.3) and m._odo_scale[0] == 1.0, m._odo_scale
+    _wrong_first_match(m, shift, 0.0)
+    odo_next = compose(odo, move)
+    res = m.update(cast(room(), compose(truth, move), t_ns=150 * 10**8), Pose2D.from_array(odo_next))
+    assert not res.ok and res.reason.startswith("unconfirmed match"), res
+    et, er = pose_error(res.pose, odo_next)  # the odometry increment kept (after 150 near-exact matches)
+    assert et < 1e-3 and er < 0.01, (et, er)

@@ -66,6 +66,10 @@ def test_idc_beats_baseline_odometry_and_kiss(errors: Result) -> None:
     assert idc < _median(stats["kiss-icp"], "trans_mean_m"), f"{name}: idc {idc:.3f} m >= kiss-icp"
     assert _median(stats["idc"], "rot_mean_deg") < _median(stats["odom"], "rot_mean_deg")
     assert failures["idc"] < 0.01 * stats["idc"][0].matched  # failures are rare on real data
+    # no relation < 1 s with a rotational error above 3 deg, from any start (CSAIL 3.1-3.8 deg before the
+    # de-skewing of interlaced scans, ACES 2.5-3.9 deg before the rotation guard could narrow)
+    worst_rot = max(s.span("<1 s").rot_max_deg for s in stats["idc"])
+    assert worst_rot < 3.0, f"{name}: a relation < 1 s off by {worst_rot:.2f} deg"
 
 
 def test_idc_params_are_the_defaults() -> None:
@@ -78,10 +82,10 @@ def test_idc_params_are_the_defaults() -> None:
 def test_idc_on_intel_below_baseline_and_odometry(datasets: Path) -> None:
     """Intel, a log never used to choose the defaults (fast turns, stale odometry): idc from scan 0 below the
     published baseline (0.220 m) and odometry (before the coarse rotation search and the guard: 1.30 m), and
-    no relation < 1 s with a rotational error above 3 deg (1.6 deg measured; 35 deg before stale scans
-    11550-11554 stopped derailing the next ones, see idc's module docstring). From other start scans one
-    relation < 1 s can still reach 3.8 deg (scan 3: scans 8420-8421, a neighbouring minimum 2 deg off with
-    fewer pairs), so that is not asserted over starts. Runs in ~20 s."""
+    no relation < 1 s with a rotational error above 3 deg (35 deg before stale scans 11550-11554 stopped
+    derailing the next ones, see idc's module docstring; from start scan 3 the relation of scans 8420-8421
+    reached 3.8 deg, a neighbouring minimum accepted unchecked, until the rotation guard could narrow for
+    good odometry; benchmarks/scanmatch.py measures all starts). Runs in ~20 s."""
     from gndreplay.io import read_ticks
 
     ticks = list(read_ticks(datasets / "carmen" / "intel.clf.bz2"))

@@ -62,11 +62,12 @@ def _pm_pi(a: float) -> float:
 @njit(cache=True, error_model="numpy")
 def scan_points(ranges, angles, min_r, max_r):
     """The beams with a range in [min_r, max_r] (no-return +inf and invalid nan fail the test) as points of
-    the laser frame: (x, y, range), each of length <= len(ranges)."""
+    the laser frame: (x, y, range, parity of the beam's index), each of length <= len(ranges)."""
     n = ranges.shape[0]
     px = np.empty(n)
     py = np.empty(n)
     pr = np.empty(n)
+    par = np.empty(n, dtype=np.int64)
     m = 0
     for i in range(n):
         r = ranges[i]
@@ -74,8 +75,36 @@ def scan_points(ranges, angles, min_r, max_r):
             px[m] = r * math.cos(angles[i])
             py[m] = r * math.sin(angles[i])
             pr[m] = r
+            par[m] = i & 1
             m += 1
-    return px[:m], py[:m], pr[:m]
+    return px[:m], py[:m], pr[:m], par[:m]
+
+
+@njit(cache=True, error_model="numpy")
+def deskew_points(px, py, pr, par, delay, vx, vy, w):
+    """Motion compensation of an interlaced scan: the odd beams are taken ``delay`` seconds after the even
+    ones, so with the laser moving at (vx, vy, w) (laser frame, m/s and rad/s) each point is moved to where
+    it lies at the mean beam time: p' = R(w tau) p + v tau, tau = (parity - mean parity) * delay.
+
+    Returns the compensated (x, y, range); copies of the inputs when delay or the motion is 0.
+    """
+    n = px.shape[0]
+    qx = px.copy()
+    qy = py.copy()
+    qr = pr.copy()
+    if n == 0 or delay == 0.0 or (vx == 0.0 and vy == 0.0 and w == 0.0):
+        return qx, qy, qr
+    mean = 0.0
+    for i in range(n):
+        mean += par[i]
+    mean /= n
+    for i in range(n):
+        tau = (par[i] - mean) * delay
+        c, s = math.cos(w * tau), math.sin(w * tau)
+        qx[i] = c * px[i] - s * py[i] + vx * tau
+        qy[i] = s * px[i] + c * py[i] + vy * tau
+        qr[i] = math.sqrt(qx[i] * qx[i] + qy[i] * qy[i])
+    return qx, qy, qr
 
 
 @njit(cache=True, error_model="numpy")
@@ -561,16 +590,19 @@ def idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, seg_ex, se
 
 @njit(cache=True, error_model="numpy")
 def _pairs_point_to_line(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il, seg_nx, seg_ny,
-                         gate2, max_cp_bins, sin2, h, g):
+                         gate2, max_cp_bins, sin2, h, g, par, hr):
     """Closest-point pairs at pose (x, y, th): fills the point-to-line normal equations h (3x3), g (3) and
     returns (pairs, sum of pair distances). Pairs on an isolated reference point count in the distance but
-    not in h, g (no normal)."""
+    not in h, g (no normal). ``hr[q]`` gets the rotation-only normal equation (sum J_th², -sum J_th e) of
+    the points of beam parity q (``par``): the two halves of an interlaced scan, see IdcMatcher._learn_skew.
+    """
     n = px.shape[0]
     n_bins = ref_x.shape[0]
     inv_res = n_bins / TWO_PI
     c, s = math.cos(th), math.sin(th)
     h[:, :] = 0.0
     g[:] = 0.0
+    hr[:, :] = 0.0
     pairs = 0
     sd = 0.0
     for i in range(n):
@@ -650,6 +682,9 @@ def _pairs_point_to_line(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg
         g[0] -= nx * e
         g[1] -= ny * e
         g[2] -= j2 * e
+        q = par[i]
+        hr[q, 0] += j2 * j2
+        hr[q, 1] -= j2 * e
     h[1, 0] = h[0, 1]
     h[2, 0] = h[0, 2]
     h[2, 1] = h[1, 2]
@@ -658,7 +693,7 @@ def _pairs_point_to_line(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg
 
 @njit(cache=True, error_model="numpy")
 def polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il, seg_nx, seg_ny, x0, y0,
-                         th0, max_iter, gate, tol_t, tol_r, max_cp_bins, w_t, w_r):
+                         th0, max_iter, gate, tol_t, tol_r, max_cp_bins, w_t, w_r, par):
     """Gauss-Newton refinement on the closest-point pairs with the point-to-line distance.
 
     Same correspondences as IDC's closest-point rule (closest point of the polyline within ``gate``), but
@@ -667,8 +702,9 @@ def polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_i
     as a prior with weights w_t (per axis) and w_r in units of one pair's weight: where the scan cannot
     tell (a corridor, a wall at arm's length) the odometry decides.
 
-    Returns (x, y, th, iterations, pairs, mean pair distance [m], 3x3 point-to-line information), the last
-    three at the pose of the last linearisation (within the tolerance of the result when converged).
+    Returns (x, y, th, iterations, pairs, mean pair distance [m], 3x3 point-to-line information, 2x2
+    rotation equations per beam parity (see _pairs_point_to_line)), the last four at the pose of the last
+    linearisation (within the tolerance of the result when converged).
     """
     n_bins = ref_x.shape[0]
     sin2 = _sin2_table(n_bins, max_cp_bins)
@@ -680,11 +716,12 @@ def polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_i
     h = np.zeros((3, 3))
     g = np.zeros(3)
     info = np.zeros((3, 3))
+    hr = np.zeros((2, 2))
     pairs = 0
     sd = 0.0
     while it < max_iter:
         pairs, sd = _pairs_point_to_line(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il,
-                                         seg_nx, seg_ny, gate2, max_cp_bins, sin2, h, g)
+                                         seg_nx, seg_ny, gate2, max_cp_bins, sin2, h, g, par, hr)
         info[:, :] = h
         it += 1
         if pairs < 3:
@@ -701,13 +738,14 @@ def polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_i
         th += step[2]
         if math.sqrt(step[0] ** 2 + step[1] ** 2) < tol_t and abs(step[2]) < tol_r:
             break
-    return x, y, th, it, pairs, (sd / pairs if pairs > 0 else np.inf), info
+    return x, y, th, it, pairs, (sd / pairs if pairs > 0 else np.inf), info, hr
 
 
 @njit(cache=True, error_model="numpy")
 def match_quality(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il, seg_nx, seg_ny, gate,
-                  max_cp_bins):
-    """Closest-point pairs at a pose: (pairs, mean distance [m], 3x3 point-to-line information).
+                  max_cp_bins, par):
+    """Closest-point pairs at a pose: (pairs, mean distance [m], 3x3 point-to-line information, 2x2 rotation
+    equations per beam parity).
 
     The information matrix sums J Jᵀ with J = (n, (R p) × n) over the pairs matched to a segment of unit
     normal n; its translational block is near-singular in a featureless corridor (degeneracy test).
@@ -716,9 +754,10 @@ def match_quality(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, se
     sin2 = _sin2_table(n_bins, max_cp_bins)
     h = np.zeros((3, 3))
     g = np.zeros(3)
+    hr = np.zeros((2, 2))
     pairs, sd = _pairs_point_to_line(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il,
-                                     seg_nx, seg_ny, gate * gate, max_cp_bins, sin2, h, g)
-    return pairs, (sd / pairs if pairs > 0 else np.inf), h
+                                     seg_nx, seg_ny, gate * gate, max_cp_bins, sin2, h, g, par, hr)
+    return pairs, (sd / pairs if pairs > 0 else np.inf), h, hr
 
 
 @njit(cache=True, error_model="numpy")
@@ -788,42 +827,45 @@ def coarse_rotation(pa, pr, ref_r, ok, half_bins, step_bins, every, tol_abs, tol
 @njit(cache=True, error_model="numpy")
 def _idc_polish(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, th0, max_iter,
                 win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every,
-                polish_iter, w_t, w_r):
+                polish_iter, w_t, w_r, par):
     """IDC from rotation ``th0``, then the point-to-line polish (``polish_iter`` > 0) or just the quality of
-    the IDC pose: (x, y, th, iterations, pairs, mean pair distance, 3x3 information)."""
+    the IDC pose: (x, y, th, iterations, pairs, mean pair distance, 3x3 information, 2x2 rotation equations
+    per beam parity)."""
     x, y, th, iters, _ = idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, 0.0,
                                    0.0, th0, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r,
                                    max_cp_bins, stride, mrp_every)
     if polish_iter > 0:
-        x, y, th, it2, pairs, resid, info = polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, ex, ey, il,
-                                                                 nx, ny, x, y, th, polish_iter, gate_min,
-                                                                 tol_t, tol_r, max_cp_bins, w_t, w_r)
-        return x, y, th, iters + it2, pairs, resid, info
-    pairs, resid, info = match_quality(px, py, x, y, th, ref_x, ref_y, nxt, cover, ex, ey, il, nx, ny,
-                                       gate_min, max_cp_bins)
-    return x, y, th, iters, pairs, resid, info
+        x, y, th, it2, pairs, resid, info, hr = polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, ex, ey,
+                                                                     il, nx, ny, x, y, th, polish_iter,
+                                                                     gate_min, tol_t, tol_r, max_cp_bins, w_t,
+                                                                     w_r, par)
+        return x, y, th, iters + it2, pairs, resid, info, hr
+    pairs, resid, info, hr = match_quality(px, py, x, y, th, ref_x, ref_y, nxt, cover, ex, ey, il, nx, ny,
+                                           gate_min, max_cp_bins, par)
+    return x, y, th, iters, pairs, resid, info, hr
 
 
 @njit(cache=True, error_model="numpy")
 def match_scan(kf_xy, kf_n, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend_m, seg_abs_m, seg_rel,
                gap_bins, normal_chord_m, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r,
                max_cp_bins, stride, mrp_every, polish_iter, w_t, w_r, pa, coarse_bins, coarse_step,
-               coarse_every, coarse_tol_abs, coarse_tol_rel, coarse_min_gain, coarse_margin):
+               coarse_every, coarse_tol_abs, coarse_tol_rel, coarse_min_gain, coarse_margin, par):
     """The whole match in one call (one dispatch instead of four): render the reference at (ox, oy, oth),
     its segments, IDC from the prediction, then the point-to-line polish (``polish_iter`` > 0) or just the
     quality of the IDC pose. With ``coarse_bins`` > 0, a second IDC may start from the rotation that the
     correlative search (coarse_rotation) prefers (see the comment below).
 
     Returns (x, y, th, iterations, pairs, mean pair distance [m], 3x3 point-to-line information, smallest
-    eigenvalue of its translational 2x2 block).
+    eigenvalue of its translational 2x2 block, rotation of the odd beams' half-scan against the map minus
+    the even beams' one [rad] (nan when a half constrains no rotation; ``par`` gives each point's parity)).
     """
     ref_x, ref_y, ref_r, ref_a, ok, nxt = render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r,
                                                            blend_m, seg_abs_m, seg_rel, gap_bins)
     ex, ey, il, nx, ny, cover = segments(ref_x, ref_y, ok, nxt, normal_chord_m)
-    x, y, th, iters, pairs, resid, info = _idc_polish(
+    x, y, th, iters, pairs, resid, info, hr = _idc_polish(
         px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, 0.0, max_iter, win0,
         win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every, polish_iter, w_t,
-        w_r)
+        w_r, par)
     if coarse_bins > 0:
         # IDC only follows its bearing window: when the correlative search sees a rotation that agrees
         # better elsewhere in the window, IDC starts from there too, and that match wins when its mean
@@ -831,20 +873,24 @@ def match_scan(kf_xy, kf_n, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend
         th1, s1, s0 = coarse_rotation(pa, pr, ref_r, ok, coarse_bins, coarse_step, coarse_every,
                                       coarse_tol_abs, coarse_tol_rel)
         if s1 >= s0 + coarse_min_gain and abs(_pm_pi(th1 - th)) > 2.0 * win_min:
-            x2, y2, t2, it2, p2, r2, i2 = _idc_polish(
+            x2, y2, t2, it2, p2, r2, i2, hr2 = _idc_polish(
                 px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, th1, max_iter,
                 win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every,
-                polish_iter, w_t, w_r)
+                polish_iter, w_t, w_r, par)
             iters += it2
             n = px.shape[0]
             cost1 = (resid * pairs + gate_min * (n - pairs)) / n
             cost2 = (r2 * p2 + gate_min * (n - p2)) / n
             if cost2 < (1.0 - coarse_margin) * cost1:
-                x, y, th, pairs, resid, info = x2, y2, t2, p2, r2, i2
+                x, y, th, pairs, resid, info, hr = x2, y2, t2, p2, r2, i2, hr2
     # smallest eigenvalue of the symmetric 2x2 block [[a, b], [b, c]]
     a = info[0, 0]
     b = info[0, 1]
     c = info[1, 1]
     hm = 0.5 * (a - c)
     weakest = 0.5 * (a + c) - math.sqrt(hm * hm + b * b)
-    return x, y, th, iters, pairs, resid, info, weakest
+    # rotation-only Gauss-Newton step of each half (g / h): how much each half would still turn alone
+    half_rot = np.nan
+    if hr[0, 0] > 0.0 and hr[1, 0] > 0.0:
+        half_rot = hr[1, 1] / hr[1, 0] - hr[0, 1] / hr[0, 0]
+    return x, y, th, iters, pairs, resid, info, weakest, half_rot

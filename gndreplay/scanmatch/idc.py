@@ -27,11 +27,17 @@ the best one; that match wins only when it fits clearly better (``coarse_margin`
 with several equal basins keeps the prediction's.
 
 Never worse than odometry (``_guard``): the odometry has an error model (``odo_sigma_*``, 3 sigmas = 0.3 m
-/ 10 deg + 50 % of the increment, widened per robot by the learnt RMS of the corrections of accepted
-matches). A match beyond it needs a second opinion: the match from the odometry's prediction in a narrow
+/ 10 deg + 50 % of the increment, scaled per robot by the learnt RMS of the corrections of accepted
+matches: the translation only widens, the rotation may also narrow, down to 3 sigmas = 3 deg + 15 % of the
+turn). A match beyond it needs a second opinion: the match from the odometry's prediction in a narrow
 window. The far match is believed when that second match fails, lands near it, or fits clearly worse; when
 the second one fits clearly better it is taken instead (the far one was a wrong basin); when both fit
 alike, the scan cannot tell, and the odometry increment is kept with MATCH_FAILED ("unconfirmed match").
+The rotation model narrows because a robot whose odometry turns well (ACES: corrections of ~0.5 deg per
+scan) otherwise accepted, unchecked, matches 3-5 deg off it that settled in a poorer fit next to the right
+one (more residual, 15 % fewer pairs: ACES scans 5263 and 5273, Intel 8421), the worst relations under 1 s
+(3.9 and 3.8 deg). Over five start scans this keeps every such relation under 2.7 deg on all three logs;
+the drift it moves is in the benchmark's table (benchmarks/scanmatch.py).
 
 Scans that do not follow the odometry (a stale record: on Intel, scans 11550-11554 repeat the view of
 ~40 deg earlier in a turn, 11552 and 11554 with fresh odometry): such a scan is placed where its content
@@ -47,6 +53,19 @@ in overlap, never by scan count, so the map does not depend on the scan rate. Af
 ``map_max_gap_s`` a scan that fails to match restarts the map from itself at once (the map no longer
 describes where the robot is); a gap where the robot stood still keeps the map (restarting after every
 long gap raised ACES' error from 0.11 to 0.69 m once decimated to one scan per 0.2 m / 5 deg).
+
+De-skewing interlaced scans (``deskew``, IdcMatcher._learn_skew): a SICK LMS at 0.5 deg takes the even and
+the odd beams in two sweeps ~13 ms apart, so in a turn at 100 deg/s the two half-scans disagree by 1.3 deg;
+the map then holds walls drawn twice, and matches in fast turns were off by up to 3.8 deg over relations
+shorter than 1 s (CSAIL, relation 824 in a 100 deg/s turn). Each scan is motion-compensated to the mean
+time of its beams with the last corrected velocity and the delay of the odd beams. No log says whether its
+scanner interlaces (CARMEN's FLASER has no timing), so the delay is learnt from the data: after each
+accepted match in a turn, the rotation the odd half-scan still needs against the map minus the even half's,
+divided by the turn rate, measures the delay not yet compensated. Their running mean is applied only once
+it is clearly non-zero: CSAIL learns 12.6 ms (two 75 Hz sweeps are 13.3 ms apart) and its worst relation
+under 1 s drops from 3.1-3.8 to 1.7-2.0 deg over five start scans; ACES and Intel (1 deg beams, one sweep)
+learn nothing and are matched exactly as without de-skewing. Per-beam times from a reader (ROS
+``time_increment``) would also allow de-skewing within a sweep; Scan does not carry them yet.
 
 A match fails (odometry increment kept, MATCH_FAILED, ``reason`` says why) on too few pairs, a large
 residual, a degenerate geometry (a featureless corridor: translation along it unobservable), or an
@@ -75,6 +94,7 @@ from .base import MatchResult
 __all__ = ["IdcMatcher", "IdcParams"]
 
 F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
 
 
 @dataclass(frozen=True, slots=True)
@@ -146,7 +166,8 @@ class IdcParams:
     # consistency guard (see IdcMatcher._guard). The odometry's error model: sigma = odo_sigma_m +
     # odo_sigma_rel * step and odo_sigma_rad + odo_sigma_rel_rad * turn, times a per-robot scale learnt
     # online: the running RMS of the normalised corrections of accepted matches (weight odo_learn_rate, each
-    # clipped at odo_learn_clip sigmas), never below 1 (the model only widens for worse odometry). A match
+    # clipped at odo_learn_clip sigmas), never below 1 for the translation, and for the rotation never below
+    # 1 deg / odo_sigma_rad (0.3, see _ODO_SIGMA_MIN_RAD: good odometry is held to 3 deg). A match
     # beyond guard_sigmas of it is suspicious: the fallback priors are tried too, and the winner needs a
     # second opinion, the match from the odometry's prediction in a guard_window_rad bearing window. The
     # defaults put 3 sigmas at 0.3 m / 10 deg + 50 % of the increment
@@ -196,6 +217,13 @@ class IdcParams:
     # turn): the fallback priors are tried too and the match with most pairs wins
     recheck_pair_ratio: float = 0.75
     reset_after_failures: int = 5  # consecutive failures -> restart the map from the current scan
+    # motion compensation of interlaced scans (see IdcMatcher._learn_skew): each scan is de-skewed with the
+    # last corrected velocity and the interlace delay learnt online
+    deskew: bool = True
+    # the learnt rotational error model of the odometry may narrow below its defaults, to 3 sigmas = 3 deg
+    # (see _ODO_SIGMA_MIN_RAD); False: it only widens (relations < 1 s up to 3.9 deg on ACES and Intel, less
+    # drift: benchmarks/scanmatch.py measures both)
+    narrow_rotation_guard: bool = True
 
 
 P3 = tuple[float, float, float]  # a pose (x, y, theta) as plain floats: the per-scan bookkeeping below costs
@@ -218,6 +246,24 @@ def _pose(a: P3) -> Pose2D:
 
 
 ZERO: P3 = (0.0, 0.0, 0.0)
+# the learnt rotational error model of the odometry narrows to 1 deg (+ 5 % of the turn) at most, i.e. 3
+# sigmas = 3 deg: a robot whose odometry turns well has a match more than 3 deg off it checked by the
+# guard's second opinion (IdcMatcher._guard); the translational model only widens
+_ODO_SIGMA_MIN_RAD = math.radians(1.0)
+# de-skewing (IdcMatcher._learn_skew): the velocity is taken from corrected increments over 20 ms to 1 s
+# (a shorter one, Intel's repeated stamps 1 ms apart, is noise); the interlace delay is learnt from scans
+# taken while turning at 30 deg/s or more (10 ms then skews a scan by 0.3 deg), each measurement clipped to
+# +-50 ms, and only when the turn rate assumed agrees within 25 % with the rate the match found (a turn that
+# changes direction between two scans gives the opposite skew); it is applied from 2 ms (0.2 deg at 100
+# deg/s, below the matches' noise) once 20 scans measured it
+_SKEW_MIN_S = 0.002
+_SKEW_MIN_SCANS = 20
+_SKEW_FORGET = 0.97
+_SKEW_RATE_AGREE = 0.25
+_VEL_MIN_GAP_S = 0.02
+_VEL_MAX_GAP_S = 1.0
+_SKEW_MIN_RATE = math.radians(30.0)
+_SKEW_MAX_S = 0.05
 
 
 class _Outcome(NamedTuple):
@@ -226,6 +272,7 @@ class _Outcome(NamedTuple):
     residual_m: float
     iterations: int
     reason: str  # "" when accepted
+    half_rot: float = math.nan  # odd beams' rotation against the map minus the even ones' [rad]
 
 
 class IdcMatcher:
@@ -250,11 +297,20 @@ class IdcMatcher:
         self._still_sum = [0.0, 0.0, 0.0]
         self._still_n = 0
         self._odom_step_small = True  # the odometry's last change (none yet) was a robot coming to rest
+        self._vel = ZERO  # laser velocity (vx, vy, w) in its own frame from the last corrected increment
+        self._skew_s = 0.0  # learnt delay of the odd beams after the even ones, 0 until sure (_learn_skew)
+        self._skew_sums = (0.0, 0.0, 0.0, 0)  # sum of w², w² d, w² d² over the delays d seen, their count
         # keyframe ring: points in the corrected frame, their count, next slot, pose of the newest
         self._kf_xy = np.zeros((self.params.map_keyframes, 0, 2))
         self._kf_n = np.zeros(self.params.map_keyframes, dtype=np.int64)
         self._kf_next = 0
         self._kf_pose: P3 | None = None
+
+    @property
+    def interlace_delay_s(self) -> float:
+        """The learnt delay of the odd beams after the even ones that de-skewing applies [s] (0 until the
+        matcher is sure of one, and for a scanner that does not interlace; see _learn_skew)."""
+        return self._skew_s
 
     # -- map -------------------------------------------------------------------------------------------
     def _reset_map(self) -> None:
@@ -315,13 +371,16 @@ class IdcMatcher:
     def update(self, scan: Scan, odom: Pose2D) -> MatchResult:
         """Correct the pose of this scan (see the module docstring); scans must come in time order."""
         p = self.params
-        px, py, pr = k.scan_points(scan.ranges_m, scan.angles_rad, max(p.min_range_m, scan.min_range_m),
-                                   p.max_range_m)
+        px, py, pr, par = k.scan_points(scan.ranges_m, scan.angles_rad,
+                                        max(p.min_range_m, scan.min_range_m), p.max_range_m)
         sp = scan.sensor_pose
         sensor = (sp.x, sp.y, sp.theta)
         odom_a = (odom.x, odom.y, odom.theta)
         gap_s = (scan.t_ns - self._last_t_ns) * 1e-9
         self._last_t_ns = scan.t_ns
+        vel = self._vel if p.deskew else ZERO
+        skew = self._skew_s
+        px, py, pr = k.deskew_points(px, py, pr, par, skew, vel[0], vel[1], vel[2])
         if not self._started:
             self._started = True
             self._prev_pose = self._anchor_pose = self._anchor_odom = odom_a
@@ -338,7 +397,7 @@ class IdcMatcher:
         outcomes: list[_Outcome] = []
         plausible: list[_Outcome] = []  # accepted and near its own prior or near the odometry's prediction
         for h, (hyp, incr) in enumerate(priors[: max(compete, 1 + p.fallback_priors)]):
-            out = self._match(px, py, pr, pa, _compose(hyp, sensor), incr, coarse=True)
+            out = self._match(px, py, pr, pa, par, _compose(hyp, sensor), incr, coarse=True)
             iterations += out.iterations
             outcomes.append(out)
             if not out.reason:
@@ -365,7 +424,7 @@ class IdcMatcher:
         res = min(pool, key=lambda o: (-o.pairs, o.residual_m)) if pool else outcomes[0]
         res = self._clearly_better(res, accepted, px.shape[0])
         if fresh and not res.reason:
-            res, extra = self._guard(res, px, py, pr, pa, odo_laser, priors[0][1])
+            res, extra = self._guard(res, px, py, pr, pa, par, odo_laser, priors[0][1])
             iterations += extra
         if res.reason:
             pose = priors[0][0]
@@ -391,6 +450,12 @@ class IdcMatcher:
                 self._add_keyframe(laser, np.column_stack([px, py]))
         self._last_incr = _compose(_inverse(self._prev_pose), pose)
         self._prev_pose = pose
+        if p.deskew and _VEL_MIN_GAP_S <= gap_s <= _VEL_MAX_GAP_S:
+            d = _compose(_inverse(sensor), _compose(self._last_incr, sensor))
+            self._vel = (d[0] / gap_s, d[1] / gap_s, d[2] / gap_s)
+            # a measurement of the delay needs the turn rate it was de-skewed with to be the one that followed
+            if not res.reason and abs(self._vel[2] - vel[2]) <= _SKEW_RATE_AGREE * abs(vel[2]):
+                self._learn_skew(res.half_rot, vel[2], skew)
         if not self._stalled:
             if odom_a != self._anchor_odom:
                 step = _compose(_inverse(self._anchor_odom), odom_a)
@@ -416,7 +481,38 @@ class IdcMatcher:
         self._odom_step_small = True
         self._prev_pose = self._anchor_pose = pose
         self._anchor_odom = odom_a
+        self._vel = ZERO
         return MatchResult(_pose(pose), False, res.pairs, res.residual_m, iterations, reason)
+
+    def _learn_skew(self, half_rot: float, w: float, applied_s: float) -> None:
+        """Learn the interlace delay online from an accepted match of a scan taken while turning at ``w``
+        rad/s and de-skewed with a delay of ``applied_s``.
+
+        A scanner that interlaces (a SICK LMS at 0.5 deg takes the even and the odd beams in two sweeps
+        13 ms apart) skews a scan taken in a turn: the odd half-scan is rotated by -w times the delay
+        against the even one (1.3 deg at 100 deg/s, CSAIL). The match leaves a rotation ``half_rot``
+        between the halves of w times the delay still missing, so each such scan gives one measurement of
+        the delay, applied_s + half_rot / w. The estimate is their mean weighted by w² (a fast turn tells
+        more) and by a factor ``_SKEW_FORGET`` per newer measurement: the map holds the scans taken before
+        the delay was known, skewed, which pull the halves together, so the first measurements fall short
+        and the estimate converges as the map is renewed (a plain mean stayed at 60 % of the delay). It is
+        applied once ``_SKEW_MIN_SCANS`` scans have measured it and it is at least
+        ``_SKEW_MIN_S`` and three standard errors from 0. A scanner that does not interlace has halves that
+        agree: its delay stays 0 and its scans are left as they are.
+        """
+        if abs(w) < _SKEW_MIN_RATE or not math.isfinite(half_rot):
+            return
+        d = min(_SKEW_MAX_S, max(-_SKEW_MAX_S, applied_s + half_rot / w))
+        s0, s1, s2, n = self._skew_sums
+        w2 = w * w
+        f = _SKEW_FORGET
+        s0, s1, s2, n = f * s0 + w2, f * s1 + w2 * d, f * s2 + w2 * d * d, n + 1
+        self._skew_sums = (s0, s1, s2, n)
+        mean = s1 / s0
+        n_eff = (1.0 - f ** n) / (1.0 - f)
+        se = math.sqrt(max(0.0, s2 / s0 - mean * mean) / n_eff)
+        sure = n >= _SKEW_MIN_SCANS and abs(mean) >= max(_SKEW_MIN_S, 3.0 * se)
+        self._skew_s = mean if sure else 0.0
 
     def _standing_mean(self, pose: P3) -> P3:
         """The mean of this standstill's matched poses (the last moving one included): while the robot
@@ -477,7 +573,7 @@ class IdcMatcher:
         g = self.params.guard_sigmas
         return z_t > g * self._odo_scale[0] or z_r > g * self._odo_scale[1]
 
-    def _guard(self, res: _Outcome, px: F64, py: F64, pr: F64, pa: F64, odo_laser: P3,
+    def _guard(self, res: _Outcome, px: F64, py: F64, pr: F64, pa: F64, par: I64, odo_laser: P3,
                incr: P3) -> tuple[_Outcome, int]:
         """Never worse than odometry: a match within ``guard_sigmas`` of the odometry's prediction (in the
         learnt error model, see IdcParams) is taken and teaches the model; a match further away needs a
@@ -489,7 +585,7 @@ class IdcMatcher:
         corr = _compose(_inverse(odo_laser), res.laser)
         z_t, z_r = self._z(res.laser, odo_laser, incr)
         if self._suspicious(res.laser, odo_laser, incr):
-            near = self._match(px, py, pr, pa, odo_laser, incr, p.guard_window_rad)
+            near = self._match(px, py, pr, pa, par, odo_laser, incr, p.guard_window_rad)
             extra = near.iterations
             d = _compose(_inverse(near.laser), res.laser)
             # the near match went most of the way from the odometry to the far one: the map agrees with it
@@ -510,10 +606,12 @@ class IdcMatcher:
         c2 = p.odo_learn_clip ** 2
         self._odo_ms = ((1.0 - a) * self._odo_ms[0] + a * min(z_t * z_t, c2),
                         (1.0 - a) * self._odo_ms[1] + a * min(z_r * z_r, c2))
-        self._odo_scale = (max(1.0, math.sqrt(self._odo_ms[0])), max(1.0, math.sqrt(self._odo_ms[1])))
+        floor = (min(1.0, _ODO_SIGMA_MIN_RAD / p.odo_sigma_rad)
+                 if p.narrow_rotation_guard and p.odo_sigma_rad > 0.0 else 1.0)
+        self._odo_scale = (max(1.0, math.sqrt(self._odo_ms[0])), max(floor, math.sqrt(self._odo_ms[1])))
         return res, extra
 
-    def _match(self, px: F64, py: F64, pr: F64, pa: F64, laser_prior: P3, incr: P3,
+    def _match(self, px: F64, py: F64, pr: F64, pa: F64, par: I64, laser_prior: P3, incr: P3,
                win0_rad: float | None = None, coarse: bool = False) -> _Outcome:
         """Align the scan with the map rendered at ``laser_prior`` and apply the acceptance gates.
 
@@ -535,13 +633,13 @@ class IdcMatcher:
         coarse_step = max(1, round(p.coarse_step_rad / bin_rad))
         coarse_bins = min(round(p.coarse_window_rad / bin_rad), p.n_bins // 2) if coarse else 0
         win0 = p.win0_rad if win0_rad is None else win0_rad
-        x, y, th, iters, pairs, resid, _info, weakest = k.match_scan(
+        x, y, th, iters, pairs, resid, _info, weakest, half_rot = k.match_scan(
             self._kf_xy, self._kf_n, laser_prior[0], laser_prior[1], laser_prior[2], px, py, pr, p.n_bins,
             p.min_range_m, p.max_range_m + p.gate0_m, p.blend_m, p.seg_abs_m, p.seg_rel, p.gap_bins,
             p.normal_chord_m, p.max_iterations, win0, p.win_tau, p.win_min_rad, p.gate0_m, p.gate_min_m,
             p.tol_m, p.tol_rad, p.max_cp_bins, stride, max(1, n // (stride * p.mrp_points)),
             p.polish_iterations, w_t, w_r, pa, coarse_bins, coarse_step, max(1, n // p.coarse_points),
-            p.coarse_tol_m, p.coarse_tol_rel, p.coarse_min_gain, p.coarse_margin)
+            p.coarse_tol_m, p.coarse_tol_rel, p.coarse_min_gain, p.coarse_margin, par)
         est = _compose(laser_prior, (x, y, th))
         if pairs < need:
             return _Outcome(est, pairs, resid, iters, f"too few pairs: {pairs} < {need}")
@@ -551,4 +649,4 @@ class IdcMatcher:
             return _Outcome(est, pairs, resid, iters,
                             f"degenerate geometry: translation unobservable (information {weakest:.1f} "
                             f"< {p.degenerate_min_info})")
-        return _Outcome(est, pairs, resid, iters, "")
+        return _Outcome(est, pairs, resid, iters, "", half_rot)
