@@ -11,11 +11,14 @@ way, the course difference where both did, and the tunnel planner's nodes expand
 Synthetic offices (``--maps``, 0 to skip): each map has room walls every 3.5-6 m with 1 m doors, and
 furniture blocks; occupied cells are inflated by 0.4 m (what ``cspace.free_cspace`` computes). The robot
 stands on a random free cell of the central control zone (N/4 square), as in the robot-centred grid. Goals:
-a free cell 5 m away, and a point 30 m away, projected onto the grid border. Prints median and p99 [ms] of
-each NF1 part (wavefront with early exit as ``plan`` runs it, descent, tightening), of the whole ``plan``
-call on the C-space computed beforehand, of a full-grid wave without early exit for reference, and, side by
-side, of the two planners as the stack calls them, the C-space included ("nf1+cspace", "tunnel plan"),
-each the fastest of ``--repeat`` runs (as on the dev logs). Use ``taskset -c 0`` for one core.
+a free cell 5 m away, and a point 30 m away, outside the grid (NF1 plans to the best reachable free border
+cell, ``Nf1Params.frontier_goal``; the tunnel planner to the goal's projection onto the border). Prints
+median and p99 [ms] of each NF1 part (wavefront with early exit as ``plan`` runs it, descent, tightening),
+of the whole ``plan`` call on the C-space computed beforehand, of a full-grid wave without early exit for
+reference, and, side by side, of the two planners as the stack calls them, the C-space included
+("nf1+cspace", "tunnel plan"), each the fastest of ``--repeat`` runs (as on the dev logs), and how often
+the tunnel planner's node search failed and its complete fallback (NF1 on its C-space) answered. Use
+``taskset -c 0`` for one core.
 
 ``--clock thread`` times with the thread's CPU clock instead of the wall clock: on a loaded shared machine
 the wall clock's p99 is mostly other processes' time slices.
@@ -160,6 +163,7 @@ def run(n_maps: int, trials: int, connectivity: Literal[4, 8], repeat: int, seed
                 t["tunnel plan"].append(min(ms for _, ms in runs))
                 ft = flags.setdefault(name + " tunnel", {})
                 ft[tun.flag.name or "NONE"] = ft.get(tun.flag.name or "NONE", 0) + 1
+                ft["fallback"] = ft.get("fallback", 0) + int(tun.fallback)
                 f = flags.setdefault(name, {})
                 f[res.flag.name or "NONE"] = f.get(res.flag.name or "NONE", 0) + 1
                 if not res.ok or res.n_escape:

@@ -89,9 +89,26 @@ Choices:
   component of free C-space (two breadth-first floods, one from each end, in turn: about twice the smaller
   component's size in cells) and stops with PLANNER_NO_PATH when they do not: no chain of tunnels could
   join them, and an enclosed goal (or robot) would otherwise cost the exhaustion of every node of the
-  robot's region. The search is not
-  complete at cell level (rays sample directions): NF1 may find a way the tunnel planner misses; the
-  converse cannot happen (a free tunnel chain is a 4-connected path of free cells).
+  robot's region. The node search is not complete at cell level (rays sample directions, nodes keep
+  their spacing): NF1 may find a way it misses; the converse cannot happen (a free tunnel chain is a
+  4-connected path of free cells).
+* **Complete fallback** (``complete``, on by default): when the node search fails although start and goal
+  may be connected (its open list ran empty, or it reached ``max_expansions``; not when the connectivity
+  check found them apart), the plan is NF1's on the same C-space (4-connected wave, the connectivity
+  check's, from the goal cell the search planned to), whose string-pulled waypoints are mutually visible
+  through free C-space: a chain of free tunnels, turned into the course as below. The result says so
+  (``TunnelResult.fallback``). Why: the failing class is a chain of one-cell waists not in line, e.g. two
+  tight doors 1 m apart and 0.3 m aside of each other (tests/test_tunnel.py): a node must stand exactly
+  where a straight tunnel threads both, which neither the passage nodes (one waist each) nor the rays
+  find, and the search exhausted its 338-357 nodes (11 ms, the planner benchmark's p99 at HEAD 5103a06)
+  to answer PLANNER_NO_PATH wrongly. The budget (150 expansions, about 5 ms) also caps the few long
+  searches that do succeed (the synthetic offices' successes needed at most 251, p95 66). ``complete``
+  False: the paper's node search alone (PLANNER_NO_PATH / PLANNER_TIMEOUT as above).
+* **Route hysteresis** (``hold_route``, on by default; ``TunnelPlanner``): the planner keeps the tunnel it
+  returned last (its cells, moved with the grid) while it stays free and is at most 10 % + 0.3 m longer
+  than this tick's, NF1's rule and margins (``nf1.keep_route``). Why: into a U through cells not yet seen
+  and back out of it are two ways of nearly equal length, and the sparse node search tips from one to the
+  other with one-cell changes of the grid; the course flipped between them (u_trap, wheelchair, seed 11).
 * **Tunnel and course**: the node chain is string-pulled (from each node, skip to the farthest later node
   whose tunnel is free, so the polyline is made of free tunnels); the course, the paper's "main course of
   the first part of the tunnel", is the bearing of the point ``lookahead_m`` (the stack's
@@ -103,13 +120,14 @@ Choices:
 Cost (``benchmarks/planner.py``, one core): a plan is the C-space (about 0.3-0.5 ms on 400 x 400), plus,
 unless the goal is in sight, about 30 us per expansion (360 rays, about 60 % of it; the rest the passage and
 corner candidates and their tunnels), plus one connectivity check (below 1 ms) in searches longer than 16
-expansions.
+expansions, plus NF1's plan (about 1 ms) when the fallback runs: at most about 7 ms.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from itertools import pairwise
 
 import numpy as np
 from numba import njit
@@ -119,12 +137,22 @@ from ..geometry import wrap_angle
 from ..types import Flag
 from .cspace import free_cspace
 from .model import FREE, OCCUPIED, UNKNOWN
-from .nf1 import Nf1Params, PlanResult, _visible, nearest_true, path_direction, resolve_goal
+from .nf1 import (
+    Nf1Params,
+    PlanResult,
+    _line_cells,
+    _visible,
+    keep_route,
+    nearest_true,
+    path_direction,
+    resolve_goal,
+)
+from .nf1 import plan as nf1_plan
 
-__all__ = ["TunnelParams", "TunnelPlanner", "tunnel_plan", "warm_up_planners"]
+__all__ = ["TunnelParams", "TunnelPlanner", "TunnelResult", "tunnel_plan", "warm_up_planners"]
 
-# search outcomes of the kernel
-_FOUND, _EXHAUSTED, _BUDGET = 0, 1, 2
+# search outcomes of the kernel (_DISCONNECTED: the connectivity check found start and goal apart)
+_FOUND, _EXHAUSTED, _BUDGET, _DISCONNECTED = 0, 1, 2, 3
 # expansions without the goal before the search asks whether start and goal are connected at all
 _CHECK_AFTER = 16
 # the course looks this far along the tunnel polyline by default: NF1's default
@@ -145,13 +173,19 @@ class TunnelParams:
             get a node in front of them on their axis and one through them [m].
         spacing_m: a candidate this close to an existing node is not placed [m]; used capped at twice the
             dilation radius (inner radius + margin_m) minus one cell.
-        max_expansions: expansions before the search gives up (PLANNER_TIMEOUT).
+        max_expansions: expansions before the node search gives up (PLANNER_TIMEOUT, or with ``complete``
+            the complete fallback).
         heuristic_weight: priority g + heuristic_weight * h; 1 is the paper's A*, larger values expand
             fewer nodes for a longer tunnel.
         escape_m: how far the search may start from the robot cell when the robot stands in C-obstacle [m]
             (as ``Nf1Params.escape_m``).
         border_search_m: a projected goal on a C-obstacle border cell moves to the nearest free border
             cell within this distance [m] (as ``Nf1Params.border_search_m``).
+        complete: when the node search fails (open list empty, or ``max_expansions`` reached) although
+            the free C-space joins robot and goal, the tunnel polyline is NF1's string-pulled path on the
+            same C-space (``TunnelResult.fallback``); False: the paper's node search alone.
+        hold_route: ``TunnelPlanner`` keeps the tunnel it returned last unless this tick's is clearly
+            shorter (NF1's route hysteresis, ``nf1.keep_route``); False: every tick plans afresh, the paper's.
     """
 
     margin_m: float = 0.025
@@ -160,10 +194,12 @@ class TunnelParams:
     advance_m: float = 0.6
     passage_max_m: float = 1.5
     spacing_m: float = 0.5
-    max_expansions: int = 400
+    max_expansions: int = 150
     heuristic_weight: float = 1.0
     escape_m: float = 0.5
     border_search_m: float = 1.0
+    complete: bool = True
+    hold_route: bool = True
 
     def __post_init__(self) -> None:
         for name in ("jump_m", "advance_m", "spacing_m", "passage_max_m"):
@@ -401,8 +437,9 @@ def _search(
     cell; ``free`` is the C-space, ``clear`` the workspace (not an obstacle), lengths in cells. Returns
     (status, n_expanded, goal_parent, node rows, node cols, parents, g, n): the goal is accessible from node
     ``goal_parent`` when status is _FOUND. After ``check_after`` expansions without the goal, a search
-    whose start and goal cells lie in different components of the free C-space stops (_EXHAUSTED: no
-    chain of tunnels can join them, whatever the rays would still find)."""
+    whose start and goal cells lie in different components of the free C-space stops (_DISCONNECTED: no
+    chain of tunnels can join them, whatever the rays would still find); _EXHAUSTED: the open list ran
+    empty, _BUDGET: ``max_expansions`` nodes were expanded."""
     cap = min(max_expansions * (n_rays + 1) + 1, free.shape[0] * free.shape[1] + 1)
     nr = np.empty(cap, np.int32)
     nc = np.empty(cap, np.int32)
@@ -441,7 +478,7 @@ def _search(
         if n_expanded >= max_expansions:
             return _BUDGET, n_expanded, -1, nr, nc, parent, g, n
         if n_expanded == check_after and not _connected(free, start_r, start_c, goal_r, goal_c):
-            return _EXHAUSTED, n_expanded, -1, nr, nc, parent, g, n
+            return _DISCONNECTED, n_expanded, -1, nr, nc, parent, g, n
         closed[best] = True
         n_expanded += 1
         r0 = int(nr[best])
@@ -623,12 +660,25 @@ def _rays(
 # public functions
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class TunnelResult(PlanResult):
+    """The tunnel planner's ``PlanResult``.
+
+    Attributes:
+        fallback: the node search failed where the free C-space joins robot and goal, and the tunnel
+            polyline is NF1's string-pulled path on the same C-space (``TunnelParams.complete``);
+            ``path_cells`` is then NF1's raw path, ``nodes_expanded`` still the node search's effort.
+    """
+
+    fallback: bool = False
+
+
 def _result(
     ok: bool, flag: Flag, goal: tuple[int, int], projected: bool, *, expanded: int, width_m: float,
     chain: NDArray[np.int32] | None = None, n_escape: int = 0, waypoints: NDArray[np.float64] | None = None,
     direction: float = math.nan, length_m: float = math.nan, cost_m: float = math.nan,
-) -> PlanResult:
-    return PlanResult(
+) -> TunnelResult:
+    return TunnelResult(
         ok=ok,
         flag=flag,
         goal_cell=goal,
@@ -644,6 +694,24 @@ def _result(
     )
 
 
+def _complete(
+    free: NDArray[np.bool_], start: tuple[int, int], goal: tuple[int, int], projected: bool, expanded: int,
+    width_m: float, cell_m: float, params: TunnelParams, lookahead_m: float,
+) -> TunnelResult:
+    """The complete fallback: NF1 (4-connected wave, as the connectivity check, from the goal cell the
+    node search planned to; its own escape when the robot is in C-obstacle) on the same C-space. Its
+    string-pulled waypoints are mutually visible through free C-space: a chain of free tunnels."""
+    nf1 = Nf1Params(connectivity=4, lookahead_m=lookahead_m, escape_m=params.escape_m, frontier_goal=False)
+    nf = nf1_plan(free, start, (goal[0] + 0.5, goal[1] + 0.5), cell_m=cell_m, params=nf1)
+    if not nf.ok:
+        return _result(False, Flag.PLANNER_NO_PATH, goal, projected, expanded=expanded, width_m=width_m)
+    return TunnelResult(
+        ok=True, flag=Flag.NONE, goal_cell=goal, goal_projected=projected, path_cells=nf.path_cells,
+        n_escape=nf.n_escape, waypoints_cells=nf.waypoints_cells, direction_rad=nf.direction_rad,
+        length_m=nf.length_m, cost_m=nf.cost_m, nodes_expanded=expanded, width_m=width_m, fallback=True,
+    )
+
+
 def tunnel_plan(
     grid_cells: NDArray[np.uint8],
     start_rc: tuple[int, int],
@@ -654,7 +722,7 @@ def tunnel_plan(
     unknown_is_free: bool = True,
     params: TunnelParams = TunnelParams(),
     lookahead_m: float = _LOOKAHEAD_M,
-) -> PlanResult:
+) -> TunnelResult:
     """Search a chain of free tunnels from the robot cell to the goal (see the module notes).
 
     Args:
@@ -669,15 +737,24 @@ def tunnel_plan(
         params: planner settings.
         lookahead_m: the course looks this far along the tunnel polyline [m] (> 0).
     Returns:
-        PlanResult: ``waypoints_cells`` the string-pulled tunnel polyline (robot cell first, goal cell last),
-        ``direction_rad`` the course (bearing of the point ``lookahead_m`` along it), ``width_m`` the tunnel
-        width, ``nodes_expanded``;
-        ``ok`` False with GOAL_IN_OBSTACLE, PLANNER_NO_PATH (no tunnel joins robot and goal) or
-        PLANNER_TIMEOUT (``max_expansions`` reached).
+        TunnelResult: ``waypoints_cells`` the string-pulled tunnel polyline (robot cell first, goal cell
+        last), ``direction_rad`` the course (bearing of the point ``lookahead_m`` along it), ``width_m`` the
+        tunnel width, ``nodes_expanded``, ``fallback`` (the polyline is NF1's, ``params.complete``);
+        ``ok`` False with GOAL_IN_OBSTACLE, PLANNER_NO_PATH (no tunnel joins robot and goal) or, without
+        ``params.complete``, PLANNER_TIMEOUT (``max_expansions`` reached).
     Raises:
         ValueError: bad grid, robot cell outside the grid, non-finite goal, cell_m <= 0, radius_m < 0 or
             lookahead_m <= 0.
     """
+    f, clear = _spaces(grid_cells, cell_m, radius_m, unknown_is_free, lookahead_m)
+    return _plan_on(f, clear, start_rc, goal_rc_float, cell_m=cell_m, radius_m=radius_m, params=params,
+                    lookahead_m=lookahead_m)
+
+
+def _spaces(
+    grid_cells: NDArray[np.uint8], cell_m: float, radius_m: float, unknown_is_free: bool, lookahead_m: float
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """``tunnel_plan``'s checks, then the free C-space and the workspace cells clear of obstacles."""
     if not cell_m > 0.0:
         raise ValueError(f"cell_m must be > 0, got {cell_m!r}")
     if not lookahead_m > 0.0:
@@ -689,6 +766,14 @@ def tunnel_plan(
     clear = cells != OCCUPIED
     if not unknown_is_free:
         clear &= cells != UNKNOWN
+    return f, clear
+
+
+def _plan_on(
+    f: NDArray[np.bool_], clear: NDArray[np.bool_], start_rc: tuple[int, int], goal_rc_float: ArrayLike, *,
+    cell_m: float, radius_m: float, params: TunnelParams, lookahead_m: float,
+) -> TunnelResult:
+    """``tunnel_plan`` on its C-space ``f`` and clear cells ``clear`` (``_spaces``)."""
     start = (int(start_rc[0]), int(start_rc[1]))
     if not (0 <= start[0] < f.shape[0] and 0 <= start[1] < f.shape[1]):
         raise ValueError(f"start_rc {start} is outside the grid of shape {f.shape}")
@@ -712,6 +797,8 @@ def tunnel_plan(
         params.heuristic_weight, _CHECK_AFTER, *_rays(params.n_rays, f.shape),
     )
     if status != _FOUND:
+        if params.complete and status != _DISCONNECTED:
+            return _complete(f, start, goal, projected, expanded, width_m, cell_m, params, lookahead_m)
         flag = Flag.PLANNER_TIMEOUT if status == _BUDGET else Flag.PLANNER_NO_PATH
         return _result(False, flag, goal, projected, expanded=expanded, width_m=width_m)
 
@@ -738,9 +825,43 @@ def tunnel_plan(
     )
 
 
+def _dense(waypoints: NDArray[np.float64]) -> NDArray[np.int64]:
+    """The cells a polyline of cell centres walks through (supercover of each segment), first to last."""
+    w = waypoints.astype(np.int64)
+    parts = [_line_cells(int(a[0]), int(a[1]), int(b[0]), int(b[1]))[1:] for a, b in pairwise(w)]
+    return np.concatenate([w[:1], *parts]).astype(np.int64)
+
+
+def _shifted(
+    held: tuple[NDArray[np.int64], NDArray[np.float64]] | None, goal: NDArray[np.float64],
+    shape: tuple[int, ...],
+) -> NDArray[np.int64] | None:
+    """A held route (its cells, the goal it led to) in this call's grid, as ``Nf1Planner``'s: the grid
+    re-centres by whole cells, which moves the goal's cell coordinates by the same whole numbers; any other
+    change of the goal, or a route leaving the grid, drops it."""
+    if held is None:
+        return None
+    route, held_goal = held
+    shift = goal - held_goal
+    step = np.rint(shift)
+    if np.abs(shift - step).max() > 1e-6:
+        return None
+    moved = route + step.astype(np.int64)
+    if moved.min() < 0 or moved[:, 0].max() >= shape[0] or moved[:, 1].max() >= shape[1]:
+        return None
+    return moved
+
+
 class TunnelPlanner:
     """The tunnel planner behind the ``nf1.Planner`` protocol: ``tunnel_plan`` on its own C-space (a disc of
-    the robot's inner radius plus ``params.margin_m``).
+    the robot's inner radius plus ``params.margin_m``), then, with ``params.hold_route``, NF1's route
+    hysteresis (``nf1.keep_route``, its margins from ``hysteresis``: the tunnel returned last is kept,
+    followed on from the robot and string-pulled, while its cells stay free and it is at most 10 % + 0.3 m
+    longer than this tick's, by default; lengths only, UNKNOWN cells cost as free ones, as in the node
+    search). Why: two ways of nearly equal length (into a U through unseen cells, or back out) and a sparse
+    node search that one-cell changes of the grid tip from one to the other; the course flipped between
+    them from tick to tick (u_trap, wheelchair). The result is a function of the inputs
+    and the held tunnel.
 
     Args:
         params: tunnel planner settings.
@@ -749,38 +870,69 @@ class TunnelPlanner:
         unknown_is_free: plan through UNKNOWN cells.
         lookahead_m: the course is the bearing of the point this far along the tunnel polyline [m] (the
             stack's ``planner.lookahead_m``, as NF1's).
+        hysteresis: NF1 settings whose ``route_keep_ratio`` / ``route_keep_m`` the held tunnel uses (the
+            stack's ``planner``, so both planners hold alike); None: ``Nf1Params``' defaults.
     """
 
     def __init__(
         self, params: TunnelParams, *, cell_m: float, inner_radius_m: float, unknown_is_free: bool,
-        lookahead_m: float = _LOOKAHEAD_M,
+        lookahead_m: float = _LOOKAHEAD_M, hysteresis: Nf1Params | None = None,
     ) -> None:
         self.params = params
         self.cell_m = cell_m
         self.radius_m = inner_radius_m + params.margin_m
         self.unknown_is_free = unknown_is_free
         self.lookahead_m = lookahead_m
+        self._keep = replace(hysteresis or Nf1Params(), lookahead_m=lookahead_m)
+        self._held: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # route cells, its goal
+
+    def reset(self) -> None:
+        """Forget the held tunnel (a new run or a new goal; a changed goal is also detected by itself)."""
+        self._held = None
 
     def plan(
         self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike
-    ) -> PlanResult:
-        return tunnel_plan(
-            grid_cells, start_rc, goal_rc_float, cell_m=self.cell_m, radius_m=self.radius_m,
-            unknown_is_free=self.unknown_is_free, params=self.params, lookahead_m=self.lookahead_m,
-        )
+    ) -> TunnelResult:
+        f, clear = _spaces(grid_cells, self.cell_m, self.radius_m, self.unknown_is_free, self.lookahead_m)
+        new = _plan_on(f, clear, start_rc, goal_rc_float, cell_m=self.cell_m, radius_m=self.radius_m,
+                       params=self.params, lookahead_m=self.lookahead_m)
+        goal = np.asarray(goal_rc_float, dtype=np.float64).reshape(2)
+        held = _shifted(self._held, goal, f.shape)
+        self._held = None
+        if not new.ok or not self.params.hold_route:
+            return new
+        out = new
+        if held is not None:
+            start = (int(start_rc[0]), int(start_rc[1]))
+            kept = keep_route(f, start, goal, new, held, cell_m=self.cell_m, params=self._keep)
+            if kept is not new:
+                out = TunnelResult(
+                    ok=True, flag=Flag.NONE, goal_cell=kept.goal_cell, goal_projected=kept.goal_projected,
+                    path_cells=kept.path_cells, n_escape=0, waypoints_cells=kept.waypoints_cells,
+                    direction_rad=kept.direction_rad, length_m=kept.length_m, cost_m=kept.cost_m,
+                    nodes_expanded=new.nodes_expanded, width_m=new.width_m, fallback=new.fallback,
+                )
+        if out.n_escape == 0:
+            self._held = (_dense(out.waypoints_cells), goal)
+        return out
 
 
 def warm_up_planners(params: TunnelParams = TunnelParams(), size_cells: int = 400) -> None:
     """Compile (or load from the numba cache) the tunnel planner's kernels before the first timed tick:
-    a goal in sight, a search around a wall with a passage, an enclosed goal, and a robot in C-obstacle;
-    and build the ray table of ``size_cells`` x ``size_cells`` grids."""
+    a goal in sight, a search around a wall with a passage, an enclosed goal, a robot in C-obstacle, a held
+    tunnel and the complete fallback (NF1's kernels); and build the ray table of ``size_cells`` x
+    ``size_cells`` grids."""
     _rays(params.n_rays, (size_cells, size_cells))
     cells = np.full((60, 60), FREE, dtype=np.uint8)
     cells[5:25, 30] = OCCUPIED
     cells[40:55, 30] = OCCUPIED
     planner = TunnelPlanner(params, cell_m=0.05, inner_radius_m=0.3, unknown_is_free=True)
-    for start, goal in (((30, 10), (30.5, 20.5)), ((20, 10), (30.5, 50.5)), ((20, 29), (20.5, 50.5))):
+    for start, goal in (((30, 10), (30.5, 20.5)), ((20, 10), (30.5, 50.5)), ((20, 29), (20.5, 50.5)),
+                        ((21, 28), (20.5, 50.5))):  # the last one again a tick later: the held tunnel
         planner.plan(cells, start, goal)
+    once = TunnelPlanner(replace(params, max_expansions=1, complete=True), cell_m=0.05, inner_radius_m=0.3,
+                         unknown_is_free=True)
+    once.plan(cells, (20, 10), (30.5, 50.5))
     cells[40, 40:56] = cells[55, 40:56] = OCCUPIED
     cells[40:56, 40] = cells[40:56, 55] = OCCUPIED
     planner.plan(cells, (30, 10), (47.5, 47.5))
