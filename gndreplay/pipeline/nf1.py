@@ -75,6 +75,7 @@ __all__ = [
     "project_goal",
     "resolve_goal",
     "route_cost",
+    "shifted_route",
     "tighten",
 ]
 
@@ -1238,6 +1239,26 @@ def keep_route(
                          cell_m)
 
 
+def shifted_route(
+    held: tuple[NDArray[np.int64], NDArray[np.float64]] | None, goal: NDArray[np.float64],
+    shape: tuple[int, ...],
+) -> NDArray[np.int64] | None:
+    """A held route (its cells, the goal cell it led to) in this call's grid: the grid re-centres by whole
+    cells, which moves the goal's cell coordinates by the same whole numbers; any other change of the goal,
+    or a route leaving the grid, drops it (None). Shared by ``Nf1Planner`` and the tunnel planner."""
+    if held is None:
+        return None
+    route, held_goal = held
+    shift = goal - held_goal
+    step = np.rint(shift)
+    if np.abs(shift - step).max() > 1e-6:
+        return None
+    moved = route + step.astype(np.int64)
+    if moved.min() < 0 or moved[:, 0].max() >= shape[0] or moved[:, 1].max() >= shape[1]:
+        return None
+    return moved
+
+
 class Nf1Planner:
     """NF1 behind the ``Planner`` protocol: C-space of the grid (a disc of the robot's inner radius plus
     ``margin_m``, ``cspace.free_cspace``), then ``plan``, then the route hysteresis (``keep_route``,
@@ -1263,19 +1284,7 @@ class Nf1Planner:
         self._held = None
 
     def _held_route(self, goal: NDArray[np.float64], shape: tuple[int, ...]) -> NDArray[np.int64] | None:
-        """The held route in this call's grid: the grid re-centres by whole cells, which moves the goal's
-        cell coordinates by the same whole numbers; any other change of the goal drops the route."""
-        if self._held is None:
-            return None
-        route, held_goal = self._held
-        shift = goal - held_goal
-        step = np.rint(shift)
-        if np.abs(shift - step).max() > 1e-6:
-            return None
-        moved = route + step.astype(np.int64)
-        if moved.min() < 0 or moved[:, 0].max() >= shape[0] or moved[:, 1].max() >= shape[1]:
-            return None
-        return moved
+        return shifted_route(self._held, goal, shape)
 
     def plan(
         self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike

@@ -146,6 +146,7 @@ from .nf1 import (
     nearest_true,
     path_direction,
     resolve_goal,
+    shifted_route,
 )
 from .nf1 import plan as nf1_plan
 
@@ -832,26 +833,6 @@ def _dense(waypoints: NDArray[np.float64]) -> NDArray[np.int64]:
     return np.concatenate([w[:1], *parts]).astype(np.int64)
 
 
-def _shifted(
-    held: tuple[NDArray[np.int64], NDArray[np.float64]] | None, goal: NDArray[np.float64],
-    shape: tuple[int, ...],
-) -> NDArray[np.int64] | None:
-    """A held route (its cells, the goal it led to) in this call's grid, as ``Nf1Planner``'s: the grid
-    re-centres by whole cells, which moves the goal's cell coordinates by the same whole numbers; any other
-    change of the goal, or a route leaving the grid, drops it."""
-    if held is None:
-        return None
-    route, held_goal = held
-    shift = goal - held_goal
-    step = np.rint(shift)
-    if np.abs(shift - step).max() > 1e-6:
-        return None
-    moved = route + step.astype(np.int64)
-    if moved.min() < 0 or moved[:, 0].max() >= shape[0] or moved[:, 1].max() >= shape[1]:
-        return None
-    return moved
-
-
 class TunnelPlanner:
     """The tunnel planner behind the ``nf1.Planner`` protocol: ``tunnel_plan`` on its own C-space (a disc of
     the robot's inner radius plus ``params.margin_m``), then, with ``params.hold_route``, NF1's route
@@ -897,7 +878,7 @@ class TunnelPlanner:
         new = _plan_on(f, clear, start_rc, goal_rc_float, cell_m=self.cell_m, radius_m=self.radius_m,
                        params=self.params, lookahead_m=self.lookahead_m)
         goal = np.asarray(goal_rc_float, dtype=np.float64).reshape(2)
-        held = _shifted(self._held, goal, f.shape)
+        held = shifted_route(self._held, goal, f.shape)
         self._held = None
         if not new.ok or not self.params.hold_route:
             return new
