@@ -103,7 +103,9 @@ class NavigationConfig:
         selector_hold_s: after a takeover, local navigation keeps the robot until the desired command's
             swept area has been clear for this long (and while that command moves); 0 is the paper's rule
             tick by tick ("as soon as the locally desired path is free"), which hands back for single
-            ticks round an obstacle (``selector.arbitrate``; **choice**: 0.6 s, three 5 Hz ticks).
+            ticks round an obstacle (``selector.arbitrate``; **choice**: 0.6 s, three 5 Hz ticks). After
+            a blind side turn first, the hold also lasts until local navigation made its way
+            (``selector.look_hold``), whatever this setting.
         local: local navigation ([navigation.local]).
         follow: path following ([navigation.follow]).
     """
@@ -158,6 +160,7 @@ class Config:
             selector=self.navigation.selector,
             selector_margin_m=self.navigation.selector_margin_m,
             cmd_timeout_s=self.navigation.cmd_timeout_s,
+            selector_hold_s=self.navigation.selector_hold_s,
             local=self.navigation.local,
             follow=self.navigation.follow,
         )

@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
-__all__ = ["ConfigError", "GndReplayError", "LogFormatError", "OutputError", "ScanMatchError"]
+__all__ = [
+    "FOLLOW_NEEDS_SUBGOALS", "ConfigError", "GndReplayError", "LogFormatError", "OutputError",
+    "ScanMatchError",
+]
+
+FOLLOW_NEEDS_SUBGOALS = "navigation mode follow needs subgoals"
+"""The one text of the "follow without subgoals" refusal (the stack, the replay, the scenario reader); each
+caller adds where the subgoals come from (``f"{FOLLOW_NEEDS_SUBGOALS}: give --subgoals FILE ..."``)."""
 
 
 class GndReplayError(Exception):

@@ -33,11 +33,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import __version__
 from .config import Config, config_to_dict, config_to_toml
-from .errors import ConfigError, LogFormatError
+from .errors import FOLLOW_NEEDS_SUBGOALS, ConfigError, LogFormatError
 from .evaluation import write_tum
 from .fsutil import check_output_dir, format_stamp, resolve_output_dir, staging_dir
 from .geometry import relative, wrap_angle
-from .io.subgoals import FOLLOW_NEEDS_SUBGOALS
 from .pipeline.model import RobotCentredGrid
 from .pipeline.stack import MODULES, NavigationStack, TickResult, warm_up
 from .pipeline.supervisor import Mode

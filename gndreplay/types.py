@@ -37,6 +37,7 @@ class Flag(enum.IntFlag):
     MODEL_OVER_BUDGET = enum.auto()
     PLANNER_OVER_BUDGET = enum.auto()
     REACTOR_OVER_BUDGET = enum.auto()
+    PLANNER_FALLBACK = enum.auto()  # the tunnel planner's node search failed; NF1's complete plan was used
 
     def names(self) -> list[str]:
         """Member names set in this value, in declaration order (stable for CSV output)."""

@@ -12,7 +12,16 @@ import pytest
 from gndreplay.config import PRESETS, Config
 from gndreplay.errors import ConfigError
 from gndreplay.geometry import compose
-from gndreplay.pipeline.selector import Takeover, arbitrate, intention_xy, select_mode, swept_area_occupied
+from gndreplay.pipeline.selector import (
+    Hold,
+    Takeover,
+    arbitrate,
+    intention_xy,
+    look_hold,
+    select_mode,
+    swept_area_occupied,
+    turned_first,
+)
 from gndreplay.pipeline.stack import NavigationStack, StackParams, TickResult, teleop_command
 from gndreplay.pipeline.supervisor import Mode, braking_time_s, footprint_signed_distance
 from gndreplay.sim.closedloop import arc_step
@@ -102,7 +111,7 @@ def _timeline(occupied: list[str], moving: list[bool], hold_s: float, dt_s: floa
     out = []
     for k, (occ, mov) in enumerate(zip(occupied, moving, strict=True)):
         active, reason, held = arbitrate("follow", occ, t_ns=round(k * dt_s * 1e9), held=held,
-                                         hold_s=hold_s, moving=mov)
+                                         hold=Hold(hold_s), moving=mov)
         assert (active == "local") == bool(reason)
         out.append(active)
     return out
@@ -129,10 +138,43 @@ def test_hold_never_delays_a_takeover_nor_moves_a_still_desired_command() -> Non
     assert _timeline(["", "", "scan"], [True] * 3, 10.0) == ["follow", "follow", "local"]
     assert _timeline(["scan", "", "", ""], [True, True, False, True], 10.0) == ["local", "local", "follow",
                                                                               "follow"]
-    active, reason, held = arbitrate("teleop", "", t_ns=5, held=Takeover(0), hold_s=1.0, moving=True)
+    active, reason, held = arbitrate("teleop", "", t_ns=5, held=Takeover(0), hold=Hold(1.0), moving=True)
     assert (active, held) == ("local", Takeover(0)) and reason.startswith("teleop: swept area clear")
-    assert arbitrate("teleop", "", t_ns=10**9, held=Takeover(0), hold_s=1.0, moving=True) == ("teleop", "",
-                                                                                            None)
+    assert arbitrate("teleop", "", t_ns=10**9, held=Takeover(0), hold=Hold(1.0), moving=True) == (
+        "teleop", "", None)
+
+
+def test_after_a_turn_first_local_navigation_keeps_the_robot_until_it_made_its_way() -> None:
+    """The blind side rule's turn first clears the desired command's sweep by itself: the hold then lasts
+    until the robot moved ``look_m`` from where it turned first or ``look_s`` passed, whichever first,
+    and an occupied tick in between keeps the turn first's place; a still desired command ends it too."""
+    hold = Hold(clear_s=0.5, look_m=1.0, look_s=10.0)
+    s = 10**9
+    held = turned_first(Takeover(0), (0.0, 0.0), 1 * s)
+    assert turned_first(None, (0.0, 0.0), s) is None  # no takeover in progress, nothing to hold
+
+    def at(t_s: float, x: float, occupied: str = "", moving: bool = True) -> tuple[str, str, Takeover | None]:
+        return arbitrate("follow", occupied, t_ns=round(t_s * 1e9), held=held, hold=hold, moving=moving,
+                         xy=(x, 0.0))
+
+    active, reason, kept = at(2.0, 0.5)  # clear for 2 s (past clear_s), moved 0.5 m of 1 m: held
+    assert (active, kept) == ("local", held) and reason == (
+        "follow: swept area clear since local navigation turned first (hold)")
+    assert at(2.0, 1.0) == ("follow", "", None)  # moved look_m
+    assert at(11.5, 0.2) == ("follow", "", None)  # look_s passed
+    assert at(2.0, 0.5, moving=False) == ("follow", "", None)
+    active, _, again = at(3.0, 0.5, occupied="grid")
+    assert active == "local" and again == Takeover(3 * s, held.look if held else None)
+    # without a turn first, the same clear tick hands back
+    assert arbitrate("follow", "", t_ns=2 * s, held=Takeover(0), hold=hold, moving=True, xy=(0.5, 0.0)) == (
+        "follow", "", None)
+
+
+def test_look_hold_is_a_footprint_diameter_or_one_rotate_turn() -> None:
+    for cfg in PRESETS.values():
+        h = look_hold(0.6, cfg.robot, cfg.supervisor)
+        assert h.clear_s == 0.6 and h.look_m == pytest.approx(2.0 * cfg.robot.outer_radius_m)
+        assert h.look_s * cfg.supervisor.rotate_w_frac * cfg.robot.wmax_radps == pytest.approx(2.0 * math.pi)
 
 
 def test_swept_area_reports_where_it_is_occupied() -> None:
@@ -325,3 +367,56 @@ def test_local_mode_alone_reaches_the_goal(name: str) -> None:
     done = [i for i, r in enumerate(results) if r.flags & Flag.GOAL_REACHED]
     assert done and results[done[0]].mode is Mode.GOAL
     assert min(clearance(world, q, cfg) for q in poses[: done[0] + 1]) > 0.0
+
+
+# ---- the hold and the follower's replan, in the stack --------------------------------------------------
+
+
+def _onsets(results: list[TickResult], mode: str) -> list[int]:
+    active = [r.active_mode for r in results]
+    return [k for k in range(1, len(active)) if active[k] == mode and active[k - 1] != mode]
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_the_stack_hands_back_only_after_the_hold(name: str) -> None:
+    """The box across the straight drive of ``test_teleop_resumes_once_the_obstacle_is_passed``: with
+    selector_hold_s every hand-back to the driver comes at least that long after the last tick whose sweep
+    was occupied, and the clear ticks in between are recorded as the hold; with 0 (the paper's rule) no
+    tick is held for the clear time, and the robot passes the box either way without touching it."""
+    cfg = PRESETS[name]
+    side = cfg.robot.width_m / 2 if cfg.robot.shape == "rectangle" else cfg.robot.radius_m
+    bx = cfg.robot.front_m + 2.5
+    world = np.vstack([ROOM, box(bx, side + 0.1, 0.4, 0.6)])
+    cmd = Command(0, cfg.robot.vmax_mps, 0.0)
+    for hold_s in (0.6, 0.0):
+        params = teleop_params(cfg, selector_hold_s=hold_s)
+        results, poses = drive(cfg, world, (0.0, 0.0, 0.0), cmd, 90, params)
+        assert min(clearance(world, q, cfg) for q in poses) > 0.0 and poses[-1][0] > bx + 0.5
+        backs = _onsets(results, "teleop")
+        assert backs, "teleoperation never won again"
+        held = [r for r in results if r.takeover_reason.endswith("s (hold)")]
+        assert bool(held) == (hold_s > 0.0)
+        for k in backs:
+            last = max(j for j in range(k) if "occupied" in results[j].takeover_reason)
+            assert results[k].t_ns - results[last].t_ns >= round(hold_s * 1e9)
+            assert all(results[j].active_mode == "local" for j in range(last, k))
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_the_follower_plans_anew_from_the_pose_after_a_takeover(name: str) -> None:
+    """The paper's Fig. 7: given control back, the path follower executes a newly planned trajectory from
+    where local navigation left the robot (its first point is the robot's position), not its old one
+    through the obstacle."""
+    cfg = PRESETS[name]
+    params = dataclasses.replace(cfg.stack_params(), nav_mode="follow")
+    subgoals = (Subgoal(3.0, 0.0, 0.0), Subgoal(7.0, 0.0, 0.0, "stop"))
+    world = np.vstack([ROOM, box(4.6, 0.15, 0.4, 0.5)])
+    results, poses = drive(cfg, world, (0.0, 0.0, 0.0), None, 400, params, subgoals)
+    backs = _onsets(results, "follow")
+    assert backs, "path following never won again"
+    for k in backs:
+        assert results[k].path_xy.shape[0] > 1
+        assert np.allclose(results[k].path_xy[0], poses[k][:2], atol=1e-9)
+        # while it had the robot before the takeover, the follower tracked a trajectory from elsewhere
+    first = _onsets(results, "local")[0]
+    assert not np.allclose(results[first - 1].path_xy[0], poses[first - 1][:2], atol=1e-3)

@@ -524,14 +524,19 @@ def test_follower_is_told_the_command_executed_last_tick() -> None:
     cfg = PRESETS["xr4000"]
     stack = NavigationStack(_multi(cfg, "follow"), (Subgoal(4.0, 0.0, 0.0, "stop"),))
     seen: list[tuple[float | None, float | None]] = []
+    overridden: list[bool] = []
     follower = stack._follower
     assert isinstance(follower, PathFollower)
     orig = follower.step
 
     def spy(pose: Pose2D, grid: object, *, v_mps: float | None = None,
-            w_radps: float | None = None) -> object:
+            w_radps: float | None = None, overridden: bool = False) -> object:
         seen.append((v_mps, w_radps))
-        return orig(pose, grid, v_mps=v_mps, w_radps=w_radps)  # type: ignore[arg-type]
+        told.append(overridden)
+        return orig(pose, grid, v_mps=v_mps, w_radps=w_radps,  # type: ignore[arg-type]
+                    overridden=overridden)
+
+    told = overridden
 
     follower.step = spy  # type: ignore[method-assign]
     pose, out = Pose2D(0.0, 0.0, 0.0), []
@@ -541,6 +546,8 @@ def test_follower_is_told_the_command_executed_last_tick() -> None:
         pose = Pose2D(pose.x + 0.05, pose.y, pose.theta)
     assert seen[0] == (0.0, 0.0)
     assert seen[1:] == [(r.v_mps, r.w_radps) for r in out[:-1]]
+    # ... and whether that command was its own (not taken over nor replaced by the reflexive loop)
+    assert told == [False] + [r.active_mode != "follow" or r.mode is not Mode.FOLLOW for r in out[:-1]]
     # a push off the trajectory: the new one starts with the executed curvature (w / v, within kappa_max)
     stack._v_out, stack._w_out = 0.4, 0.2
     t = 1_000_000_000 + 4 * 200_000_000
@@ -563,3 +570,51 @@ def test_a_counter_steering_driver_keeps_the_held_teleop_target() -> None:
     assert away is not None and _intention_changed(before, (0.0, 0.0, 0.5), held, away)
     back = intention_xy(-0.3, 0.0, 0.0, 1.0)  # reversing
     assert back is not None and _intention_changed(before, (-0.3, 0.0, 0.0), held, back)
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_a_goal_nd_reaches_through_a_door_the_planner_closes_is_not_held_unreachable(name: str) -> None:
+    """The goal in view 2 m beyond a door the planner's inflated C-space closes (narrower than twice its
+    inflation) but ND+ finds navigable (wider than the robot): the planner finds no path tick after tick,
+    yet ND+ to the goal chooses the goal's own region (HSGR / LSG), so GND's mND goes on and the goal is
+    never held unreachable (no ROTATE, no stop). The other side of the rule, a goal hidden inside a closed
+    box while ND+ finds gaps round it, is ``test_goal_in_enclosed_box_is_held_unreachable``."""
+    cfg = PRESETS[name]
+    params = dataclasses.replace(
+        cfg.stack_params(), supervisor=dataclasses.replace(cfg.supervisor, unreachable_ticks=3)
+    )
+    robot = cfg.robot
+    nd_gap = robot.width_m if robot.shape == "rectangle" else 2.0 * robot.radius_m
+    door = 0.5 * (nd_gap + 2.0 * (robot.inner_radius_m + params.cspace_margin_m))
+    sensor = Pose2D(robot.laser_x_m, robot.laser_y_m, robot.laser_theta_rad)
+    x_wall = robot.front_m + 1.0
+    room = polygon([(-2.0, -2.5), (x_wall + 3.0, -2.5), (x_wall + 3.0, 2.5), (-2.0, 2.5)])  # all in view
+    world = np.vstack([room, wall(x_wall, -2.5, x_wall, -door / 2), wall(x_wall, door / 2, x_wall, 2.5)])
+    stack = NavigationStack(params)
+    pose, results = Pose2D(0.0, 0.0, 0.0), []
+    for i in range(12):  # the robot stands still: the same view every tick
+        t = 1_000_000_000 + i * 200_000_000
+        tick = Tick(index=i, t_ns=t, scan=scan_of(world, pose, sensor, t, AROUND), odom=pose)
+        results.append(stack.step(tick, pose, (x_wall + 2.0, 0.0)))
+    assert all(r.flags & Flag.PLANNER_NO_PATH for r in results), "the door is open to the planner"
+    assert all(r.mode is Mode.MND and r.situation in (Situation.HSGR, Situation.LSG) for r in results)
+    assert all(r.v_mps > 0.0 for r in results)
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_tunnel_fallback_is_flagged_per_tick(name: str) -> None:
+    """A tick whose plan came from the tunnel planner's complete fallback (NF1 on the same C-space) says so
+    in its flags; with the paper's node search alone the same budget is a planner time-out, unflagged."""
+    import dataclasses
+
+    from gndreplay.pipeline.tunnel import TunnelParams
+
+    cfg = PRESETS[name]
+    world = np.vstack([ROOM, polygon([(1.5, -1.0), (1.7, -1.0), (1.7, 1.0), (1.5, 1.0)])])
+    flags = []
+    for complete in (True, False):
+        base = tunnel_params(cfg)
+        params = dataclasses.replace(base, tunnel=TunnelParams(max_expansions=1, complete=complete))
+        flags.append(run(cfg, world, Pose2D(0, 0, 0), (4.0, 0.0), params=params)[-1].flags)
+    assert flags[0] & Flag.PLANNER_FALLBACK and not flags[0] & Flag.PLANNER_TIMEOUT
+    assert flags[1] & Flag.PLANNER_TIMEOUT and not flags[1] & Flag.PLANNER_FALLBACK

@@ -21,6 +21,7 @@ from gndreplay.pipeline.supervisor import (
     rotate_command,
     safe_command,
     safety_reach_m,
+    straight_min_m,
     swept_collision,
     swept_touch,
     unconfirmed_cells,
@@ -460,3 +461,54 @@ def test_unconfirmed_cells_keeps_exactly_the_cells_without_a_hit(n_side: int) ->
     hits_far = cells[~confirmed] + 0.1  # between cells, 0.14 m from any centre
     kept = unconfirmed_cells(cells, np.vstack([hits_in, hits_far]), CELL)
     assert kept.tolist() == cells[~confirmed].tolist()
+
+
+def test_trap_detector_counts_rocking_forward_and_back_without_turning() -> None:
+    """v flipping sign (|v| >= trap_w_frac * vmax) with w = 0 while the robot stays put is dithering too
+    (a chair wedged at a wall, rocking); the same rocking with progress, steady driving, creeping below the
+    threshold, or reversals short of trap_count are not."""
+    params = SupervisorParams(trap_window=20, trap_count=6)
+    r = WHEELCHAIR_ROBOT
+    v = 0.2 * r.vmax_mps
+
+    def rock(v_of: object, pose_of: object, n: int = 20) -> list[bool]:
+        det = TrapDetector(params, r.wmax_radps, r.vmax_mps)
+        return [det.update(Mode.MND, 0.0, pose_of(i), v_of(i)) for i in range(n)]  # type: ignore[operator]
+
+    seen = rock(lambda i: v * (-1) ** (i // 2), lambda i: (1.0, 2.0, 0.3))
+    assert seen[-1] and not any(seen[:-1])
+    assert not any(rock(lambda i: v * (-1) ** (i // 2), lambda i: (0.02 * i, 0.0, 0.0), 40))  # progress
+    assert not any(rock(lambda i: v, lambda i: (1.0, 2.0, 0.3), 40))  # one way (pushing at nothing)
+    creep = 0.05 * r.vmax_mps
+    assert not any(rock(lambda i: creep * (-1) ** i, lambda i: (1.0, 2.0, 0.3), 40))
+    assert not any(rock(lambda i: v * (-1) ** (i // 4), lambda i: (1.0, 2.0, 0.3), 20))  # 4 reversals
+    # turn and travel reversals add up: 3 of each in a window is the same stall
+    det = TrapDetector(params, r.wmax_radps, r.vmax_mps)
+    mixed = [det.update(Mode.MND, 0.3 * (-1) ** (i // 3) if i < 12 else 0.0, (1.0, 2.0, 0.3),
+                        v * (-1) ** (i // 2) if i >= 12 else 0.0) for i in range(20)]
+    assert mixed[-1]
+
+
+def test_straight_on_replaces_a_turn_only_with_a_full_speed_stop_distance_free() -> None:
+    """The jamb cells beside the chair of ``test_chair_between_jamb_cells_goes_straight_instead_of_turning``
+    and a wall across its way: at 0.05 m/s the command's own braking horizon is about 2 cm, so straight on
+    would pass a wall 10 cm ahead, tick after tick, until the chair is wedged there. Straight on must be
+    free for ``straight_min_m`` (the full-speed stop distance): with the wall 10 cm ahead it is not (the
+    chair stops), with the wall beyond that distance it is."""
+    r = WHEELCHAIR_ROBOT
+    assert straight_min_m(r, P) == pytest.approx(r.vmax_mps * braking_time_s(r.vmax_mps, 0.0, 0.0, r, P))
+    xs = np.arange(0.0, 0.1, 0.05) + 0.125
+    side = r.width_m / 2.0 + 0.04
+    jambs = np.vstack([np.column_stack([xs, np.full(xs.size, side)]),
+                       np.column_stack([xs, np.full(xs.size, -side)])])
+    ys = np.linspace(-0.3, 0.3, 13)
+
+    def ahead(gap_m: float) -> np.ndarray:
+        return np.column_stack([np.full(ys.size, r.front_m + gap_m), ys])
+
+    near = safe_command(0.05, 0.0, 0.05, ahead(0.1), jambs, r, P, cell_m=0.05)
+    assert near.rule is not None and near.v_mps <= 0.0  # no forward motion towards the wall
+    far = safe_command(0.05, 0.0, 0.05, ahead(straight_min_m(r, P) + 0.1), jambs, r, P, cell_m=0.05)
+    assert far.rule is Mode.SAFE_TURN and far.w_radps == 0.0 and far.v_mps == 0.05
+    # the wall 10 cm ahead is not touched within the slow command's own horizon: only the new rule stops it
+    assert not swept_collision(ahead(0.1), 0.05, 0.0, r, P)

@@ -26,7 +26,7 @@ from ..types import Subgoal, SubgoalKind
 from .base import special_file_kind
 
 __all__ = [
-    "FOLLOW_NEEDS_SUBGOALS", "MAX_ABS_SUBGOAL_M", "MAX_ABS_THETA_RAD", "MAX_SUBGOAL_FILE_BYTES",
+    "MAX_ABS_SUBGOAL_M", "MAX_ABS_THETA_RAD", "MAX_SUBGOAL_FILE_BYTES",
     "check_small_file", "load_subgoals", "subgoals_from_rows",
 ]
 
@@ -36,10 +36,6 @@ MAX_ABS_THETA_RAD = 1e3
 """Largest |theta| [rad] accepted (a heading beyond it is a typo, and would lose precision when wrapped)."""
 MAX_SUBGOAL_FILE_BYTES = 1 << 20
 """Largest subgoal file read (1 MB: tens of thousands of subgoals)."""
-
-FOLLOW_NEEDS_SUBGOALS = "navigation mode follow needs subgoals"
-"""The one text of the "follow without subgoals" refusal; each caller adds where the subgoals come from
-(``f"{FOLLOW_NEEDS_SUBGOALS}: give --subgoals FILE ..."``)."""
 
 _KINDS: tuple[str, ...] = get_args(SubgoalKind)
 

@@ -13,9 +13,11 @@ navigation turns the robot away, the desired command from the new heading sweeps
 turns it back in, and the timeline shows many one-tick takeovers round one obstacle where the paper's
 Fig. 7 shows three local episodes. So we read "free" as "free for a while" (the paper's "within certain
 tolerances"): local navigation keeps the robot until the desired command's swept area has been clear for
-``hold_s`` (**choice**, ``navigation.selector_hold_s``). A takeover still starts on the very tick the area
-is occupied (safety is not delayed), and a desired command that stands still (the driver let go, the
-follower stopped) ends the hold at once: a hold never moves a robot its driver or follower wants still.
+``hold.clear_s`` (**choice**, ``navigation.selector_hold_s``), and, after the reflexive loop made local
+navigation turn first to look where it goes (the blind side rule), until it has made its way (``Hold``).
+A takeover still starts on the very tick the area is occupied (safety is not delayed), and a desired
+command that stands still (the driver let go, the follower stopped) ends the hold at once: a hold never
+moves a robot its driver or follower wants still.
 (The path follower itself plans anew from the robot's pose after every tick it was overridden,
 ``PathFollower.step``: steering back onto its old trajectory, through the obstacle, was the main source of
 the alternation.)
@@ -24,7 +26,7 @@ the alternation.)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,7 +34,10 @@ from numpy.typing import NDArray
 from ..robot import RobotConfig
 from .supervisor import SupervisorParams, swept_touch, unconfirmed_cells
 
-__all__ = ["Takeover", "arbitrate", "intention_xy", "select_mode", "swept_area_occupied"]
+__all__ = [
+    "Hold", "Takeover", "arbitrate", "intention_xy", "look_hold", "select_mode", "swept_area_occupied",
+    "turned_first",
+]
 
 
 def swept_area_occupied(
@@ -91,30 +96,82 @@ class Takeover:
 
     Attributes:
         last_occupied_ns: the last tick at which the desired command's swept area was occupied.
+        look: where and when (x, y, t_ns; any fixed frame) the reflexive loop last replaced local
+            navigation's command by the blind side rule's turn first (``turned_first``); None: not since
+            the takeover began.
     """
 
     last_occupied_ns: int
+    look: tuple[float, float, int] | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Hold:
+    """How long local navigation keeps the robot after a takeover (``arbitrate``).
+
+    Attributes:
+        clear_s: until the desired command's swept area has been clear this long
+            (``navigation.selector_hold_s``; 0: the paper's rule, tick by tick).
+        look_m, look_s: after a turn first, until local navigation has moved ``look_m`` from where it
+            last turned first, or ``look_s`` has passed since (``look_hold``).
+    """
+
+    clear_s: float = 0.0
+    look_m: float = 0.0
+    look_s: float = 0.0
+
+
+def look_hold(clear_s: float, robot: RobotConfig, params: SupervisorParams) -> Hold:
+    """The hold with the turn first's part set from the robot: one footprint diameter (2 * outer radius)
+    or the time of one full ROTATE turn (**choice**: local navigation has then either passed the obstacle
+    or found no way, and the selector decides again)."""
+    return Hold(clear_s, 2.0 * robot.outer_radius_m,
+                2.0 * math.pi / (params.rotate_w_frac * robot.wmax_radps))
+
+
+def turned_first(held: Takeover | None, xy: tuple[float, float], t_ns: int) -> Takeover | None:
+    """The takeover after the reflexive loop replaced local navigation's command by the blind side rule's
+    turn first at ``xy`` and ``t_ns`` (none in progress: still none)."""
+    return None if held is None else replace(held, look=(xy[0], xy[1], t_ns))
 
 
 def select_mode(desired: str, occupied: str) -> tuple[str, str]:
     """(active mode, takeover reason) by the paper's rule, tick by tick: the desired mode unless its swept
     area is occupied (``occupied`` as ``swept_area_occupied`` returns it), then "local" with the reason,
-    e.g. "teleop: swept area occupied (scan)". ``arbitrate`` with ``hold_s = 0``."""
-    active, reason, _ = arbitrate(desired, occupied, t_ns=0, held=None, hold_s=0.0, moving=True)
+    e.g. "teleop: swept area occupied (scan)". ``arbitrate`` without a hold."""
+    active, reason, _ = arbitrate(desired, occupied, t_ns=0, held=None, hold=Hold(), moving=True)
     return active, reason
 
 
-def arbitrate(desired: str, occupied: str, *, t_ns: int, held: Takeover | None, hold_s: float,
-              moving: bool) -> tuple[str, str, Takeover | None]:
-    """(active mode, takeover reason, takeover to pass back next tick) with a hold on handing back.
+def arbitrate(desired: str, occupied: str, *, t_ns: int, held: Takeover | None, hold: Hold, moving: bool,
+              xy: tuple[float, float] = (0.0, 0.0)) -> tuple[str, str, Takeover | None]:
+    """(active mode, takeover reason, takeover to pass back next tick): the one rule for handing back.
 
-    ``occupied`` (``swept_area_occupied``): "local" with "<desired>: swept area occupied (<where>)", and the
-    takeover's last occupied time set to ``t_ns``. Clear: local navigation keeps the robot, reason
-    "<desired>: swept area clear for less than <hold_s> s (hold)", while a takeover is ``held``, the
-    desired command is ``moving`` and ``t_ns`` is less than ``hold_s`` after the last occupied tick; else
-    the desired mode, no reason, no takeover. ``hold_s = 0`` is the paper's rule tick by tick. Pure."""
+    ``occupied`` (``swept_area_occupied``): "local" with "<desired>: swept area occupied (<where>)", the
+    takeover's last occupied time set to ``t_ns``. Clear: while a takeover is ``held`` and the desired
+    command is ``moving``, local navigation keeps the robot
+
+    - until ``hold.clear_s`` after the last occupied tick, reason "<desired>: swept area clear for less
+      than <clear_s> s (hold)";
+    - after a turn first (``turned_first``), until the robot (at ``xy``, the frame of ``turned_first``'s)
+      has moved ``hold.look_m`` from where it turned first or ``hold.look_s`` has passed, reason
+      "<desired>: swept area clear since local navigation turned first (hold)". The turn itself clears
+      the desired command's swept area (the robot now faces away from the obstacle); handing back then
+      turns the robot back into it, and the takeover begins again, turn after turn (measured:
+      follow_unknown_obstacle on the XR4000 timed out).
+
+    Else the desired mode, no reason, no takeover. A desired command that stands still (the driver let
+    go, the follower stopped) ends any hold: a hold never moves a robot its driver or follower wants still.
+    ``Hold()`` is the paper's rule tick by tick. Pure."""
     if occupied:
-        return "local", f"{desired}: swept area occupied ({occupied})", Takeover(t_ns)
-    if held is not None and moving and t_ns - held.last_occupied_ns < round(hold_s * 1e9):
-        return "local", f"{desired}: swept area clear for less than {hold_s:g} s (hold)", held
+        return "local", f"{desired}: swept area occupied ({occupied})", Takeover(
+            t_ns, None if held is None else held.look)
+    if held is None or not moving:
+        return desired, "", None
+    if t_ns - held.last_occupied_ns < round(hold.clear_s * 1e9):
+        return "local", f"{desired}: swept area clear for less than {hold.clear_s:g} s (hold)", held
+    if held.look is not None:
+        x, y, t_look = held.look
+        if math.hypot(xy[0] - x, xy[1] - y) < hold.look_m and t_ns - t_look <= round(hold.look_s * 1e9):
+            return "local", f"{desired}: swept area clear since local navigation turned first (hold)", held
     return desired, "", None

@@ -19,7 +19,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import ConfigError
+from ..errors import FOLLOW_NEEDS_SUBGOALS, ConfigError
 from ..geometry import transform_points, wrap_angle
 from ..robot import RobotConfig
 from ..types import Command, Flag, Pose2D, Scan, Subgoal, Tick
@@ -29,7 +29,7 @@ from .local import LocalParams, local_command, polar_map, warm_up_local
 from .model import OCCUPIED, UNKNOWN, GridParams, RobotCentredGrid
 from .nd import NdMemory, NdParams, NdResult, Situation, nd_step
 from .nf1 import Nf1Params, Nf1Planner, Planner, PlanResult, reaches_border
-from .selector import intention_xy, select_mode, swept_area_occupied
+from .selector import Takeover, arbitrate, intention_xy, look_hold, swept_area_occupied, turned_first
 from .supervisor import (
     Mode,
     SafeCommand,
@@ -43,7 +43,7 @@ from .supervisor import (
     safe_command,
     safety_reach_m,
 )
-from .tunnel import TunnelParams, TunnelPlanner, warm_up_planners
+from .tunnel import TunnelParams, TunnelPlanner, TunnelResult, warm_up_planners
 
 __all__ = [
     "MODULES", "NAV_MODES", "PLANNERS", "NavMode", "NavigationStack", "StackParams", "TickResult",
@@ -68,8 +68,8 @@ class StackParams:
     ``planner_kind`` chooses the planner ("nf1": ``planner`` settings and the [cspace] margin; "tunnel":
     ``tunnel`` settings, its own margin); ``planner.lookahead_m`` places the reactor's target for both,
     and local navigation's target ahead of a teleoperation command when the mode selector takes over.
-    ``nav_mode``, ``selector``, ``selector_margin_m``, ``cmd_timeout_s``, ``local`` and ``follow``: the
-    multi-loop architecture (``NavigationConfig``; see ``NavigationStack``).
+    ``nav_mode``, ``selector``, ``selector_margin_m``, ``cmd_timeout_s``, ``selector_hold_s``, ``local``
+    and ``follow``: the multi-loop architecture (``NavigationConfig``; see ``NavigationStack``).
     """
 
     robot: RobotConfig
@@ -87,6 +87,7 @@ class StackParams:
     follow: FollowParams = FollowParams()
     selector_margin_m: float = 0.05
     cmd_timeout_s: float = 0.5
+    selector_hold_s: float = 0.6
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -144,7 +145,7 @@ def make_planner(params: StackParams) -> Planner:
     if p.planner_kind == "tunnel":
         return TunnelPlanner(
             p.tunnel, cell_m=p.grid.cell_m, inner_radius_m=p.robot.inner_radius_m,
-            unknown_is_free=p.unknown_is_free,
+            unknown_is_free=p.unknown_is_free, lookahead_m=p.planner.lookahead_m, hysteresis=p.planner,
         )
     if p.planner_kind == "nf1":
         return Nf1Planner(
@@ -185,13 +186,15 @@ class NavigationStack:
     cell (within ``selector_margin_m``), local navigation wins the tick and steers towards the desired
     mode's intention (path following: the first point of its trajectory beyond its look-ahead point that
     is free in C-space, ``PathFollower.local_target``; teleoperation: ``_teleop_target``, a point where the
-    driver's command heads, fixed in the world while the takeover lasts); the desired mode wins again on
-    the first tick its
-    area is clear. Whatever won then goes through the reflexive loop (stale data, ``safe_command``, trap
-    escape), as in GND, except that a teleop command is never replaced by a trap escape (a driver's
-    dithering is the driver's). ``selector=False`` is the driver alone, for comparison: the desired mode's
-    command goes out unchanged, with no takeover and no reflexive override (GND mode ignores it; local
-    mode has no selector, its reflexive loop always runs).
+    driver's command heads, fixed in the world while the takeover lasts). The desired mode wins again once
+    its swept area has been clear for selector_hold_s (0: the first clear tick, the paper's rule) and,
+    if the reflexive loop made local navigation turn first to look where it goes, once local navigation
+    has made its way (``selector.arbitrate``: one rule for handing back); the path follower, told it was
+    overridden, then plans a new trajectory from the robot's pose. Whatever won then goes through the
+    reflexive loop (stale data, ``safe_command``, trap escape), as in GND, except that a teleop command
+    is never replaced by a trap escape (a driver's dithering is the driver's). ``selector=False`` is the
+    driver alone, for comparison: the desired mode's command goes out unchanged, with no takeover and no
+    reflexive override (GND mode ignores it; local mode has no selector, its reflexive loop always runs).
     """
 
     def __init__(self, params: StackParams, subgoals: Sequence[Subgoal] = ()) -> None:
@@ -202,7 +205,7 @@ class NavigationStack:
         self._follower: PathFollower | None = None
         if params.nav_mode == "follow":
             if not subgoals:
-                raise ConfigError("navigation.mode = \"follow\" needs subgoals (none given)")
+                raise ConfigError(f"{FOLLOW_NEEDS_SUBGOALS}: none given (navigation.mode = \"follow\")")
             self._follower = PathFollower(
                 subgoals, params.follow, params.robot,
                 inflate_m=params.robot.inner_radius_m + params.cspace_margin_m,
@@ -210,11 +213,13 @@ class NavigationStack:
             )
         self.grid = RobotCentredGrid(params.grid)
         self._planner = make_planner(params)
-        self._trap = TrapDetector(params.supervisor, params.robot.wmax_radps)
+        self._trap = TrapDetector(params.supervisor, params.robot.wmax_radps, params.robot.vmax_mps)
         self._escape_left = 0
         self._escape_v = 0.0
         self._prev_t_ns: int | None = None
         self._no_path = 0  # consecutive PLANNER_NO_PATH ticks
+        # the planner's no path to a goal beyond the grid means no free border cell is reachable
+        self._no_path_is_no_border = params.planner_kind == "nf1" and params.planner.frontier_goal
         self._looked_rad = 0.0  # turned in place since the goal was held unreachable
         self._prev_theta: float | None = None
         self._rotate_sign = 0.0  # turn direction of the previous tick's ROTATE (0: not rotating)
@@ -222,9 +227,8 @@ class NavigationStack:
         self._w_out = 0.0  # ... and its turn rate (the start curvature of a regenerated trajectory)
         self._local_side = 0  # the side the last local strategy command kept its wall / obstacle on
         self._looking = False  # the last reflexive check replaced the command by the blind side's turn first
-        self._look_hold: tuple[float, float, int] | None = None  # where and when (x, y, t_ns) local
-        # navigation's command was last replaced by that turn first: local navigation keeps the robot until
-        # it has made its way (``_hold_for_look``)
+        self._takeover: Takeover | None = None  # the mode selector's takeover in progress (its hold)
+        self._follow_overridden = False  # the last command out was not the path follower's own
         self._intent: tuple[NDArray[np.float64], tuple[float, float, float]] | None = None  # held teleop
         # target (world) of the takeover in progress, and the driver's command it was aimed from
         # ND+'s last choice per user ("gnd": GND's reactor, "local": local navigation): the sub-goal's and
@@ -269,6 +273,8 @@ class NavigationStack:
         over = budget_flags({k: v / 1e3 for k, v in timings.items()}, p.supervisor)
         flags |= over
         planner_ok = planned.ok
+        if isinstance(planned, TunnelResult) and planned.fallback:
+            flags |= Flag.PLANNER_FALLBACK
         if p.supervisor.enforce_budgets and over & Flag.PLANNER_OVER_BUDGET:
             planner_ok = False
             flags |= Flag.PLANNER_TIMEOUT
@@ -283,7 +289,8 @@ class NavigationStack:
             nd = self._nd("gnd", pose, obstacles, target)
         v, vy, w = nd.v_mps, nd.vy_mps, nd.w_radps
         goal_rel = _to_robot(pose, goal[None, :])[0]
-        unreachable = self._unreachable(planned, pose)
+        # ND+ to the goal itself (the planner failed) chose the goal's own region: a way to it in view
+        unreachable = self._unreachable(planned, pose, nd.region is not None and nd.memory is None)
         if unreachable:
             mode = Mode.ROTATE
         if mode is Mode.ROTATE:
@@ -341,7 +348,8 @@ class NavigationStack:
             intention = intention_xy(v, vy, w, p.planner.lookahead_m)
         elif desired == "follow":
             assert self._follower is not None  # built in __init__ for this mode
-            fc = self._follower.step(pose, self.grid, v_mps=self._v_out, w_radps=self._w_out)
+            fc = self._follower.step(pose, self.grid, v_mps=self._v_out, w_radps=self._w_out,
+                                     overridden=self._follow_overridden)
             v, w = fc.v_mps, fc.w_radps
             subgoal_index, done, path_xy = fc.subgoal_index, fc.done, fc.trajectory_xy
         timings["planner"] = _ms(t0)
@@ -357,12 +365,10 @@ class NavigationStack:
             assert points is not None
             where = swept_area_occupied(v, vy, w, points[1], points[2], p.robot, p.supervisor,
                                         cell_m=p.grid.cell_m, margin_m=p.selector_margin_m)
-            active, why = select_mode(desired, where)
-            if active == desired and self._look_hold is not None:
-                # local navigation turned to look where it is going (the blind side rule's turn first);
-                # handing back now, because the turn cleared the desired command's swept area, would
-                # turn the robot back and the takeover would begin again, turn after turn
-                active, why = "local", f"{desired}: swept area occupied until local navigation turned first"
+            active, why, self._takeover = arbitrate(
+                desired, where, t_ns=tick.t_ns, held=self._takeover,
+                hold=look_hold(p.selector_hold_s, p.robot, p.supervisor),
+                moving=v != 0.0 or vy != 0.0 or w != 0.0, xy=(pose.x, pose.y))
             reason = why or reason
         if done:
             mode, v, vy, w = Mode.GOAL, 0.0, 0.0, 0.0
@@ -387,9 +393,13 @@ class NavigationStack:
             # begun under local navigation ends when the driver has the robot again)
             mode, v, vy, w, flags = self._reflexive(tick, pose, mode, v, vy, w, flags, points=points,
                                                     trap=active != "teleop")
-        self._hold_for_look(tick, pose, active)
+        if active != "local":
+            self._takeover = None
+        elif self._looking:
+            self._takeover = turned_first(self._takeover, (pose.x, pose.y), tick.t_ns)
         self._rotate_sign = (1.0 if w > 0.0 else -1.0) if rotating and w != 0.0 else 0.0
         self._v_out, self._w_out = _finite(v), _finite(w)
+        self._follow_overridden = active != "follow" or mode is not Mode.FOLLOW
         return TickResult(
             t_ns=tick.t_ns,
             pose_corrected=pose,
@@ -408,29 +418,6 @@ class NavigationStack:
             takeover_reason=reason,
             subgoal_index=subgoal_index,
         )
-
-    def _hold_for_look(self, tick: Tick, pose: Pose2D, active: str) -> None:
-        """Track the hand-back hold of the blind side rule's turn first under the mode selector.
-
-        When the reflexive loop replaces local navigation's command by a turn in place towards where it was
-        going (``supervisor.safe_command``), the turn itself clears the desired module's swept area (the
-        robot now faces away from the obstacle), and the selector would hand back at once: the path
-        follower turns back to its path, meets the obstacle, local navigation takes over and turns again,
-        over and over (measured: follow_unknown_obstacle on the XR4000 timed out). So local navigation keeps
-        the robot from its turn first until it has moved a footprint diameter (2 * outer radius) from
-        where it last turned first, or for at most the time of one full ROTATE turn (**choice**: local
-        navigation has then either passed the obstacle or found no way; the selector decides again)."""
-        p = self.params
-        if active != "local":
-            self._look_hold = None
-        elif self._looking:
-            self._look_hold = (pose.x, pose.y, tick.t_ns)
-        elif self._look_hold is not None:
-            x, y, t_ns = self._look_hold
-            max_s = 2.0 * math.pi / (p.supervisor.rotate_w_frac * p.robot.wmax_radps)
-            if (math.hypot(pose.x - x, pose.y - y) >= 2.0 * p.robot.outer_radius_m
-                    or (tick.t_ns - t_ns) / 1e9 > max_s):
-                self._look_hold = None
 
     def _teleop_target(self, pose: Pose2D, cmd: tuple[float, float, float]) -> NDArray[np.float64] | None:
         """Local navigation's target (robot frame) while it has taken over from the driver.
@@ -507,15 +494,22 @@ class NavigationStack:
         w = rotate_command(math.atan2(goal_rel[1], goal_rel[0]), p.robot, p.supervisor)
         return abs(w) * self._rotate_sign if self._rotate_sign else w
 
-    def _unreachable(self, planned: PlanResult, pose: Pose2D) -> bool:
-        """True once the planner has found no path (PLANNER_NO_PATH) to a goal inside the grid for
-        unreachable_ticks in a row: the goal is held unreachable (GND: mND did not connect it either;
-        ROTATE, one full turn, then stop). Any plan ends it. A goal beyond the grid only when the robot
-        cannot reach the grid border at all: no path to the goal's border cell alone says nothing about
-        the goal (GND's mND goes on). Tracks how far the robot turned since, from the corrected pose."""
+    def _unreachable(self, planned: PlanResult, pose: Pose2D, nd_to_goal: bool) -> bool:
+        """True once, for unreachable_ticks in a row, the planner has found no path (PLANNER_NO_PATH) to a
+        goal inside the grid *and* ND+ towards the goal itself did not connect it either (``nd_to_goal``
+        False: no region, or only a region through a gap elsewhere, the goal hidden behind obstacles): the
+        goal is held unreachable (GND: mND did not connect it; ROTATE, one full turn, then stop). Any plan
+        ends it, and so does ND+ choosing the goal's own region (the goal in view with a navigable way to
+        it, e.g. between stale obstacle cells the planner's inflated C-space closes): GND's mND then goes
+        on. Not just "ND+ has a region": ND+ finds some gap round almost any obstacle, so a goal inside a
+        closed box would never be held unreachable. A goal beyond the grid only when the robot cannot reach
+        the grid border at all: no path to the goal's border cell alone says nothing about the goal (NF1
+        with ``frontier_goal`` plans to the best reachable free border cell, so its no path already says
+        so; the tunnel planner plans to one border cell: ``_reaches_border``). Tracks how far the robot
+        turned since, from the corrected pose."""
         prev, self._prev_theta = self._prev_theta, pose.theta
-        if planned.ok or not planned.flag & Flag.PLANNER_NO_PATH or (
-            planned.goal_projected and self._reaches_border(pose)
+        if planned.ok or nd_to_goal or not planned.flag & Flag.PLANNER_NO_PATH or (
+            planned.goal_projected and not self._no_path_is_no_border and self._reaches_border(pose)
         ):
             self._no_path, self._looked_rad = 0, 0.0
             return False
@@ -528,7 +522,7 @@ class NavigationStack:
 
     def _reaches_border(self, pose: Pose2D) -> bool:
         """The robot's free region in the NF1 C-space of the grid touches the grid border (only asked on
-        ticks without a path to a goal beyond the grid)."""
+        ticks without a path to a goal beyond the grid, of a planner that plans to one border cell)."""
         p = self.params
         free = free_cspace(self.grid.cells, cell_m=p.grid.cell_m, inflate_m=p.robot.inner_radius_m
                            + p.cspace_margin_m, unknown_is_free=p.unknown_is_free)
@@ -626,7 +620,7 @@ class NavigationStack:
                 mode, v, vy, w = safe.rule, safe.v_mps, safe.vy_mps, safe.w_radps
                 if safe.rule is Mode.EMERGENCY:
                     flags |= Flag.EMERGENCY_STOP
-        if trap and self._trap.update(mode, w, (pose.x, pose.y, pose.theta)) and not unreachable:
+        if trap and self._trap.update(mode, w, (pose.x, pose.y, pose.theta), v) and not unreachable:
             flags |= Flag.TRAP_DETECTED
             v_esc, possible = escape_command(raw, p.robot, p.supervisor, cell_m=cell_m,
                                              not_free_xy=partial(self._not_free_points, pose))

@@ -54,6 +54,7 @@ __all__ = [
     "rotate_command",
     "safe_command",
     "safety_reach_m",
+    "straight_min_m",
     "swept_collision",
     "swept_touch",
     "unconfirmed_cells",
@@ -103,8 +104,9 @@ class SupervisorParams:
         trap_progress_m, trap_turn_rad: progress that clears a dithering window: the robot moved at least
             this far, or turned at least this much net, between the window's first and last tick
             (**choice**: 0.2 m and 45 deg, the issue's stall definition).
-        trap_w_frac: a tick counts as turning for the dithering rule when |w| >= this fraction of wmax
-            (**choice**: 0.1; smaller steering corrections are not dithering).
+        trap_w_frac: a tick counts as turning for the dithering rule when |w| >= this fraction of wmax,
+            as driving when |v| >= this fraction of vmax (**choice**: 0.1; smaller steering corrections
+            and creeping are not dithering).
         unreachable_ticks: consecutive ticks of PLANNER_NO_PATH to a goal inside the grid (the goal's free
             region and the robot's are not connected in the model) after which the goal is held
             unreachable: GND's ROTATE for one full turn in place (to look around), then stop, until a plan
@@ -195,6 +197,22 @@ def safety_reach_m(robot: RobotConfig, params: SupervisorParams, cell_m: float) 
     speed = math.hypot(robot.vmax_mps, robot.vmax_mps if robot.drive == "holonomic" else 0.0)
     t = braking_time_s(speed, 0.0, robot.wmax_radps, robot, params)
     return robot.outer_radius_m + speed * t + params.emergency_margin_m + cell_m
+
+
+def straight_min_m(robot: RobotConfig, params: SupervisorParams) -> float:
+    """Least free travel [m] for ``safe_command``'s "same speed, straight on" replacement of a turning
+    command: the robot's stop distance from full speed (vmax over ``braking_time_s``; 0.18 m for the
+    wheelchair preset, 0.23 m for the XR4000's).
+
+    **Choice**, and why not the command's own horizon: the replacement is not a one-off. The reactor asks
+    for its turn again next tick, is refused again, and the robot goes on straight, tick after tick. A
+    slow command's own braking horizon is tiny (2 cm at 0.05 m/s), so a chair heading into a wall (the
+    reactor turning away, the turn swinging a corner into stale cells beside it) crept on straight until
+    it was wedged at the wall (gnd_exp2_people_room). Straight on is the right replacement where it is a
+    passage (a door whose jambs the chair passes parallel): that stays free over a full-speed stop
+    distance, a wall ahead does not. Derived from the robot's limits rather than a constant: it is the
+    distance any command the reactor may send next must be able to stop in."""
+    return robot.vmax_mps * braking_time_s(robot.vmax_mps, 0.0, 0.0, robot, params)
 
 
 _SWEEP_STEP_M = 0.02  # largest displacement of any footprint point between two checked poses [m]
@@ -357,7 +375,8 @@ def safe_command(
     frame); cell centres are grown by half a cell (``swept_touch``). Replacements, first admissible
     wins: the same arc at 1/2 then 1/4 of the speed (SAFE_SLOW: a shorter braking horizon); the same speed
     straight on (a chair in a door: any turn swings a side towards a jamb it passes parallel), then the
-    other turn direction, on the same arc then in place (SAFE_TURN); for a turning command, a straight
+    other turn direction, on the same arc then in place (SAFE_TURN; straight on only if it is also free
+    for ``straight_min_m``, see there); for a turning command, a straight
     reverse at escape_v_frac * vmax whose sweep also avoids every cell not known FREE (``unknown_xy()``:
     UNKNOWN cell centres, computed only if needed; without it no reverse) (SAFE_REVERSE); else stop
     (EMERGENCY). A still command is never checked. A differential base's commanded reverse (the reactor
@@ -429,14 +448,25 @@ def safe_command(
             f = creep / abs(v_mps)
             candidates.append((f * v_mps, 0.0, f * w_radps, Mode.SAFE_SLOW))
     candidates += [(f * v_mps, f * vy_mps, f * w_radps, Mode.SAFE_SLOW) for f in (0.5, 0.25)]
+    straight = -1  # index of the straight-on candidate
     if w_radps != 0.0:
         if v_mps != 0.0 or vy_mps != 0.0:  # the same speed without turning: parallel to what it passes
+            straight = len(candidates)
             candidates.append((v_mps, vy_mps, 0.0, Mode.SAFE_TURN))
         candidates.append((v_mps, vy_mps, -w_radps, Mode.SAFE_TURN))
         if v_mps != 0.0 or vy_mps != 0.0:
             candidates.append((0.0, 0.0, -w_radps, Mode.SAFE_TURN))
+
+    def straight_short(v: float, vy: float) -> bool:  # not free for the full-speed stop distance
+        t_end = straight_min_m(robot, params) / math.hypot(v, vy)
+        if t_end <= braking_time_s(v, vy, 0.0, robot, params):
+            return False  # its own horizon is longer, and was checked
+        m = params.emergency_margin_m
+        return arc_touches(scan_xy, v, vy, 0.0, t_end, robot, m) or arc_touches(
+            grid_xy, v, vy, 0.0, t_end, robot, m + grow)
+
     for k, (v, vy, w, rule) in enumerate(candidates):
-        if not blocked(v, vy, w):
+        if not blocked(v, vy, w) and not (k == straight and straight_short(v, vy)):
             return SafeCommand(v, vy, w, rule, looking=k == 0 and looks)
     if unknown is not None and w_radps != 0.0:
         v_back = -params.escape_v_frac * robot.vmax_mps
@@ -526,21 +556,26 @@ class TrapDetector:
 
     The multi-loop paper's: repeated stopped rotations (ROTATE) to the left and right, or frequent
     imminent collisions (EMERGENCY). And dithering, whatever the mode (mpND, mND, the safety rules):
-    within a full window, the turn direction (|w| >= trap_w_frac * wmax) reverses at least trap_count
-    times while the robot neither moved trap_progress_m nor turned trap_turn_rad net. ``update`` returns
-    True when a trap holds and then starts a new window.
+    within a full window, the turn direction (|w| >= trap_w_frac * wmax) and the direction of travel
+    (|v| >= trap_w_frac * vmax) reverse at least trap_count times together while the robot neither moved
+    trap_progress_m nor turned trap_turn_rad net. Rocking forward and back without turning (a chair wedged
+    between a wall ahead and obstacles beside it, w = 0) is the same stall as turning left and right.
+    ``update`` returns True when a trap holds and then starts a new window.
     """
 
-    def __init__(self, params: SupervisorParams, wmax_radps: float = 1.0) -> None:
+    def __init__(self, params: SupervisorParams, wmax_radps: float = 1.0, vmax_mps: float = 1.0) -> None:
         self._p = params
         self._w_min = params.trap_w_frac * wmax_radps
+        self._v_min = params.trap_w_frac * vmax_mps
         self._events: deque[int] = deque(maxlen=params.trap_window)  # -1/+1 rotation, 2 emergency, 0 else
         self._turns: deque[int] = deque(maxlen=params.trap_window)  # -1/+1 turning in any mode, 0 else
+        self._drives: deque[int] = deque(maxlen=params.trap_window)  # -1/+1 driving back / forward, 0 else
         self._poses: deque[tuple[float, float, float]] = deque(maxlen=params.trap_window)
 
-    def update(self, mode: Mode, w_radps: float, pose: tuple[float, float, float] | None = None) -> bool:
+    def update(self, mode: Mode, w_radps: float, pose: tuple[float, float, float] | None = None,
+               v_mps: float = 0.0) -> bool:
         """Record one tick (its final mode, turn rate and, for the dithering rule, the robot pose
-        (x, y, theta) in any fixed frame); True when the window holds a trap."""
+        (x, y, theta) in any fixed frame and the forward speed); True when the window holds a trap."""
         if mode is Mode.ROTATE:
             self._events.append(1 if w_radps >= 0 else -1)
         elif mode is Mode.EMERGENCY:
@@ -549,6 +584,8 @@ class TrapDetector:
             self._events.append(0)
         turning = abs(w_radps) >= self._w_min and mode is not Mode.GOAL
         self._turns.append((1 if w_radps > 0 else -1) if turning else 0)
+        driving = abs(v_mps) >= self._v_min and mode is not Mode.GOAL
+        self._drives.append((1 if v_mps > 0 else -1) if driving else 0)
         if pose is not None:
             self._poses.append(pose)
         ev = np.fromiter(self._events, dtype=np.int8)
@@ -561,20 +598,26 @@ class TrapDetector:
         if trapped:
             self._events.clear()
             self._turns.clear()
+            self._drives.clear()
             self._poses.clear()
         return trapped
 
     def _dithering(self) -> bool:
-        """A full window of poses with trap_count turn reversals and no progress."""
+        """A full window of poses with trap_count reversals of turn and travel direction and no progress."""
         if len(self._poses) < self._p.trap_window:
             return False
-        turns = np.fromiter(self._turns, dtype=np.int8)
-        turns = turns[turns != 0]
-        if turns.size < 2 or int(np.count_nonzero(np.diff(turns) != 0)) < self._p.trap_count:
+        if _reversals(self._turns) + _reversals(self._drives) < self._p.trap_count:
             return False
         (x0, y0, th0), (x1, y1, th1) = self._poses[0], self._poses[-1]
         net_turn = abs(math.remainder(th1 - th0, math.tau))
         return math.hypot(x1 - x0, y1 - y0) < self._p.trap_progress_m and net_turn < self._p.trap_turn_rad
+
+
+def _reversals(signs: deque[int]) -> int:
+    """Sign changes in a sequence of -1 / 0 / +1, the zeros skipped."""
+    a = np.fromiter(signs, dtype=np.int8)
+    a = a[a != 0]
+    return int(np.count_nonzero(np.diff(a) != 0)) if a.size > 1 else 0
 
 
 def budget_flags(timings_s: dict[str, float], params: SupervisorParams) -> Flag:

@@ -58,8 +58,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import ConfigError
-from ..io.subgoals import FOLLOW_NEEDS_SUBGOALS, MAX_ABS_SUBGOAL_M, MAX_ABS_THETA_RAD
+from ..errors import FOLLOW_NEEDS_SUBGOALS, ConfigError
+from ..io.subgoals import MAX_ABS_SUBGOAL_M, MAX_ABS_THETA_RAD
 from ..pipeline.local import LOCAL_STRATEGIES
 from ..pipeline.stack import NAV_MODES
 from ..types import Subgoal
