@@ -126,22 +126,26 @@ def main() -> None:
              for k in planners_of(n, planners) for on in selectors]
     t0 = time.perf_counter()
     log = open(a.jsonl, "a") if a.jsonl else None  # noqa: SIM115
+    results: list[dict[str, Any]] = []
+
+    def done(t: Task, r: dict[str, Any]) -> None:
+        """Keep a finished run, append it to --jsonl and show progress (in task order, with any --jobs)."""
+        results.append(r)
+        if log is not None:
+            row = {"scenario": t[0], "preset": t[1], "planner": t[2], "selector": t[3], "seed": t[4], **r}
+            log.write(json.dumps(row) + "\n")
+            log.flush()
+        print(f"\r{len(results)}/{len(tasks)} {t[0]} {t[1]} {t[2]} {'' if t[3] else 'no selector '}"
+              f"seed {t[4]}: {r['outcome']}    ", end="", file=sys.stderr, flush=True)
+
     if a.jobs > 1:
         with ProcessPoolExecutor(a.jobs, initializer=warm, initargs=(out, presets, planners, names)) as ex:
-            results = list(ex.map(one, tasks))
+            for t, r in zip(tasks, ex.map(one, tasks), strict=True):
+                done(t, r)
     else:
-        results = []
-        for k, t in enumerate(tasks):
-            results.append(one(t))
-            if log is not None:
-                row = {"scenario": t[0], "preset": t[1], "planner": t[2], "selector": t[3], "seed": t[4],
-                       **results[-1]}
-                log.write(json.dumps(row) + "\n")
-                log.flush()
-            print(f"\r{k + 1}/{len(tasks)} {t[0]} {t[1]} {t[2]} {'' if t[3] else 'no selector '}seed {t[4]}: "
-                  f"{results[-1]['outcome']}    ",
-                  end="", file=sys.stderr, flush=True)
-        print(file=sys.stderr)
+        for t in tasks:
+            done(t, one(t))
+    print(file=sys.stderr)
     wall = time.perf_counter() - t0
     table(names, presets, [*planners, NO_PLANNER], selectors, tasks, results,
           f"{a.seeds} seeds per row, latency 0 s, {a.jobs} process(es), total wall {wall:.0f} s")
