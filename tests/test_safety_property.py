@@ -46,6 +46,13 @@ def _touches(r: TickResult, stack: NavigationStack, scan: Scan, pose: Pose2D) ->
     if swept_collision(cells, r.v_mps, r.w_radps, p.robot, p.supervisor, vy_mps=r.vy_mps,
                        grow_m=0.5 * p.grid.cell_m):
         return "grid"
+    # the literal reading for the cells: no overlap with an unconfirmed cell's whole square (its
+    # circumscribed disc, no margin), which the check above implies while emergency_margin_m is at least
+    # (sqrt(2) - 1) / 2 of a cell; asserted so that the two cannot drift apart
+    bare = dataclasses.replace(p.supervisor, emergency_margin_m=0.0)
+    if swept_collision(cells, r.v_mps, r.w_radps, p.robot, bare, vy_mps=r.vy_mps,
+                       grow_m=0.5 * math.sqrt(2.0) * p.grid.cell_m):
+        return "grid square"
     return ""
 
 
