@@ -42,6 +42,7 @@ from .supervisor import (
     rotate_command,
     safe_command,
     safety_reach_m,
+    unconfirmed_cells,
 )
 from .tunnel import TunnelParams, TunnelPlanner, TunnelResult, warm_up_planners
 
@@ -595,13 +596,15 @@ class NavigationStack:
             raw, near, grid_xy = points
             near = near[np.hypot(near[:, 0], near[:, 1]) <= reach]
             grid_xy = grid_xy[np.hypot(grid_xy[:, 0], grid_xy[:, 1]) <= reach]
+        grid_xy = unconfirmed_cells(grid_xy, near, cell_m)  # once for the up to three checks below
         unknown_xy = partial(self.grid.cell_points, pose, reach, UNKNOWN)
         blind_xy = partial(self._blind_points, tick.scan, pose, reach)
         view = _view_rad(tick.scan)
 
         def check(v: float, vy: float, w: float) -> SafeCommand:
             return safe_command(v, vy, w, near, grid_xy, p.robot, p.supervisor, cell_m=cell_m,
-                                unknown_xy=unknown_xy, blind_xy=blind_xy, view_rad=view)
+                                unknown_xy=unknown_xy, blind_xy=blind_xy, view_rad=view,
+                                cells_unconfirmed=True)
 
         if not trap:
             self._escape_left = 0

@@ -368,6 +368,7 @@ def safe_command(
     unknown_xy: Callable[[], NDArray[np.float64]] | None = None,
     blind_xy: Callable[[], NDArray[np.float64]] | None = None,
     view_rad: tuple[float, float] = (-math.pi, math.pi),
+    cells_unconfirmed: bool = False,
 ) -> SafeCommand:
     """The command if its swept footprint touches nothing, else the safest admissible replacement.
 
@@ -383,7 +384,9 @@ def safe_command(
     backing out of a turn the chair cannot make) must avoid the UNKNOWN cells too: the chair's laser never
     saw what is behind it.
 
-    Grid cells that hold a hit of the current scan are checked through the hit (``unconfirmed_cells``).
+    Grid cells that hold a hit of the current scan are checked through the hit (``unconfirmed_cells``;
+    ``cells_unconfirmed``: the caller already filtered ``grid_xy`` against ``scan_xy``, e.g. once for the
+    several checks of one tick).
 
     The blind side (``blind_xy()``: centres of the cells out of the laser's view not seen within
     blind_memory_s, ``blind_points``; computed only if needed; without it no such rule): a command whose
@@ -409,7 +412,8 @@ def safe_command(
     wheelchair's problem); for a straight command it would only back off and come again, tick after tick.
     """
     grow = 0.5 * cell_m
-    grid_xy = unconfirmed_cells(grid_xy, scan_xy, cell_m)
+    if not cells_unconfirmed:
+        grid_xy = unconfirmed_cells(grid_xy, scan_xy, cell_m)
     unknown = _once(unknown_xy)
     blind = _once(blind_xy)
 
