@@ -943,16 +943,15 @@ def batch(
 
     cfg = _with_navigation(_with_planner(load_config(config, preset_name=preset_name), planner), mode, local,
                            no_selector)
+    goals = _load_subgoals(subgoals)  # read once, for the scenarios and the logs alike
     sim = SimOptions(latency_s=parse_latency(latency), perfect_odometry=perfect_odometry,
                      time_limit_s=time_limit, figures=figures, config=config, preset=preset_name,
-                     planner=planner, mode=mode, local=local, subgoals=_load_subgoals(subgoals),
-                     no_selector=no_selector)
+                     planner=planner, mode=mode, local=local, subgoals=goals, no_selector=no_selector)
     job_list = expand_inputs(
         inputs or [], scenarios=scenarios or [], seeds=None if seeds is None else parse_seeds(seeds)
     )
     limits = load_thresholds(thresholds) if thresholds is not None else Thresholds()
-    options = RunOptions(goal_ahead_m=goal_ahead, until_s=until, every=every,
-                         subgoals=_load_subgoals(subgoals))
+    options = RunOptions(goal_ahead_m=goal_ahead, until_s=until, every=every, subgoals=goals)
     with _progress(enabled=not quiet, label="batch", total=len(job_list), unit="inputs") as progress:
         result = run_batch(
             job_list,
