@@ -80,10 +80,20 @@ of the wheelchair paper's reference [18]; the circle and the holonomic base are 
       barely wider than the chair is a crawl the scorecard counts as a stall (wheelchair_office_exit:
       0.02 m/s for 10 s in its 0.85 m door); the footprint sweeps below keep it off the jambs.
     * Motion law: the command is the first admissible arc of ``_admissible_drive`` (the law's arc, wider
-      arcs with the same final heading, the turn in place, straight on, reversing while turning, straight
-      back), admissible when the real footprint swept along it does not approach an obstacle point: a
-      turn whose corners would sweep a wall is not commanded. Reversing (v < 0) happens only there; the
-      reflexive check then also requires the swept cells behind to be known FREE.
+      arcs with the same final heading, the turn in place, straight on, a small correction in place,
+      reversing while turning, straight back), admissible when the real footprint swept along it does not
+      approach an obstacle point: a turn whose corners would sweep a wall is not commanded. Reversing
+      (v < 0) happens only there; the reflexive check then also requires the swept cells behind to be
+      known FREE.
+    * A chair reaching a narrow door a few centimetres off its axis (or a few degrees crooked) with its
+      front at the jambs needs a correction of a few degrees that no forward arc can make: the law's
+      gentle arc sweeps a front corner into the jamb. The turn in place is skipped for corrections below
+      ``_SWEEP_MIN_TURN_RAD`` (it would dither in open space), so the chair crept on the unchecked law,
+      backed straight off once nothing forward could go ``_STEP_M``, and came back, tick after tick
+      (wheelchair_office_exit's 0.85 m door: 6-10 s stalls there in all 20 seeds). When nothing forward is
+      admissible, the small correction in place comes before reversing, if the turn sweeps free and
+      straight on is free once turned; a turn that does not open the way is not made (it would only be
+      undone next tick).
     * ``min_clearance_m`` is the exact distance to the footprint.
 """
 
@@ -652,7 +662,9 @@ def _admissible_drive(theta: float, v_nd: float, robot: RobotConfig, points: F64
     arcs, the same final heading), the turn in place towards theta (not for a correction smaller than
     ``_SWEEP_MIN_TURN_RAD``), straight on when theta is ahead
     (free for ``_SWEEP_STRAIGHT_M``: room to go on until the turn fits, as in a corridor before a side
-    opening), then reversing (``_REVERSE_FRAC`` of vmax, ``_SWEEP_MIN_M``) while turning the front
+    opening), the turn in place for a small correction only now, when nothing forward fits, and only if
+    straight on is free once turned (``_blocked_after_turn``), then reversing (``_REVERSE_FRAC`` of vmax,
+    ``_SWEEP_MIN_M``) while turning the front
     towards theta (a multi-point turn), then straight back; reversing only when theta is behind or
     nothing forward can go even ``_STEP_M`` (``_blocked_now``). This is the
     shape / kinematics abstraction in its simplest form: the turn a rectangle cannot make here (its
@@ -673,6 +685,9 @@ def _admissible_drive(theta: float, v_nd: float, robot: RobotConfig, points: F64
         candidates.append((0.0, sign * w_turn, True))
     if turn <= _HALF_PI:  # straight on serves only a direction ahead
         candidates.append((v_nd, 0.0, True))
+    small_turn = 0.0 < turn < _SWEEP_MIN_TURN_RAD
+    if small_turn:  # a small correction in place: only when nothing forward fits, and it opens the way
+        candidates.append((0.0, sign * w_turn, True))
     if turn > _HALF_PI or _blocked_now(points, law_v, law_w, v_nd, robot):
         candidates.extend([(v_back, sign * w_turn, True), (v_back, 0.0, True)])
     for v, w, whole in candidates:
@@ -688,9 +703,24 @@ def _admissible_drive(theta: float, v_nd: float, robot: RobotConfig, points: F64
             t_end = min(max(turn / abs(w), _SWEEP_MIN_M / v), _SWEEP_MAX_M / v)
         else:  # the law's own arc: its turn or a short stretch, whichever ends first
             t_end = min(turn / abs(w), _SWEEP_MIN_M / v)
-        if not arc_touches(points, v, 0.0, w, t_end, robot, _SWEEP_MARGIN_M):
-            return v, w
+        if arc_touches(points, v, 0.0, w, t_end, robot, _SWEEP_MARGIN_M):
+            continue
+        if v == 0.0 and small_turn and _blocked_after_turn(points, theta, v_nd, robot):
+            continue
+        return v, w
     return law_v, law_w
+
+
+def _blocked_after_turn(points: F64, theta: float, v_nd: float, robot: RobotConfig) -> bool:
+    """True when the chair, once turned in place to face ``theta``, could not go straight on for
+    ``_SWEEP_MIN_M``. A small correction in place that does not open the way forward is followed by the
+    same correction back (the direction swings across 0 as the chair turns): a turn that never turns;
+    backing off (``_blocked_now``) serves it better."""
+    if v_nd <= 0.0:
+        return True
+    c, s = math.cos(theta), math.sin(theta)
+    turned = np.column_stack([c * points[:, 0] + s * points[:, 1], c * points[:, 1] - s * points[:, 0]])
+    return arc_touches(turned, v_nd, 0.0, 0.0, _SWEEP_MIN_M / v_nd, robot, _SWEEP_MARGIN_M)
 
 
 def _blocked_now(points: F64, law_v: float, law_w: float, v_nd: float, robot: RobotConfig) -> bool:
