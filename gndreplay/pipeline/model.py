@@ -502,7 +502,7 @@ class RobotCentredGrid:
         """(K, 2) centres of the cells in ``state`` (UNKNOWN / FREE / OCCUPIED) whose centre is within
         ``radius_m`` of the robot, in the ROBOT frame [m], row-major order. Cells beyond the grid's edge
         are not returned (they are unknown, but the grid does not hold them)."""
-        return self._points(robot_pose, radius_m, state, None)
+        return self._points(robot_pose, radius_m, state, None)[0]
 
     def unseen_points(self, robot_pose: Pose2D, radius_m: float, since_ns: int) -> NDArray[np.float64]:
         """(K, 2) centres of the cells not OCCUPIED that no scan has seen since ``since_ns`` (UNKNOWN, and
@@ -510,12 +510,19 @@ class RobotCentredGrid:
 
         Where the grid's FREE is old news: a mover may have walked in since (the reflexive loop's blind
         side rule, ``supervisor.safe_command``)."""
-        return self._points(robot_pose, radius_m, None, since_ns)
+        return self._points(robot_pose, radius_m, None, since_ns)[0]
+
+    def occupied_points_seen(self, robot_pose: Pose2D,
+                             radius_m: float) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """``occupied_points`` with the stamp of the scan that last saw each cell (NEVER_SEEN: none):
+        how old the pose that placed it is (the reflexive loop's pose doubt,
+        ``NavigationStack._doubted_points``)."""
+        return self._points(robot_pose, radius_m, OCCUPIED, None)
 
     def _points(self, robot_pose: Pose2D, radius_m: float, state: np.uint8 | None,
-                since_ns: int | None) -> NDArray[np.float64]:
+                since_ns: int | None) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """Robot-frame centres within ``radius_m`` of the cells in ``state``, or (``since_ns``) of the
-        cells not OCCUPIED and not seen since then."""
+        cells not OCCUPIED and not seen since then, and their seen stamps."""
         p = self.params
         n, c = p.size_cells, p.cell_m
         row, col = self.robot_cell(robot_pose)
@@ -523,15 +530,17 @@ class RobotCentredGrid:
         r0, r1 = max(row - h, 0), min(row + h + 1, n)
         c0, c1 = max(col - h, 0), min(col + h + 1, n)
         if r0 >= r1 or c0 >= c1:
-            return np.zeros((0, 2))
+            return np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
         window = self.cells[r0:r1, c0:c1]
+        seen = self.seen_ns[r0:r1, c0:c1]
         if since_ns is None:
             rows, cols = np.nonzero(window == state)
         else:
-            rows, cols = np.nonzero((window != OCCUPIED) & (self.seen_ns[r0:r1, c0:c1] < since_ns))
+            rows, cols = np.nonzero((window != OCCUPIED) & (seen < since_ns))
         dx = (cols + (c0 + self._off_col) + 0.5) * c - robot_pose.x
         dy = (rows + (r0 + self._off_row) + 0.5) * c - robot_pose.y
         keep = dx * dx + dy * dy <= radius_m * radius_m
         dx, dy = dx[keep], dy[keep]
         ct, st = math.cos(robot_pose.theta), math.sin(robot_pose.theta)
-        return np.column_stack([ct * dx + st * dy, -st * dx + ct * dy])
+        pts = np.column_stack([ct * dx + st * dy, -st * dx + ct * dy])
+        return pts, seen[rows[keep], cols[keep]].astype(np.int64)

@@ -37,11 +37,14 @@ from .supervisor import (
     TrapDetector,
     blind_points,
     budget_flags,
+    doubt_transforms,
+    doubted_cells,
     escape_command,
     gnd_mode,
     rotate_command,
     safe_command,
     safety_reach_m,
+    seen_through,
     unconfirmed_cells,
 )
 from .tunnel import TunnelParams, TunnelPlanner, TunnelResult, warm_up_planners
@@ -235,6 +238,13 @@ class NavigationStack:
         # ND+'s last choice per user ("gnd": GND's reactor, "local": local navigation): the sub-goal's and
         # the target's world bearings (commitment, NdMemory)
         self._nd_memory: dict[str, tuple[float, float]] = {}
+        # stamps, corrected poses and odometry of ticks within doubt_window_s, oldest first, the first
+        # _track_n rows: the pose doubt of the grid's cells (``_safety_points``, ``_follow_track``)
+        cap = math.ceil(params.supervisor.doubt_window_s * 1e9 / DOUBT_TRACK_NS) + 2
+        self._track_ns = np.zeros(cap, dtype=np.int64)
+        self._track_c = np.zeros((cap, 3))
+        self._track_o = np.zeros((cap, 3))
+        self._track_n = 0
 
     def step(self, tick: Tick, pose: Pose2D, goal_xy: tuple[float, float], match_ms: float = 0.0,
              match_failed: bool = False) -> TickResult:
@@ -251,8 +261,30 @@ class NavigationStack:
         timings = {"match": match_ms}
         t0 = time.perf_counter_ns()
         self.grid.integrate(tick.scan, pose)
+        self._follow_track(tick, pose)
         timings["model"] = _ms(t0)
         return flags, timings
+
+    def _follow_track(self, tick: Tick, pose: Pose2D) -> None:
+        """Put this tick's corrected pose and odometry at the end of the track (``_safety_points``' pose
+        doubt): one tick kept per DOUBT_TRACK_NS, the newest always last (it replaces a last one kept less
+        than that after its predecessor), none older than doubt_window_s. A tick stamped before the last
+        one (a log that restarts) starts the track anew."""
+        t, n = self._track_ns, self._track_n
+        if n and t[n - 1] > tick.t_ns:
+            n = 0
+        if n >= 2 and t[n - 1] - t[n - 2] < DOUBT_TRACK_NS:
+            n -= 1
+        old = int(np.searchsorted(t[:n], tick.t_ns - round(self.params.supervisor.doubt_window_s * 1e9)))
+        if old or n == t.shape[0]:  # drop the ticks past the window (and, if full, the oldest)
+            old = max(old, 1)
+            for a in (t, self._track_c, self._track_o):
+                a[: n - old] = a[old:n]
+            n -= old
+        t[n] = tick.t_ns
+        self._track_c[n] = (pose.x, pose.y, pose.theta)
+        self._track_o[n] = (tick.odom.x, tick.odom.y, tick.odom.theta)
+        self._track_n = n + 1
 
     def _gnd_step(self, tick: Tick, pose: Pose2D, goal_xy: tuple[float, float], match_ms: float,
                   match_failed: bool) -> TickResult:
@@ -557,6 +589,25 @@ class NavigationStack:
         near = raw[np.hypot(raw[:, 0], raw[:, 1]) <= reach_m]
         return raw, near, self.grid.occupied_points(pose, reach_m)
 
+    def _doubted_points(self, scan: Scan, pose: Pose2D, reach_m: float) -> NDArray[np.float64]:
+        """The occupied cells whose pose is in doubt, where they lie if the odometry is right, within
+        ``reach_m`` (robot frame; ``supervisor.doubted_cells``: the matcher and the odometry disagree on
+        the motion since the cell was last seen), less those the scan sees through (``seen_through``)."""
+        n = self._track_n
+        if n < 2 or self.params.supervisor.doubt_window_s <= 0.0:
+            return np.zeros((0, 2))
+        transforms, doubted = doubt_transforms(self._track_c[:n], self._track_o[:n], self.params.supervisor)
+        if not doubted.any():
+            return np.zeros((0, 2))
+        # E p = R p + t keeps |R p| = |p|: only cells within reach + |t| can move into reach
+        far = reach_m + float(np.max(np.hypot(transforms[doubted, 0], transforms[doubted, 1])))
+        cells, seen_ns = self.grid.occupied_points_seen(pose, far)
+        moved = doubted_cells(cells, seen_ns, self._track_ns[:n], transforms, doubted)
+        moved = moved[np.hypot(moved[:, 0], moved[:, 1]) <= reach_m]
+        sp = scan.sensor_pose
+        return moved[~seen_through(moved, scan.ranges_m, scan.angles_rad, (sp.x, sp.y, sp.theta),
+                                   self.params.grid.cell_m)]
+
     def _not_free_points(self, pose: Pose2D, radius_m: float) -> NDArray[np.float64]:
         """Centres (robot frame) of the cells within ``radius_m`` not known FREE (UNKNOWN or OCCUPIED):
         where a backward escape may not go (``supervisor.escape_command``)."""
@@ -599,11 +650,12 @@ class NavigationStack:
         grid_xy = unconfirmed_cells(grid_xy, near, cell_m)  # once for the up to three checks below
         unknown_xy = partial(self.grid.cell_points, pose, reach, UNKNOWN)
         blind_xy = partial(self._blind_points, tick.scan, pose, reach)
+        doubt_xy = partial(self._doubted_points, tick.scan, pose, reach)
         view = _view_rad(tick.scan)
 
         def check(v: float, vy: float, w: float) -> SafeCommand:
             return safe_command(v, vy, w, near, grid_xy, p.robot, p.supervisor, cell_m=cell_m,
-                                unknown_xy=unknown_xy, blind_xy=blind_xy, view_rad=view,
+                                unknown_xy=unknown_xy, blind_xy=blind_xy, doubt_xy=doubt_xy, view_rad=view,
                                 cells_unconfirmed=True)
 
         if not trap:
@@ -632,6 +684,10 @@ class NavigationStack:
                 return Mode.ESCAPE, v_esc, 0.0, 0.0, flags
         return mode, v, vy, w, flags
 
+
+DOUBT_TRACK_NS = 250_000_000
+"""Spacing of the ticks the pose-doubt track keeps (0.25 s: a 40 Hz log's 300 s window holds 1200, not
+12000; ``NavigationStack._follow_track``)."""
 
 _Points = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
 """A tick's obstacles for the safety checks (robot frame): all raw scan hits, the hits within a reach, the

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..geometry import compose, inverse, relative
 from ..robot import RobotConfig
 from ..types import Flag
 
@@ -47,6 +48,8 @@ __all__ = [
     "blind_points",
     "braking_time_s",
     "budget_flags",
+    "doubt_transforms",
+    "doubted_cells",
     "escape_command",
     "footprint_contains",
     "footprint_signed_distance",
@@ -54,6 +57,7 @@ __all__ = [
     "rotate_command",
     "safe_command",
     "safety_reach_m",
+    "seen_through",
     "straight_min_m",
     "swept_collision",
     "swept_touch",
@@ -123,6 +127,15 @@ class SupervisorParams:
             cells in a fraction of that. Older FREE cells out of view are old news (issue 10: the XR4000
             backed at 0.45 m/s into a person who had walked in behind it since the laser last looked).
             0 trusts no cell out of view; a huge value restores the old rule (only UNKNOWN counts).
+        doubt_window_s, doubt_tol_m, doubt_tol_frac: the pose doubt (``doubted_cells``). The grid is
+            built at the matcher's corrected poses; where the corrected motion since a cell was last seen
+            disagrees with the odometry's by more than doubt_tol_m + doubt_tol_frac of the odometry's
+            displacement, the cell is also checked where it lies if the odometry is right (issue 10:
+            backing out of gnd_exp1_three_traps' side passage, the matcher held its pose while the chair
+            reversed 0.5 m, and the chair's blind rear met a wall its grid put 0.5 m further). The poses
+            are tracked over doubt_window_s, one per 0.25 s. **Choice**: 300 s, 0.05 m and 10 %:
+            wheel odometry drifts a few percent of its travel, and the simulated one less; 0 s disables
+            the rule.
     """
 
     budget_match_s: float = 0.05
@@ -145,6 +158,71 @@ class SupervisorParams:
     escape_v_frac: float = 0.3
     escape_clearance_m: float = 0.6
     blind_memory_s: float = 1.0
+    doubt_window_s: float = 300.0
+    doubt_tol_m: float = 0.05
+    doubt_tol_frac: float = 0.1
+
+
+def doubt_transforms(corrected: NDArray[np.float64], odom: NDArray[np.float64],
+                     params: SupervisorParams) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """For each earlier tick k (rows of ``corrected`` and ``odom`` (N, 3), oldest first, the last one
+    now): the rigid transform E_k (N, 3) that takes a point of the robot frame now, placed by the corrected
+    poses, to where it lies if the odometry is right since tick k, E_k = inv(odometry's motion since k) ∘
+    corrected motion since k; and whether the two motions disagree by more than the odometry's own error,
+    doubt_tol_m + doubt_tol_frac of its displacement since k. Each motion is taken in the robot frame at
+    tick k, so the frames' offset does not count. The displacement, not the path: a robot rocking on the
+    spot covers metres of path while its odometry's error stays that of the net motion (the scale errors of
+    forward and back cancel), and a tolerance growing with the path let a matcher stuck for a minute pass.
+    """
+    dc = relative(corrected, corrected[-1])
+    do = relative(odom, odom[-1])
+    gap = np.hypot(dc[:, 0] - do[:, 0], dc[:, 1] - do[:, 1])
+    doubted = gap > params.doubt_tol_m + params.doubt_tol_frac * np.hypot(do[:, 0], do[:, 1])
+    return compose(inverse(do), dc), doubted
+
+
+def doubted_cells(cells_xy: NDArray[np.float64], seen_ns: NDArray[np.int64], track_ns: NDArray[np.int64],
+                  transforms: NDArray[np.float64], doubted: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """The cells (robot frame) whose pose is in doubt, moved to where they lie if the odometry is right.
+
+    A cell last seen at ``seen_ns`` was placed by the corrected pose then: its error is the disagreement
+    since, that of the first tracked tick at or after its stamp (``track_ns``, oldest first;
+    ``doubt_transforms``'s ``transforms`` and ``doubted`` of those ticks; a cell older than the track gets
+    the oldest). The reflexive loop checks these as well as the cells where the grid has them: of the
+    matcher and the odometry, it cannot tell which is wrong; a cell the current scan sees has no doubt,
+    and a moved cell the scan sees through is dropped (``seen_through``)."""
+    if cells_xy.shape[0] == 0 or not doubted.any():
+        return np.zeros((0, 2))
+    k = np.minimum(np.searchsorted(track_ns, seen_ns, side="left"), track_ns.shape[0] - 1)
+    sel = doubted[k]
+    e = transforms[k[sel]]
+    x, y = cells_xy[sel, 0], cells_xy[sel, 1]
+    c, s = np.cos(e[:, 2]), np.sin(e[:, 2])
+    return np.column_stack([e[:, 0] + c * x - s * y, e[:, 1] + s * x + c * y])
+
+
+def seen_through(points_xy: NDArray[np.float64], ranges_m: NDArray[np.float64],
+                 angles_rad: NDArray[np.float64], laser_pose: tuple[float, float, float],
+                 tolerance_m: float) -> NDArray[np.bool_]:
+    """(M,) mask of the points (robot frame) the scan sees through: within its field of view, the beam
+    nearest their bearing returned from more than ``tolerance_m`` beyond them, or not at all (+inf). The
+    scan is exact where it looks; a hypothesis it contradicts there is dropped (``doubted_cells``: with a
+    poor odometry the cells moved by it would otherwise stand in the way of every command). Beams in
+    angle order, either way round; a nan beam sees nothing."""
+    if points_xy.shape[0] == 0 or ranges_m.shape[0] < 2:
+        return np.zeros(points_xy.shape[0], dtype=bool)
+    if angles_rad[0] > angles_rad[-1]:  # a clockwise scan
+        angles_rad, ranges_m = angles_rad[::-1], ranges_m[::-1]
+    lx, ly, lth = laser_pose
+    dx, dy = points_xy[:, 0] - lx, points_xy[:, 1] - ly
+    r = np.hypot(dx, dy)
+    a = np.arctan2(dy, dx) - lth
+    a = (a + math.pi) % (2.0 * math.pi) - math.pi
+    in_view = (a >= angles_rad[0]) & (a <= angles_rad[-1])
+    i = np.clip(np.searchsorted(angles_rad, a), 1, angles_rad.shape[0] - 1)
+    i = np.where(np.abs(angles_rad[i - 1] - a) <= np.abs(angles_rad[i] - a), i - 1, i)
+    beam = ranges_m[i]
+    return in_view & ((beam > r + tolerance_m) | np.isposinf(beam))
 
 
 def gnd_mode(planner_ok: bool, reactor_has_region: bool) -> Mode:
@@ -367,6 +445,7 @@ def safe_command(
     cell_m: float,
     unknown_xy: Callable[[], NDArray[np.float64]] | None = None,
     blind_xy: Callable[[], NDArray[np.float64]] | None = None,
+    doubt_xy: Callable[[], NDArray[np.float64]] | None = None,
     view_rad: tuple[float, float] = (-math.pi, math.pi),
     cells_unconfirmed: bool = False,
 ) -> SafeCommand:
@@ -387,6 +466,14 @@ def safe_command(
     Grid cells that hold a hit of the current scan are checked through the hit (``unconfirmed_cells``;
     ``cells_unconfirmed``: the caller already filtered ``grid_xy`` against ``scan_xy``, e.g. once for the
     several checks of one tick).
+
+    The pose doubt (``doubt_xy()``: the occupied cells moved to where they lie if the odometry is right,
+    ``doubted_cells``; computed only if needed): a command whose direction of travel lies outside the
+    laser's view must not touch them either (grown by half a cell, as the grid's). Only there: in view
+    the scan is exact and refutes what it sees through, and a turn in place is how the robot looks; the
+    class is a front laser's robot backing into what it remembers behind it while its matcher is stuck
+    (issue 10), and testing every command against the moved cells made a robot with poor odometry (the
+    Intel log) stop and turn aside for walls that were where the matcher had them.
 
     The blind side (``blind_xy()``: centres of the cells out of the laser's view not seen within
     blind_memory_s, ``blind_points``; computed only if needed; without it no such rule): a command whose
@@ -416,6 +503,7 @@ def safe_command(
         grid_xy = unconfirmed_cells(grid_xy, scan_xy, cell_m)
     unknown = _once(unknown_xy)
     blind = _once(blind_xy)
+    doubt = _once(doubt_xy)
 
     def touches(v: float, vy: float, w: float) -> bool:
         return swept_touch(v, vy, w, scan_xy, grid_xy, robot, params, cell_m=cell_m) != ""
@@ -437,8 +525,14 @@ def safe_command(
         t_end = braking_time_s(v, vy, w, robot, params)
         return arc_touches(blind(), v, vy, 0.0, t_end, robot, params.emergency_margin_m + grow)
 
+    def into_doubt(v: float, vy: float, w: float) -> bool:  # travel out of view towards moved cells
+        if doubt is None or (v == 0.0 and vy == 0.0) or (
+                (math.atan2(vy, v) - view_rad[0]) % math.tau <= view_rad[1] - view_rad[0]):
+            return False
+        return swept_collision(doubt(), v, w, robot, params, vy_mps=vy, grow_m=grow)
+
     def blocked(v: float, vy: float, w: float) -> bool:
-        return touches(v, vy, w) or backs_into_unknown(v, w) or into_blind(v, vy, w)
+        return touches(v, vy, w) or backs_into_unknown(v, w) or into_blind(v, vy, w) or into_doubt(v, vy, w)
 
     if (v_mps == 0.0 and vy_mps == 0.0 and w_radps == 0.0) or not blocked(v_mps, vy_mps, w_radps):
         return SafeCommand(v_mps, vy_mps, w_radps, None)
@@ -474,9 +568,8 @@ def safe_command(
             return SafeCommand(v, vy, w, rule, looking=k == 0 and looks)
     if unknown is not None and w_radps != 0.0:
         v_back = -params.escape_v_frac * robot.vmax_mps
-        if not touches(v_back, 0.0, 0.0) and not into_blind(v_back, 0.0, 0.0) and not swept_collision(
-            unknown(), v_back, 0.0, robot, params, grow_m=grow
-        ):
+        if not blocked(v_back, 0.0, 0.0) and not swept_collision(unknown(), v_back, 0.0, robot, params,
+                                                                 grow_m=grow):
             return SafeCommand(v_back, 0.0, 0.0, Mode.SAFE_REVERSE)
     return SafeCommand(0.0, 0.0, 0.0, Mode.EMERGENCY)
 
