@@ -239,7 +239,7 @@ class NavigationStack:
         # the target's world bearings (commitment, NdMemory)
         self._nd_memory: dict[str, tuple[float, float]] = {}
         # stamps, corrected poses and odometry of ticks within doubt_window_s, oldest first, the first
-        # _track_n rows: the pose doubt of the grid's cells (``_safety_points``, ``_follow_track``)
+        # _track_n rows: the pose doubt of the grid's cells (``_doubted_points``, ``_follow_track``)
         cap = math.ceil(params.supervisor.doubt_window_s * 1e9 / DOUBT_TRACK_NS) + 2
         self._track_ns = np.zeros(cap, dtype=np.int64)
         self._track_c = np.zeros((cap, 3))
@@ -266,7 +266,7 @@ class NavigationStack:
         return flags, timings
 
     def _follow_track(self, tick: Tick, pose: Pose2D) -> None:
-        """Put this tick's corrected pose and odometry at the end of the track (``_safety_points``' pose
+        """Put this tick's corrected pose and odometry at the end of the track (``_doubted_points``' pose
         doubt): one tick kept per DOUBT_TRACK_NS, the newest always last (it replaces a last one kept less
         than that after its predecessor), none older than doubt_window_s. A tick stamped before the last
         one (a log that restarts) starts the track anew."""
