@@ -109,6 +109,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import ConfigError
+from ..geometry import transform_points
 from ..robot import RobotConfig
 from ..types import Flag
 from .supervisor import arc_touches, footprint_signed_distance
@@ -718,8 +719,7 @@ def _blocked_after_turn(points: F64, theta: float, v_nd: float, robot: RobotConf
     backing off (``_blocked_now``) serves it better."""
     if v_nd <= 0.0:
         return True
-    c, s = math.cos(theta), math.sin(theta)
-    turned = np.column_stack([c * points[:, 0] + s * points[:, 1], c * points[:, 1] - s * points[:, 0]])
+    turned = transform_points((0.0, 0.0, -theta), points)  # the points in the frame facing theta
     return arc_touches(turned, v_nd, 0.0, 0.0, _SWEEP_MIN_M / v_nd, robot, _SWEEP_MARGIN_M)
 
 

@@ -195,10 +195,9 @@ def doubted_cells(cells_xy: NDArray[np.float64], seen_ns: NDArray[np.int64], tra
         return np.zeros((0, 2))
     k = np.minimum(np.searchsorted(track_ns, seen_ns, side="left"), track_ns.shape[0] - 1)
     sel = doubted[k]
-    e = transforms[k[sel]]
-    x, y = cells_xy[sel, 0], cells_xy[sel, 1]
-    c, s = np.cos(e[:, 2]), np.sin(e[:, 2])
-    return np.column_stack([e[:, 0] + c * x - s * y, e[:, 1] + s * x + c * y])
+    cells = np.column_stack([cells_xy[sel], np.zeros(int(np.count_nonzero(sel)))])
+    moved: NDArray[np.float64] = compose(transforms[k[sel]], cells)[:, :2]
+    return moved
 
 
 def seen_through(points_xy: NDArray[np.float64], ranges_m: NDArray[np.float64],
@@ -515,19 +514,21 @@ def safe_command(
 
     creep = params.escape_v_frac * robot.vmax_mps
 
+    def in_view(v: float, vy: float) -> bool:  # the direction of travel lies within the laser's view
+        return (math.atan2(vy, v) - view_rad[0]) % math.tau <= view_rad[1] - view_rad[0]
+
     def into_blind(v: float, vy: float, w: float) -> bool:  # translation towards cells not seen lately
         if blind is None or (v == 0.0 and vy == 0.0):
             return False
         if robot.drive == "differential" and abs(v) <= creep * (1.0 + 1e-9):
             return False  # the differential base's creep (see above)
-        if (math.atan2(vy, v) - view_rad[0]) % math.tau <= view_rad[1] - view_rad[0]:
-            return False  # travel within the view
+        if in_view(v, vy):
+            return False
         t_end = braking_time_s(v, vy, w, robot, params)
         return arc_touches(blind(), v, vy, 0.0, t_end, robot, params.emergency_margin_m + grow)
 
     def into_doubt(v: float, vy: float, w: float) -> bool:  # travel out of view towards moved cells
-        if doubt is None or (v == 0.0 and vy == 0.0) or (
-                (math.atan2(vy, v) - view_rad[0]) % math.tau <= view_rad[1] - view_rad[0]):
+        if doubt is None or (v == 0.0 and vy == 0.0) or in_view(v, vy):
             return False
         return swept_collision(doubt(), v, w, robot, params, vy_mps=vy, grow_m=grow)
 
