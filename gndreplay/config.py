@@ -316,6 +316,8 @@ RANGES: dict[tuple[type, str], Range] = {
     (SupervisorParams, "escape_ticks"): _count(),
     (SupervisorParams, "escape_v_frac"): _FRAC,
     (SupervisorParams, "escape_clearance_m"): _nonneg(_LEN),
+    (SupervisorParams, "manoeuvre_nodes"): _count(0, 100_000),
+    (SupervisorParams, "manoeuvre_after_s"): _pos(_TIME),
     (SupervisorParams, "blind_memory_s"): _nonneg(3600.0),
     (SupervisorParams, "doubt_window_s"): _nonneg(3600.0),
     (SupervisorParams, "doubt_tol_m"): _nonneg(_LEN),

@@ -512,6 +512,12 @@ class RobotCentredGrid:
         side rule, ``supervisor.safe_command``)."""
         return self._points(robot_pose, radius_m, None, since_ns)[0]
 
+    def free_border_points(self, robot_pose: Pose2D, radius_m: float) -> NDArray[np.float64]:
+        """(K, 2) centres of the cells not FREE (OCCUPIED or UNKNOWN) beside a FREE cell (4-neighbours)
+        within ``radius_m`` of the robot, ROBOT frame [m], row-major: the edge of the known free space,
+        all a motion that must stay in it can meet (the trap escape's manoeuvre, ``manoeuvre``)."""
+        return self._points(robot_pose, radius_m, None, None, border=True)[0]
+
     def occupied_points_seen(self, robot_pose: Pose2D,
                              radius_m: float) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """``occupied_points`` with the stamp of the scan that last saw each cell (NEVER_SEEN: none):
@@ -520,9 +526,10 @@ class RobotCentredGrid:
         return self._points(robot_pose, radius_m, OCCUPIED, None)
 
     def _points(self, robot_pose: Pose2D, radius_m: float, state: np.uint8 | None,
-                since_ns: int | None) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+                since_ns: int | None, border: bool = False) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """Robot-frame centres within ``radius_m`` of the cells in ``state``, or (``since_ns``) of the
-        cells not OCCUPIED and not seen since then, and their seen stamps."""
+        cells not OCCUPIED and not seen since then, or (``border``) of the cells not FREE beside a FREE
+        one, and their seen stamps."""
         p = self.params
         n, c = p.size_cells, p.cell_m
         row, col = self.robot_cell(robot_pose)
@@ -533,7 +540,15 @@ class RobotCentredGrid:
             return np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
         window = self.cells[r0:r1, c0:c1]
         seen = self.seen_ns[r0:r1, c0:c1]
-        if since_ns is None:
+        if border:
+            free = window == FREE
+            beside = np.zeros_like(free)
+            beside[1:] |= free[:-1]
+            beside[:-1] |= free[1:]
+            beside[:, 1:] |= free[:, :-1]
+            beside[:, :-1] |= free[:, 1:]
+            rows, cols = np.nonzero(~free & beside)
+        elif since_ns is None:
             rows, cols = np.nonzero(window == state)
         else:
             rows, cols = np.nonzero((window != OCCUPIED) & (seen < since_ns))

@@ -20,12 +20,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import FOLLOW_NEEDS_SUBGOALS, ConfigError
-from ..geometry import transform_points, wrap_angle
+from ..geometry import compose, relative, transform_points, wrap_angle
 from ..robot import RobotConfig
 from ..types import Command, Flag, Pose2D, Scan, Subgoal, Tick
 from .cspace import free_cspace
 from .follow import FollowParams, PathFollower, first_free_point
 from .local import LocalParams, local_command, polar_map, warm_up_local
+from .manoeuvre import ManoeuvreParams, Primitive, Speeds, end_poses, plan_manoeuvre, warm_up_manoeuvre
 from .model import OCCUPIED, UNKNOWN, GridParams, RobotCentredGrid
 from .nd import NdMemory, NdParams, NdResult, Situation, nd_step
 from .nf1 import Nf1Params, Nf1Planner, Planner, PlanResult, reaches_border
@@ -220,6 +221,13 @@ class NavigationStack:
         self._trap = TrapDetector(params.supervisor, params.robot.wmax_radps, params.robot.vmax_mps)
         self._escape_left = 0
         self._escape_v = 0.0
+        # the trap escape's manoeuvre in progress (``_manoeuvre_step``): its primitives still to drive, the
+        # odometry pose each is to end at, and the tick stamp by which it must be over
+        self._manoeuvre: tuple[Primitive, ...] = ()
+        self._manoeuvre_ends = np.zeros((0, 3))
+        self._manoeuvre_until_ns = 0
+        self._refused_since: tuple[int, Pose2D] | None = None  # stamp and pose of the first of the
+        # ticks in a row whose command the reflexive check replaced (``_held_up``)
         self._prev_t_ns: int | None = None
         self._no_path = 0  # consecutive PLANNER_NO_PATH ticks
         # the planner's no path to a goal beyond the grid means no free border cell is reachable
@@ -337,7 +345,8 @@ class NavigationStack:
             flags |= Flag.GOAL_REACHED
 
         rotating = mode is Mode.ROTATE
-        mode, v, vy, w, flags = self._reflexive(tick, pose, mode, v, vy, w, flags, unreachable)
+        mode, v, vy, w, flags = self._reflexive(tick, pose, mode, v, vy, w, flags, unreachable,
+                                                want_rad=math.atan2(target[1], target[0]))
         self._rotate_sign = (1.0 if w > 0.0 else -1.0) if rotating and w != 0.0 else 0.0
         path = planned.waypoints_cells
         path_xy = self.grid.cells_to_world(path) if path.shape[0] else np.zeros((0, 2))
@@ -424,8 +433,9 @@ class NavigationStack:
         if points is not None:
             # no trap escape for the driver: dithering under teleop is the driver's own (and an escape
             # begun under local navigation ends when the driver has the robot again)
+            want = math.nan if intention is None else math.atan2(intention[1], intention[0])
             mode, v, vy, w, flags = self._reflexive(tick, pose, mode, v, vy, w, flags, points=points,
-                                                    trap=active != "teleop")
+                                                    trap=active != "teleop", want_rad=want)
         if active != "local":
             self._takeover = None
         elif self._looking:
@@ -625,6 +635,7 @@ class NavigationStack:
     def _reflexive(
         self, tick: Tick, pose: Pose2D, mode: Mode, v: float, vy: float, w: float, flags: Flag,
         unreachable: bool = False, points: _Points | None = None, trap: bool = True,
+        want_rad: float = math.nan,
     ) -> tuple[Mode, float, float, float, Flag]:
         """The reflexive loop: stale data, a command whose swept footprint would touch an obstacle of the
         raw scan or the grid (replaced by ``safe_command``'s rule, recorded as the mode), trap escape.
@@ -633,7 +644,16 @@ class NavigationStack:
         one it would reverse or replace stops the robot for good (ROTATE at rest: no way, stay still),
         and there is no trap escape (standing still is the intended behaviour, not a trap). ``points``:
         ``_safety_points`` of this tick if at hand (any reach at least the loop's: cut down to it).
-        ``trap`` False: no trap detection or escape this tick, and an escape in progress ends."""
+        ``trap`` False: no trap detection or escape this tick, and an escape in progress ends.
+
+        The trap escape of a rectangular robot is first a manoeuvre (``manoeuvre``): the quickest sequence
+        of arcs and turns in place that heads it within a few degrees of ``want_rad`` (robot frame: where
+        the planner or the intention leads; nan: none) with room to drive on, through known free space.
+        Its primitives are driven one by one, each until the odometry reaches its planned end, every tick
+        through the same check; refused, or over time, the manoeuvre ends and the reactor resumes. Without
+        one (a circle turns where it stands: ND+'s own turn is its manoeuvre), the slow straight escape.
+        The manoeuvre is also searched, without a trap, when the check has refused every command for
+        manoeuvre_after_s without progress (``_held_up``)."""
         p = self.params
         self._looking = False
         prev, self._prev_t_ns = self._prev_t_ns, tick.t_ns
@@ -660,11 +680,18 @@ class NavigationStack:
 
         if not trap:
             self._escape_left = 0
+            self._manoeuvre = ()
+        if self._manoeuvre:
+            cmd = self._manoeuvre_step(tick)
+            if cmd is not None and check(cmd[0], 0.0, cmd[1]).rule is None:
+                return Mode.ESCAPE, cmd[0], 0.0, cmd[1], flags
+            self._manoeuvre = ()
         if self._escape_left > 0:
             self._escape_left -= 1
             if check(self._escape_v, 0.0, 0.0).rule is None:
                 return Mode.ESCAPE, self._escape_v, 0.0, 0.0, flags
             self._escape_left = 0
+        refused = False
         if mode is not Mode.GOAL:
             safe = check(v, vy, w)
             self._looking = safe.looking
@@ -672,11 +699,20 @@ class NavigationStack:
                 self._looked_rad = 2.0 * math.pi
                 return Mode.ROTATE, 0.0, 0.0, 0.0, flags
             if safe.rule is not None:
+                refused = True
                 mode, v, vy, w = safe.rule, safe.v_mps, safe.vy_mps, safe.w_radps
                 if safe.rule is Mode.EMERGENCY:
                     flags |= Flag.EMERGENCY_STOP
-        if trap and self._trap.update(mode, w, (pose.x, pose.y, pose.theta), v) and not unreachable:
+        held = self._held_up(tick, pose, refused and trap and not unreachable)
+        trapped = trap and self._trap.update(mode, w, (pose.x, pose.y, pose.theta), v) and not unreachable
+        if trapped:
             flags |= Flag.TRAP_DETECTED
+        if (trapped or held) and self._plan_manoeuvre(tick, pose, raw, want_rad):
+            cmd = self._manoeuvre_step(tick)
+            if cmd is not None and check(cmd[0], 0.0, cmd[1]).rule is None:
+                return Mode.ESCAPE, cmd[0], 0.0, cmd[1], flags
+            self._manoeuvre = ()
+        if trapped:
             v_esc, possible = escape_command(raw, p.robot, p.supervisor, cell_m=cell_m,
                                              not_free_xy=partial(self._not_free_points, pose))
             if possible and check(v_esc, 0.0, 0.0).rule is None:
@@ -684,6 +720,88 @@ class NavigationStack:
                 return Mode.ESCAPE, v_esc, 0.0, 0.0, flags
         return mode, v, vy, w, flags
 
+    def _held_up(self, tick: Tick, pose: Pose2D, refused: bool) -> bool:
+        """Whether the reflexive check has refused the command of every tick for manoeuvre_after_s while
+        the robot neither moved trap_progress_m nor turned trap_turn_rad (the trap detector's progress):
+        the reactor keeps asking for what cannot be done, so the manoeuvre is searched before a full trap
+        window of dithering has passed. The count restarts once it has answered."""
+        if not refused:
+            self._refused_since = None
+            return False
+        if self._refused_since is None:
+            self._refused_since = (tick.t_ns, pose)
+            return False
+        t0, p0 = self._refused_since
+        sp = self.params.supervisor
+        if (tick.t_ns - t0) * 1e-9 < sp.manoeuvre_after_s:
+            return False
+        self._refused_since = None
+        return (math.hypot(pose.x - p0.x, pose.y - p0.y) < sp.trap_progress_m
+                and abs(math.remainder(pose.theta - p0.theta, math.tau)) < sp.trap_turn_rad)
+
+    def _plan_manoeuvre(self, tick: Tick, pose: Pose2D, raw: NDArray[np.float64], want_rad: float) -> bool:
+        """Search the trap escape's manoeuvre (``manoeuvre.plan_manoeuvre``) and hold it; False when the
+        robot is a circle, there is no wanted direction, the search is off or finds none. Obstacles: the
+        raw scan's hits, the edge of the grid's known free space (``free_border_points``, those the scan
+        does not confirm, grown by half a cell) and the pose doubt's moved cells, within reach."""
+        p = self.params
+        nodes = p.supervisor.manoeuvre_nodes
+        if p.robot.shape == "circle" or not math.isfinite(want_rad) or nodes == 0:
+            return False
+        mp = ManoeuvreParams(max_nodes=nodes)
+        cell_m, margin = p.grid.cell_m, p.supervisor.emergency_margin_m
+        radius = mp.radius_m + p.robot.outer_radius_m + mp.room_m + margin + cell_m
+        scan = raw[np.hypot(raw[:, 0], raw[:, 1]) <= radius]
+        cells = np.vstack([unconfirmed_cells(self.grid.free_border_points(pose, radius), scan, cell_m),
+                           self._doubted_points(tick.scan, pose, radius)])
+        margins = np.concatenate([np.full(scan.shape[0], margin),
+                                  np.full(cells.shape[0], margin + 0.5 * cell_m)])
+        speeds = self._manoeuvre_speeds()
+        sequence = plan_manoeuvre(np.vstack([scan, cells]), margins, p.robot, want_rad, mp, speeds)
+        if sequence is None:
+            return False
+        odom = tick.odom.as_array()
+        self._manoeuvre, self._manoeuvre_ends = sequence, compose(odom, end_poses(sequence))
+        planned_s = sum(speeds.duration_s(q) for q in sequence)
+        self._manoeuvre_until_ns = tick.t_ns + round((MANOEUVRE_TIME_FACTOR * planned_s + 1.0) * 1e9)
+        return True
+
+    def _manoeuvre_step(self, tick: Tick) -> tuple[float, float] | None:
+        """(v, w) of the manoeuvre's current primitive at the manoeuvre's speeds (``_manoeuvre_speeds``;
+        an arc keeps its curvature). A primitive is over once the odometry has reached its planned end
+        (within 1 cm / 1 deg, or past it); the ends are absolute, so a tick's overshoot does not add up.
+        None: the manoeuvre is over (done, or past its time)."""
+        if tick.t_ns > self._manoeuvre_until_ns:
+            self._manoeuvre = ()
+        odom = tick.odom.as_array()
+        while self._manoeuvre:
+            q, rest = self._manoeuvre[0], relative(odom, self._manoeuvre_ends[0])
+            left = (math.copysign(1.0, q.dth_rad) * rest[2] if q.ds_m == 0.0
+                    else math.copysign(1.0, q.ds_m) * rest[0])
+            if left > (MANOEUVRE_DONE_RAD if q.ds_m == 0.0 else MANOEUVRE_DONE_M):
+                break
+            self._manoeuvre, self._manoeuvre_ends = self._manoeuvre[1:], self._manoeuvre_ends[1:]
+        if not self._manoeuvre:
+            return None
+        return self._manoeuvre_speeds().twist(self._manoeuvre[0])
+
+    def _manoeuvre_speeds(self) -> Speeds:
+        """The manoeuvre's speeds: forward at half the top speed (a few decimetres in known free space,
+        every tick checked), reverse at the escape's creep (the blind side rule's limit for a front
+        laser's robot backing, ``safe_command``), turns in place at ROTATE's rate."""
+        p = self.params
+        return Speeds(forward_mps=MANOEUVRE_FORWARD_FRAC * p.robot.vmax_mps,
+                      reverse_mps=p.supervisor.escape_v_frac * p.robot.vmax_mps,
+                      turn_radps=p.supervisor.rotate_w_frac * p.robot.wmax_radps)
+
+
+MANOEUVRE_DONE_M = 0.01
+MANOEUVRE_DONE_RAD = math.radians(1.0)
+"""A manoeuvre's primitive is over within this of its planned end (``NavigationStack._manoeuvre_step``)."""
+MANOEUVRE_FORWARD_FRAC = 0.5
+"""A manoeuvre's forward speed, as a fraction of vmax (``NavigationStack._manoeuvre_speeds``)."""
+MANOEUVRE_TIME_FACTOR = 3.0
+"""A manoeuvre ends at this many times its planned duration, plus a second, whatever is left of it."""
 
 DOUBT_TRACK_NS = 250_000_000
 """Spacing of the ticks the pose-doubt track keeps (0.25 s: a 40 Hz log's 300 s window holds 1200, not
@@ -749,6 +867,7 @@ def warm_up(params: StackParams) -> None:
     that mode then runs its module, a mode selector takeover and the local strategy (``_warm_up_mode``)."""
     gnd = dataclasses.replace(params, nav_mode="gnd")
     _warm_up_gnd(gnd)
+    warm_up_manoeuvre()
     if params.nav_mode != "gnd":
         warm_up_local(params.robot)
         _warm_up_mode(params)

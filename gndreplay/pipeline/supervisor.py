@@ -77,7 +77,7 @@ class Mode(enum.Enum):
     # (or, travelling into stale blind space, a turn in place towards it: turn first)
     SAFE_REVERSE = "SAFE_REVERSE"  # reflexive: the command would touch; a short reverse through known free
     STALE = "STALE"  # reflexive: sensor data too old, stop
-    ESCAPE = "ESCAPE"  # reflexive: trap detected, slow straight escape
+    ESCAPE = "ESCAPE"  # reflexive: trap escape, a manoeuvre of arcs and turns (rectangle) or slow straight
     GOAL = "GOAL"  # goal reached, stop
     TELEOP = "TELEOP"  # multi-loop: the driver's command, unchanged
     FOLLOW = "FOLLOW"  # multi-loop: the path follower's command, unchanged
@@ -119,6 +119,13 @@ class SupervisorParams:
         escape_v_frac: escape speed, and speed of the safety check's short reverse, as a fraction of vmax
             (**choice**: 0.3).
         escape_clearance_m: free distance the raw scan must show ahead/behind to escape that way.
+        manoeuvre_nodes: the rectangular robot's trap escape is first a manoeuvre searched over this many
+            lattice expansions at most (``manoeuvre``; **choice**: 1500, tens of ms); 0: the straight
+            escape only.
+        manoeuvre_after_s: ... and searched already when the reflexive check has replaced every command
+            for this long without progress (see ``trap_progress_m``; **choice**: 2 s, a quarter of the
+            wheelchair's trap window: the trap's dithering rule needs a full window, and the stall limit
+            of issue 10 is 10 s).
         blind_memory_s: how long a cell outside the laser's current field of view stays trusted as free
             after the laser last saw it, for translation towards it (``safe_command``'s blind side rule).
             **Choice**: 1.0 s, five to seven scans of the presets: a person walking at 1 m/s covers 1 m
@@ -157,6 +164,8 @@ class SupervisorParams:
     escape_ticks: int = 10
     escape_v_frac: float = 0.3
     escape_clearance_m: float = 0.6
+    manoeuvre_nodes: int = 1500
+    manoeuvre_after_s: float = 2.0
     blind_memory_s: float = 1.0
     doubt_window_s: float = 300.0
     doubt_tol_m: float = 0.05
