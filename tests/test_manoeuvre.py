@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from gndreplay.config import apply_overrides, preset
-from gndreplay.geometry import compose, inverse, transform_points
+from gndreplay.geometry import compose, inverse, relative, transform_points
 from gndreplay.pipeline.manoeuvre import ManoeuvreParams, Primitive, Speeds, end_poses, plan_manoeuvre
 from gndreplay.pipeline.model import FREE, OCCUPIED, GridParams, RobotCentredGrid
-from gndreplay.pipeline.supervisor import arc_touches, footprint_signed_distance
+from gndreplay.pipeline.supervisor import Mode, arc_touches, footprint_signed_distance, safe_command
 from gndreplay.robot import WHEELCHAIR_ROBOT
 from gndreplay.sim import simulate_scenario
 from gndreplay.sim.runner import SimOutcome
@@ -140,3 +140,41 @@ def test_the_edge_of_known_free_space_is_every_cell_not_free_beside_a_free_one()
     expected = ({(1 + 1, c) for c in range(-5, 6)} | {(-1 - 1, c) for c in range(-5, 6)}
                 | {(r, -6) for r in (-1, 0, 1)} | {(r, 6) for r in (-1, 0, 1)})
     assert cells == expected
+
+
+@pytest.mark.parametrize("start, want_world", [((4.0, -0.2, 0.0), math.pi), ((4.4, 0.2, 0.0), math.pi),
+                                               ((4.2, 0.0, math.pi), -math.pi / 2),
+                                               ((4.2, -0.3, -math.radians(83.0)), math.pi)])
+def test_a_planned_manoeuvre_driven_tick_by_tick_passes_the_reflexive_check(
+        start: tuple[float, float, float], want_world: float) -> None:
+    """The stack drives the plan at 5 Hz through ``safe_command`` (scan points, the chair's margins),
+    accepting only its SAFE_SLOW (the same arc): every tick passes and the chair ends heading the wanted
+    way. The check looks a braking horizon ahead, past a primitive's end; a search that cleared each
+    primitive only to its end had manoeuvres refused near the end of an arc."""
+    cfg = preset("wheelchair")
+    robot, sup = cfg.robot, cfg.supervisor
+    pts = in_robot_frame(wall_points(T_WALLS), start)
+    want = math.remainder(want_world - start[2], math.tau)
+    params = ManoeuvreParams()
+    sequence = plan_manoeuvre(pts, np.full(len(pts), sup.emergency_margin_m), robot, want, params, SPEEDS)
+    assert sequence is not None
+    ends, todo = list(end_poses(sequence)), list(sequence)
+    pose, dt = np.zeros(3), 0.2
+    for _ in range(600):
+        while todo:  # the stack's completion rule (NavigationStack._manoeuvre_step)
+            rest = relative(pose, ends[0])
+            left = math.copysign(1.0, todo[0].dth_rad) * rest[2] if todo[0].ds_m == 0.0 else (
+                math.copysign(1.0, todo[0].ds_m) * rest[0])
+            if left > (math.radians(1.0) if todo[0].ds_m == 0.0 else 0.01):
+                break
+            todo.pop(0)
+            ends.pop(0)
+        if not todo:
+            break
+        v, w = SPEEDS.twist(todo[0])
+        safe = safe_command(v, 0.0, w, transform_points(inverse(pose), pts), np.zeros((0, 2)), robot, sup,
+                            cell_m=cfg.grid.cell_m)
+        assert safe.rule in (None, Mode.SAFE_SLOW), (len(sequence) - len(todo), safe.rule)
+        pose = compose(pose, end_poses((Primitive(safe.v_mps * dt, safe.w_radps * dt),))[0])
+    assert not todo
+    assert abs(math.remainder(pose[2] - want, math.tau)) <= params.heading_tol_rad + math.radians(2.0)

@@ -16,8 +16,9 @@ when the sequence ends or the check refuses it.
 Obstacles are points in the robot frame at the search's start, each with its own margin: the raw scan's
 hits (exact) and the cells that bound the grid's known free space (occupied or never seen; a cell is
 anywhere within half a cell of its centre): the manoeuvre stays where the robot knows it is free, behind
-the laser as well. A point the footprint is already nearer than its margin blocks only a pose nearer
-still (as ``supervisor.arc_touches``: a wedged robot must be able to move away).
+the laser as well. A point already within its margin of the footprint blocks only a pose nearer than
+the footprint has been to it since the primitive began (a wedged robot must be able to move away; the
+reflexive check tests each tick's command the same way, ``supervisor.arc_touches``).
 """
 
 from __future__ import annotations
@@ -31,7 +32,6 @@ from numba import njit
 from numpy.typing import NDArray
 
 from ..robot import RobotConfig
-from .supervisor import footprint_signed_distance
 
 F64 = NDArray[np.float64]
 
@@ -100,12 +100,15 @@ class Primitive:
 
 
 @njit(cache=True)
-def _blocked(px: F64, py: F64, margin: F64, d_root: F64, x0: float, y0: float, th0: float, ds: float,
-             dth: float, n: int, front: float, rear: float, half_w: float, circle_r: float) -> bool:
+def _blocked(px: F64, py: F64, margin: F64, x0: float, y0: float, th0: float, ds: float, dth: float, n: int,
+             front: float, rear: float, half_w: float, circle_r: float) -> bool:
     """Whether the footprint, moved from (x0, y0, th0) along the primitive (ds, dth) in n equal steps,
-    comes within a point's margin and nearer than it was at the search's start (``d_root``). Only the
-    points within reach of the primitive are tested, and at each pose only those within the footprint's
-    enclosing circle grown by their margin."""
+    comes within a point's margin and nearer than it has been since the primitive began (inside its
+    margin a point may only recede: the reflexive check, ``supervisor.arc_touches``, refuses a motion
+    that brings the footprint nearer a point within its margin than it is at the tick). Only the points
+    within reach of the primitive are tested, and at each pose only those within the footprint's
+    enclosing circle grown by their margin (the footprint's distance is ``supervisor.
+    footprint_signed_distance``'s, written out for the kernel)."""
     c0 = math.cos(th0)
     s0 = math.sin(th0)
     outer = circle_r if circle_r > 0.0 else math.hypot(max(front, rear), half_w)
@@ -117,7 +120,8 @@ def _blocked(px: F64, py: F64, margin: F64, d_root: F64, x0: float, y0: float, t
         if (px[i] - x0) ** 2 + (py[i] - y0) ** 2 <= r * r:
             idx[m] = i
             m += 1
-    for k in range(1, n + 1):
+    nearest = np.full(m, np.inf)  # per candidate, the largest distance since the start (inf: out of reach)
+    for k in range(n + 1):
         f = k / n
         phi = dth * f
         s = ds * f
@@ -140,6 +144,7 @@ def _blocked(px: F64, py: F64, margin: F64, d_root: F64, x0: float, y0: float, t
             dy = py[i] - y
             r = outer + margin[i]
             if dx * dx + dy * dy > r * r:
+                nearest[t] = np.inf
                 continue
             qx = c * dx + sn * dy
             qy = -sn * dx + c * dy
@@ -149,8 +154,12 @@ def _blocked(px: F64, py: F64, margin: F64, d_root: F64, x0: float, y0: float, t
                 ex = max(qx - front, -rear - qx)
                 ey = abs(qy) - half_w
                 d = math.hypot(max(ex, 0.0), max(ey, 0.0)) + min(max(ex, ey), 0.0)
-            if d <= margin[i] and d < d_root[i] - 1e-9:
+            if k == 0:
+                nearest[t] = d
+            elif d <= margin[i] and d < nearest[t] - 1e-9:
                 return True
+            else:
+                nearest[t] = max(nearest[t], d) if nearest[t] < np.inf else d
     return False
 
 
@@ -173,18 +182,18 @@ def _end(x: float, y: float, th: float, ds: float, dth: float) -> tuple[float, f
 
 def plan_manoeuvre(points_xy: F64, margins_m: F64, robot: RobotConfig, want_rad: float,
                    params: ManoeuvreParams, speeds: Speeds) -> tuple[Primitive, ...] | None:
-    """The quickest sequence of primitives from the robot's pose (the origin of ``points_xy``' frame)
-    to one heading within ``heading_tol_rad`` of ``want_rad`` (robot frame) with ``room_m`` free straight
-    on; None when there is none within ``radius_m`` and ``max_nodes`` expansions, or when the robot
-    already stands so (nothing to manoeuvre). Cost: the time driven at ``speeds``, plus
-    ``switch_cost_s`` per change of direction (each one a stop and a start)."""
+    """The quickest sequence of primitives (up to the lattice's 5 cm / 7.5 deg states) from the robot's
+    pose (the origin of ``points_xy``' frame) to one heading within ``heading_tol_rad`` of ``want_rad``
+    (robot frame) with ``room_m`` free straight on; None when there is none within ``radius_m`` and
+    ``max_nodes`` expansions, or when the robot already stands so (nothing to manoeuvre). Cost: the time
+    driven at ``speeds``, plus ``switch_cost_s`` per change of direction (each one a stop and a start)."""
     p = params
-    reach = p.radius_m + robot.outer_radius_m + p.room_m + float(np.max(margins_m, initial=0.0))
+    reach = (p.radius_m + p.step_m + robot.outer_radius_m + p.room_m + p.extra_margin_m
+             + float(np.max(margins_m, initial=0.0)))
     near = np.einsum("ij,ij->i", points_xy, points_xy) <= reach * reach
     pts = np.ascontiguousarray(points_xy[near])
     margin = np.ascontiguousarray(margins_m[near] + p.extra_margin_m)
     px, py = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
-    d_root = footprint_signed_distance(pts, robot)
     circle = robot.radius_m if robot.shape == "circle" else 0.0
     geo = (robot.front_m, robot.rear_m, robot.width_m / 2.0, circle)
     prims = [Primitive(sign * p.step_m, sign * p.step_m * k) for sign in (1.0, -1.0) for k in p.curvatures]
@@ -196,7 +205,7 @@ def plan_manoeuvre(points_xy: F64, margins_m: F64, robot: RobotConfig, want_rad:
     rate = max(sharpest * speeds.forward_mps, sharpest * speeds.reverse_mps, speeds.turn_radps)
 
     def blocked(x: float, y: float, th: float, q: Primitive, n: int) -> bool:
-        return bool(_blocked(px, py, margin, d_root, x, y, th, q.ds_m, q.dth_rad, n, *geo))
+        return bool(_blocked(px, py, margin, x, y, th, q.ds_m, q.dth_rad, n, *geo))
 
     def done(x: float, y: float, th: float) -> bool:
         return (abs(math.remainder(th - want_rad, math.tau)) <= p.heading_tol_rad
@@ -231,7 +240,7 @@ def plan_manoeuvre(points_xy: F64, margins_m: F64, robot: RobotConfig, want_rad:
                 continue
             best[k1] = g1
             nodes.append((x1, y1, th1, i, j, w1))
-            h = abs(math.remainder(th1 - want_rad, math.tau)) / rate
+            h = max(0.0, abs(math.remainder(th1 - want_rad, math.tau)) - p.heading_tol_rad) / rate
             heapq.heappush(heap, (g1 + h, g1, len(nodes) - 1))
     return None
 
@@ -265,4 +274,4 @@ def end_poses(sequence: tuple[Primitive, ...]) -> F64:
 def warm_up_manoeuvre() -> None:
     """Compile the sweep kernel before the first timed tick."""
     z = np.zeros(1)
-    _blocked(z, z + 5.0, z, z + 1.0, 0.0, 0.0, 0.0, 0.1, 0.1, 2, 0.8, 0.4, 0.35, 0.0)
+    _blocked(z, z + 5.0, z, 0.0, 0.0, 0.0, 0.1, 0.1, 2, 0.8, 0.4, 0.35, 0.0)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Literal
@@ -678,14 +678,14 @@ class NavigationStack:
                                 unknown_xy=unknown_xy, blind_xy=blind_xy, doubt_xy=doubt_xy, view_rad=view,
                                 cells_unconfirmed=True)
 
-        if not trap:
+        if not trap or mode is Mode.GOAL or unreachable:
             self._escape_left = 0
             self._manoeuvre = ()
+            self._refused_since = None
         if self._manoeuvre:
-            cmd = self._manoeuvre_step(tick)
-            if cmd is not None and check(cmd[0], 0.0, cmd[1]).rule is None:
-                return Mode.ESCAPE, cmd[0], 0.0, cmd[1], flags
-            self._manoeuvre = ()
+            driven = self._drive_manoeuvre(tick, check)
+            if driven is not None:
+                return Mode.ESCAPE, driven[0], 0.0, driven[1], flags
         if self._escape_left > 0:
             self._escape_left -= 1
             if check(self._escape_v, 0.0, 0.0).rule is None:
@@ -708,10 +708,10 @@ class NavigationStack:
         if trapped:
             flags |= Flag.TRAP_DETECTED
         if (trapped or held) and self._plan_manoeuvre(tick, pose, raw, want_rad):
-            cmd = self._manoeuvre_step(tick)
-            if cmd is not None and check(cmd[0], 0.0, cmd[1]).rule is None:
-                return Mode.ESCAPE, cmd[0], 0.0, cmd[1], flags
-            self._manoeuvre = ()
+            self._refused_since = None
+            driven = self._drive_manoeuvre(tick, check)
+            if driven is not None:
+                return Mode.ESCAPE, driven[0], 0.0, driven[1], flags
         if trapped:
             v_esc, possible = escape_command(raw, p.robot, p.supervisor, cell_m=cell_m,
                                              not_free_xy=partial(self._not_free_points, pose))
@@ -766,6 +766,20 @@ class NavigationStack:
         self._manoeuvre_until_ns = tick.t_ns + round((MANOEUVRE_TIME_FACTOR * planned_s + 1.0) * 1e9)
         return True
 
+    def _drive_manoeuvre(self, tick: Tick,
+                         check: Callable[[float, float, float], SafeCommand]) -> tuple[float, float] | None:
+        """(v, w) out for the manoeuvre in progress this tick, through the reflexive ``check``: its
+        current primitive's command, or the check's SAFE_SLOW of it (the same arc, slower: near a
+        primitive's end the braking horizon looks past it, where the plan did not look). None, and the
+        manoeuvre ends: it is over, or the check replaces the command otherwise."""
+        cmd = self._manoeuvre_step(tick)
+        if cmd is not None:
+            safe = check(cmd[0], 0.0, cmd[1])
+            if safe.rule is None or safe.rule is Mode.SAFE_SLOW:
+                return safe.v_mps, safe.w_radps
+        self._manoeuvre = ()
+        return None
+
     def _manoeuvre_step(self, tick: Tick) -> tuple[float, float] | None:
         """(v, w) of the manoeuvre's current primitive at the manoeuvre's speeds (``_manoeuvre_speeds``;
         an arc keeps its curvature). A primitive is over once the odometry has reached its planned end
@@ -788,10 +802,12 @@ class NavigationStack:
     def _manoeuvre_speeds(self) -> Speeds:
         """The manoeuvre's speeds: forward at half the top speed (a few decimetres in known free space,
         every tick checked), reverse at the escape's creep (the blind side rule's limit for a front
-        laser's robot backing, ``safe_command``), turns in place at ROTATE's rate."""
+        laser's robot backing, ``safe_command``), both no faster than the sharpest arc allows within
+        wmax; turns in place at ROTATE's rate."""
         p = self.params
-        return Speeds(forward_mps=MANOEUVRE_FORWARD_FRAC * p.robot.vmax_mps,
-                      reverse_mps=p.supervisor.escape_v_frac * p.robot.vmax_mps,
+        arc_max = p.robot.wmax_radps / max(abs(k) for k in ManoeuvreParams().curvatures)  # w within wmax
+        return Speeds(forward_mps=min(MANOEUVRE_FORWARD_FRAC * p.robot.vmax_mps, arc_max),
+                      reverse_mps=min(p.supervisor.escape_v_frac * p.robot.vmax_mps, arc_max),
                       turn_radps=p.supervisor.rotate_w_frac * p.robot.wmax_radps)
 
 
