@@ -100,6 +100,20 @@ class Primitive:
 
 
 @njit(cache=True)
+def _end(x: float, y: float, th: float, ds: float, dth: float) -> tuple[float, float, float]:
+    """The pose at the end of the primitive (ds, dth) from (x, y, th) (exact arc; the search and the sweep
+    kernel both step with it)."""
+    if ds == 0.0:
+        lx = ly = 0.0
+    elif abs(dth) < 1e-9:
+        lx, ly = ds, 0.0
+    else:
+        lx, ly = ds * math.sin(dth) / dth, ds * (1.0 - math.cos(dth)) / dth
+    c, s = math.cos(th), math.sin(th)
+    return x + c * lx - s * ly, y + s * lx + c * ly, th + dth
+
+
+@njit(cache=True)
 def _blocked(px: F64, py: F64, margin: F64, x0: float, y0: float, th0: float, ds: float, dth: float, n: int,
              front: float, rear: float, half_w: float, circle_r: float) -> bool:
     """Whether the footprint, moved from (x0, y0, th0) along the primitive (ds, dth) in n equal steps,
@@ -109,8 +123,6 @@ def _blocked(px: F64, py: F64, margin: F64, x0: float, y0: float, th0: float, ds
     within reach of the primitive are tested, and at each pose only those within the footprint's
     enclosing circle grown by their margin (the footprint's distance is ``supervisor.
     footprint_signed_distance``'s, written out for the kernel)."""
-    c0 = math.cos(th0)
-    s0 = math.sin(th0)
     outer = circle_r if circle_r > 0.0 else math.hypot(max(front, rear), half_w)
     reach = outer + abs(ds)
     idx = np.empty(px.shape[0], dtype=np.int64)
@@ -123,21 +135,9 @@ def _blocked(px: F64, py: F64, margin: F64, x0: float, y0: float, th0: float, ds
     nearest = np.full(m, np.inf)  # per candidate, the largest distance since the start (inf: out of reach)
     for k in range(n + 1):
         f = k / n
-        phi = dth * f
-        s = ds * f
-        if ds == 0.0:
-            lx = 0.0
-            ly = 0.0
-        elif abs(phi) < 1e-9:
-            lx = s
-            ly = 0.0
-        else:
-            lx = s * math.sin(phi) / phi
-            ly = s * (1.0 - math.cos(phi)) / phi
-        x = x0 + c0 * lx - s0 * ly
-        y = y0 + s0 * lx + c0 * ly
-        c = math.cos(th0 + phi)
-        sn = math.sin(th0 + phi)
+        x, y, th = _end(x0, y0, th0, ds * f, dth * f)
+        c = math.cos(th)
+        sn = math.sin(th)
         for t in range(m):
             i = idx[t]
             dx = px[i] - x
@@ -166,18 +166,6 @@ def _blocked(px: F64, py: F64, margin: F64, x0: float, y0: float, th0: float, ds
 def _steps(ds: float, dth: float, robot: RobotConfig) -> int:
     """Checked poses along a primitive: one per _SAMPLE_M of the farthest footprint point's travel."""
     return max(1, math.ceil((abs(ds) + abs(dth) * robot.outer_radius_m) / _SAMPLE_M))
-
-
-def _end(x: float, y: float, th: float, ds: float, dth: float) -> tuple[float, float, float]:
-    """The pose at the end of the primitive (ds, dth) from (x, y, th) (exact arc)."""
-    if ds == 0.0:
-        lx = ly = 0.0
-    elif abs(dth) < 1e-9:
-        lx, ly = ds, 0.0
-    else:
-        lx, ly = ds * math.sin(dth) / dth, ds * (1.0 - math.cos(dth)) / dth
-    c, s = math.cos(th), math.sin(th)
-    return x + c * lx - s * ly, y + s * lx + c * ly, th + dth
 
 
 def plan_manoeuvre(points_xy: F64, margins_m: F64, robot: RobotConfig, want_rad: float,
@@ -273,5 +261,6 @@ def end_poses(sequence: tuple[Primitive, ...]) -> F64:
 
 def warm_up_manoeuvre() -> None:
     """Compile the sweep kernel before the first timed tick."""
+    _end(0.0, 0.0, 0.0, 0.1, 0.1)
     z = np.zeros(1)
     _blocked(z, z + 5.0, z, 0.0, 0.0, 0.0, 0.1, 0.1, 2, 0.8, 0.4, 0.35, 0.0)

@@ -42,6 +42,7 @@ from .supervisor import (
     doubted_cells,
     escape_command,
     gnd_mode,
+    no_progress,
     rotate_command,
     safe_command,
     safety_reach_m,
@@ -736,8 +737,7 @@ class NavigationStack:
         if (tick.t_ns - t0) * 1e-9 < sp.manoeuvre_after_s:
             return False
         self._refused_since = None
-        return (math.hypot(pose.x - p0.x, pose.y - p0.y) < sp.trap_progress_m
-                and abs(math.remainder(pose.theta - p0.theta, math.tau)) < sp.trap_turn_rad)
+        return no_progress((p0.x, p0.y, p0.theta), (pose.x, pose.y, pose.theta), sp)
 
     def _plan_manoeuvre(self, tick: Tick, pose: Pose2D, raw: NDArray[np.float64], want_rad: float) -> bool:
         """Search the trap escape's manoeuvre (``manoeuvre.plan_manoeuvre``) and hold it; False when the

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..geometry import compose, inverse, relative
+from ..geometry import compose, inverse, relative, wrap_angle
 from ..robot import RobotConfig
 from ..types import Flag
 
@@ -54,6 +54,7 @@ __all__ = [
     "footprint_contains",
     "footprint_signed_distance",
     "gnd_mode",
+    "no_progress",
     "rotate_command",
     "safe_command",
     "safety_reach_m",
@@ -224,8 +225,7 @@ def seen_through(points_xy: NDArray[np.float64], ranges_m: NDArray[np.float64],
     lx, ly, lth = laser_pose
     dx, dy = points_xy[:, 0] - lx, points_xy[:, 1] - ly
     r = np.hypot(dx, dy)
-    a = np.arctan2(dy, dx) - lth
-    a = (a + math.pi) % (2.0 * math.pi) - math.pi
+    a = np.asarray(wrap_angle(np.arctan2(dy, dx) - lth))
     in_view = (a >= angles_rad[0]) & (a <= angles_rad[-1])
     i = np.clip(np.searchsorted(angles_rad, a), 1, angles_rad.shape[0] - 1)
     i = np.where(np.abs(angles_rad[i - 1] - a) <= np.abs(angles_rad[i] - a), i - 1, i)
@@ -578,8 +578,9 @@ def safe_command(
             return SafeCommand(v, vy, w, rule, looking=k == 0 and looks)
     if unknown is not None and w_radps != 0.0:
         v_back = -params.escape_v_frac * robot.vmax_mps
-        if not blocked(v_back, 0.0, 0.0) and not swept_collision(unknown(), v_back, 0.0, robot, params,
-                                                                 grow_m=grow):
+        # a differential base's reverse was already tested against the UNKNOWN cells by ``blocked``
+        if not blocked(v_back, 0.0, 0.0) and (robot.drive == "differential" or not swept_collision(
+                unknown(), v_back, 0.0, robot, params, grow_m=grow)):
             return SafeCommand(v_back, 0.0, 0.0, Mode.SAFE_REVERSE)
     return SafeCommand(0.0, 0.0, 0.0, Mode.EMERGENCY)
 
@@ -715,9 +716,15 @@ class TrapDetector:
             return False
         if _reversals(self._turns) + _reversals(self._drives) < self._p.trap_count:
             return False
-        (x0, y0, th0), (x1, y1, th1) = self._poses[0], self._poses[-1]
-        net_turn = abs(math.remainder(th1 - th0, math.tau))
-        return math.hypot(x1 - x0, y1 - y0) < self._p.trap_progress_m and net_turn < self._p.trap_turn_rad
+        return no_progress(self._poses[0], self._poses[-1], self._p)
+
+
+def no_progress(a: tuple[float, float, float], b: tuple[float, float, float],
+                params: SupervisorParams) -> bool:
+    """Whether between poses a and b (x, y, theta) the robot neither moved trap_progress_m nor turned
+    trap_turn_rad net: the stall of the trap detector's dithering rule and of the manoeuvre's trigger."""
+    net_turn = abs(math.remainder(b[2] - a[2], math.tau))
+    return math.hypot(b[0] - a[0], b[1] - a[1]) < params.trap_progress_m and net_turn < params.trap_turn_rad
 
 
 def _reversals(signs: deque[int]) -> int:
