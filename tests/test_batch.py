@@ -716,8 +716,10 @@ def deterministic(results: tuple[InputResult, ...]) -> list[tuple[Any, ...]]:
 @pytest.fixture(scope="module")
 def dask_cluster() -> Any:
     distributed = pytest.importorskip("distributed")
+    # ":0": any free port for the scheduler's HTTP server (None still binds the fixed 8787, and a second
+    # test run on the same machine then fails to start its cluster)
     with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
     ) as cluster:
         yield cluster
 
