@@ -330,6 +330,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (IdcParams, "keyframe_dist_m"): _pos(_LEN),
     (IdcParams, "keyframe_angle_rad"): _TURN,
     (IdcParams, "keyframe_pair_ratio"): _UNIT,
+    (IdcParams, "keyframe_pair_scans"): _count(1, 10_000),
     (IdcParams, "map_keyframes"): _count(1, 10_000),
     (IdcParams, "map_max_gap_s"): _pos(3600.0),
     (IdcParams, "n_bins"): _count(8, 100_000),

@@ -596,16 +596,18 @@ def test_good_odometry_narrows_the_rotation_guard_to_3_deg() -> None:
     assert et < 1e-3 and er < 0.01, (et, er)
 
 
-# -- known defect (issue 10): a laser looking down a passage whose walls are within about 1 m -------------
-# Surface normals taken over a few centimetres of such a wall (points 3 mm apart, 1 cm of range noise) tilt
-# by 30-60 deg and invent information along the passage; the match passes the degenerate-geometry gate and
-# the corrected pose stays at the newest keyframe's while the robot drives on. In gnd_exp1_three_traps the
-# chair backing out of the side passage lost 0.5 m: its exit had closed after the last keyframe, and the
-# overlap fell a few points per scan, so the door (the one surface across the passage) never entered the map.
-# No fix so far kept the real logs' short relations and the other closed-loop rows where they were (README,
-# open work); these tests hold the class until one does (strict: they fail the day they pass).
-KNOWN_PASSAGE_DEFECT = pytest.mark.xfail(strict=True, raises=AssertionError,
-                                         reason="issue 10: IDC along a narrow passage")
+# -- narrow passages (issue 10) ------------------------------------------------------------------------------
+# The chair backing out of gnd_exp1_three_traps' side passage lost 0.5 m: its exit had closed after the last
+# keyframe, and the overlap fell a few points per scan, so the door (the one surface across the passage)
+# never entered the map (fixed: a lasting drop in overlap takes a keyframe). Known defect, held by strict
+# xfails (they fail the day they pass): a laser looking down a bare passage whose walls are within about 1 m.
+# Surface normals over a few centimetres of such a wall (points 3 mm apart, 1 cm of range noise) tilt by
+# 30-60 deg and invent information along it; the match passes the degenerate-geometry gate and the pose
+# stays at the newest keyframe's while the robot drives on. A degeneracy test with 25 cm line normals fixes
+# these tests but put relations under 1 s of the ACES log up to 5.7 deg off over 16 start scans (issue 11's
+# bound is 3 deg), so it is not in.
+KNOWN_CORRIDOR_DEFECT = pytest.mark.xfail(strict=True, raises=AssertionError,
+                                          reason="known matcher defect: IDC along a bare narrow corridor")
 
 
 def side_passage(door: float) -> np.ndarray:
@@ -641,19 +643,43 @@ def _worst_error(segs_at: list[np.ndarray], start: np.ndarray, steps: list[np.nd
     return worst
 
 
-@KNOWN_PASSAGE_DEFECT
 def test_backing_out_of_a_passage_whose_end_closed_follows_the_odometry() -> None:
     """The chair creeps into the side passage, its exit slides shut over 1.4 s, the chair stops and backs
-    out 0.72 m (HEAD: 0.37 m lost)."""
+    out 0.72 m. The map must take in the door, though the chair moved too little for a keyframe and the pairs
+    fell a few at a time (keyframes on a drop against the previous match alone: 0.37 m lost)."""
     steps = [motion(0.02, 0, 0)] * 12 + [motion(0, 0, 0)] * 3 + [motion(-0.036, 0, 0)] * 20
     worlds = [side_passage((i - 7) / 7.0) for i in range(len(steps) + 1)]
     assert _worst_error(worlds, np.array([6.2, -0.3, math.radians(-84.0)]), steps) < 0.05
 
 
-@KNOWN_PASSAGE_DEFECT
+@KNOWN_CORRIDOR_DEFECT
 @pytest.mark.parametrize("step_m", [0.036, -0.036])
 def test_a_narrow_corridor_keeps_the_odometry_along_it(step_m: float) -> None:
     """30 scans 3.6 cm apart between bare walls 0.7 m from the laser, either way (HEAD: about 1 m lost
     over 1.08 m): the scan can tell nothing along the corridor, so the odometry's motion must stand."""
     steps = [motion(step_m, 0, 0)] * 30
     assert _worst_error([narrow_corridor()] * 31, np.array([0.0, 0.1, 0.0]), steps) < 0.02
+
+
+def test_a_lasting_change_of_view_enters_the_map_and_a_one_scan_dip_does_not() -> None:
+    """A robot standing still: a person (0.8 m wide, 2 m ahead) in view for one scan leaves the map alone (a
+    single match pairing fewer points is as often a poorer fit); in view for three scans in a row, the map
+    takes the new view in, though no scan paired fewer than 80 % of the previous one's points."""
+    def keyframes(m: IdcMatcher) -> int:
+        return int(np.count_nonzero(m._kf_n))
+
+    person = np.array(_box(2.0, -1.0, 0.3, 0.8), dtype=float)
+    with_person = np.concatenate([room(), person])
+    m = IdcMatcher()
+    still = Pose2D(0.0, 0.0, 0.0)
+    scans = [room()] * 3 + [with_person] + [room()] * 3 + [with_person] * 3
+    counts, pairs, ok = [], [], []
+    for i, segs in enumerate(scans):
+        res = m.update(cast(segs, np.zeros(3), t_ns=i * 10**8), still)
+        counts.append(keyframes(m))
+        pairs.append(res.pairs)
+        ok.append(res.ok)
+    assert all(ok), (ok, pairs)
+    assert 0.8 * pairs[2] < pairs[3] < IdcParams().keyframe_pair_ratio * pairs[2], pairs
+    assert counts[:9] == [1] * 9, counts  # one scan with the person, then two more: the map unchanged
+    assert counts[9] == 2, counts  # the third scan in a row with the person enters the map
