@@ -566,11 +566,11 @@ def test_stale_scan_in_a_turn_does_not_derail_the_next_ones(step_deg: float, bac
     assert max(et for _, et, _ in out[8:]) < 0.01 and max(er for _, _, er in out[8:]) < 0.5, out
 
 
-def test_good_odometry_narrows_the_rotation_guard_to_3_deg() -> None:
-    """A robot whose odometry turns well learns a narrower rotational error model (down to 3 sigmas = 3 deg
-    + 15 % of the turn): a match 4 deg off exact odometry that fits no better than the match near the
-    odometry is then refused, where a fresh matcher (3 sigmas = 10 deg) takes it unchecked. The translation
-    model does not narrow."""
+def test_good_odometry_narrows_the_rotation_guard_to_2_deg() -> None:
+    """A robot whose odometry turns well learns a narrower rotational error model (the guard's 2 sigmas
+    down to 2 deg + 10 % of the turn): a match 4 deg off exact odometry that fits no better than the match
+    near the odometry is then refused, where a fresh matcher (2 sigmas = 6.7 deg) takes it unchecked. The
+    translation model does not narrow."""
     shift = (0.0, 0.0, math.radians(4.0))
     move = motion(0.05, 0.0, 2.0)
 
