@@ -329,6 +329,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (IdcParams, "max_range_m"): _pos(_RANGE_M),
     (IdcParams, "keyframe_dist_m"): _pos(_LEN),
     (IdcParams, "keyframe_angle_rad"): _TURN,
+    (IdcParams, "keyframe_back_m"): _nonneg(_LEN),
     (IdcParams, "keyframe_pair_ratio"): _UNIT,
     (IdcParams, "keyframe_pair_scans"): _count(1, 10_000),
     (IdcParams, "map_keyframes"): _count(1, 10_000),

@@ -178,3 +178,29 @@ def test_a_planned_manoeuvre_driven_tick_by_tick_passes_the_reflexive_check(
         pose = compose(pose, end_poses((Primitive(safe.v_mps * dt, safe.w_radps * dt),))[0])
     assert not todo
     assert abs(math.remainder(pose[2] - want, math.tau)) <= params.heading_tol_rad + math.radians(2.0)
+
+
+@pytest.mark.parametrize("door_y", [0.15, 0.3, 0.4, -0.4])
+@pytest.mark.parametrize("wall_x", [1.0, 1.1])
+def test_a_door_off_the_chairs_line_is_lined_up_with_not_only_backed_away_from(door_y: float,
+                                                                                wall_x: float) -> None:
+    """The chair heads within the tolerance of where it wants to go, through a 0.85 m door in a wall
+    0.2-0.3 m ahead of its front, but the door is off its line: driving straight on, a side meets a jamb.
+    Backing straight away gives it room_m straight on, yet driving that room brings it back where it
+    started (wheelchair_office_exit: three such reverses, the chair stalled 12 s before the cabinet's
+    corner beside the door). The manoeuvre must end where the straight way on leads through the door."""
+    lo, hi = door_y - 0.425, door_y + 0.425
+    pts = wall_points({"below": [wall_x, -3.0, wall_x, lo], "above": [wall_x, hi, wall_x, 3.0]})
+    want = math.atan2(door_y, 3.0)  # a point 3 m ahead beyond the door
+    params = ManoeuvreParams()
+    assert abs(want) <= params.heading_tol_rad  # the heading is not what is wrong
+    assert arc_touches(pts, 1.0, 0.0, 0.0, params.room_m, CHAIR, MARGIN)  # the straight way on is
+    sequence = plan_manoeuvre(pts, np.full(len(pts), MARGIN), CHAIR, want, params, SPEEDS)
+    assert sequence is not None
+    assert not all(q.ds_m < 0.0 and q.dth_rad == 0.0 for q in sequence)  # not only a straight reverse
+    assert swept_clearance(pts, sequence) > MARGIN - 0.005
+    end = end_poses(sequence)[-1]
+    assert abs(math.remainder(end[2] - want, math.tau)) <= params.heading_tol_rad + 1e-9
+    # straight on from its end, the whole chair passes the door (its rear 0.1 m beyond the wall)
+    through = (wall_x + CHAIR.rear_m + 0.1 - end[0]) / math.cos(end[2])
+    assert not arc_touches(transform_points(inverse(end), pts), 1.0, 0.0, 0.0, through, CHAIR, MARGIN - 0.01)

@@ -49,7 +49,8 @@ class ManoeuvreParams:
         curvatures: the primitives' curvatures [1/m], each driven forward and in reverse (0: straight).
         turn_rad: rotation of one turn-in-place primitive.
         heading_tol_rad: the manoeuvre ends heading within this of the wanted direction...
-        room_m: ... with the footprint free for this much straight travel on.
+        room_m: ... with the footprint free for this much straight travel on, counted from the start
+            when the pose lies behind it on its own heading (a straight reverse is no manoeuvre).
         radius_m: the search stays within this of the start (a manoeuvre, not a route).
         max_nodes: expansions before the search gives up (bounds its time: a few ms per hundred).
         switch_cost_s: cost of a change of direction (forward / reverse / in place) [s]; the rest of the
@@ -172,9 +173,11 @@ def plan_manoeuvre(points_xy: F64, margins_m: F64, robot: RobotConfig, want_rad:
                    params: ManoeuvreParams, speeds: Speeds) -> tuple[Primitive, ...] | None:
     """The quickest sequence of primitives (up to the lattice's 5 cm / 7.5 deg states) from the robot's
     pose (the origin of ``points_xy``' frame) to one heading within ``heading_tol_rad`` of ``want_rad``
-    (robot frame) with ``room_m`` free straight on; None when there is none within ``radius_m`` and
-    ``max_nodes`` expansions, or when the robot already stands so (nothing to manoeuvre). Cost: the time
-    driven at ``speeds``, plus ``switch_cost_s`` per change of direction (each one a stop and a start)."""
+    (robot frame) with ``room_m`` free straight on, plus however far the pose lies behind the start along
+    its heading (backing away from what blocks the way on, only to drive back to it, is no end); None when
+    there is none within ``radius_m`` and ``max_nodes`` expansions, or when the robot already stands so
+    (nothing to manoeuvre). Cost: the time driven at ``speeds``, plus ``switch_cost_s`` per change of
+    direction (each one a stop and a start)."""
     p = params
     reach = (p.radius_m + p.step_m + robot.outer_radius_m + p.room_m + p.extra_margin_m
              + float(np.max(margins_m, initial=0.0)))
@@ -186,8 +189,6 @@ def plan_manoeuvre(points_xy: F64, margins_m: F64, robot: RobotConfig, want_rad:
     geo = (robot.front_m, robot.rear_m, robot.width_m / 2.0, circle)
     prims = [Primitive(sign * p.step_m, sign * p.step_m * k) for sign in (1.0, -1.0) for k in p.curvatures]
     prims += [Primitive(0.0, p.turn_rad), Primitive(0.0, -p.turn_rad)]
-    room = Primitive(p.room_m, 0.0)
-    n_room = _steps(room.ds_m, 0.0, robot)
     # the quickest a radian can be turned: on the sharpest arc forward, or in place (h admissible)
     sharpest = max(abs(k) for k in p.curvatures)
     rate = max(sharpest * speeds.forward_mps, sharpest * speeds.reverse_mps, speeds.turn_radps)
@@ -196,8 +197,13 @@ def plan_manoeuvre(points_xy: F64, margins_m: F64, robot: RobotConfig, want_rad:
         return bool(_blocked(px, py, margin, x, y, th, q.ds_m, q.dth_rad, n, *geo))
 
     def done(x: float, y: float, th: float) -> bool:
-        return (abs(math.remainder(th - want_rad, math.tau)) <= p.heading_tol_rad
-                and not blocked(x, y, th, room, n_room))
+        if abs(math.remainder(th - want_rad, math.tau)) > p.heading_tol_rad:
+            return False
+        # room_m on from the start, not only from where the robot backed to: a pose behind the start
+        # on its own heading sees the straight way the start had, and driving it comes back to the start
+        behind = max(0.0, -(x * math.cos(th) + y * math.sin(th)))
+        room = Primitive(p.room_m + behind, 0.0)
+        return not blocked(x, y, th, room, _steps(room.ds_m, 0.0, robot))
 
     if done(0.0, 0.0, 0.0):
         return None
