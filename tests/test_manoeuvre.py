@@ -194,7 +194,7 @@ def test_a_door_off_the_chairs_line_is_lined_up_with_not_only_backed_away_from(d
     want = math.atan2(door_y, 3.0)  # a point 3 m ahead beyond the door
     params = ManoeuvreParams()
     assert abs(want) <= params.heading_tol_rad  # the heading is not what is wrong
-    assert arc_touches(pts, 1.0, 0.0, 0.0, params.room_m, CHAIR, MARGIN)  # the straight way on is
+    assert arc_touches(pts, 1.0, 0.0, 0.0, params.room_m, CHAIR, MARGIN)  # the straight way on is blocked
     sequence = plan_manoeuvre(pts, np.full(len(pts), MARGIN), CHAIR, want, params, SPEEDS)
     assert sequence is not None
     assert not all(q.ds_m < 0.0 and q.dth_rad == 0.0 for q in sequence)  # not only a straight reverse
