@@ -187,7 +187,7 @@ def test_a_door_off_the_chairs_line_is_lined_up_with_not_only_backed_away_from(d
     """The chair heads within the tolerance of where it wants to go, through a 0.85 m door in a wall
     0.2-0.3 m ahead of its front, but the door is off its line: driving straight on, a side meets a jamb.
     Backing straight away gives it room_m straight on, yet driving that room brings it back where it
-    started (wheelchair_office_exit: three such reverses, the chair stalled 12 s before the cabinet's
+    started (wheelchair_office_exit: two such reverses, the chair stalled 12 s before the cabinet's
     corner beside the door). The manoeuvre must end where the straight way on leads through the door."""
     lo, hi = door_y - 0.425, door_y + 0.425
     pts = wall_points({"below": [wall_x, -3.0, wall_x, lo], "above": [wall_x, hi, wall_x, 3.0]})
