@@ -704,7 +704,7 @@ def test_backing_up_puts_the_walls_beside_the_laser_into_the_map(back_m: float) 
     hardest (gnd_exp1_three_traps, chair, seed 3: 0.5 m of a side wall unmapped after backing out of the
     closed side passage, a match slid 0.2 m into the passage and the goal was missed by 0.5 m). Backing up
     along the passage, no return within 1.5 m of the laser lies further than keyframe_back_m from the map
-    it is matched against (before: the whole distance reversed, up to the 0.5 m of a motion keyframe)."""
+    it is matched against (without the rule, keyframes only every 0.5 m: 0.24 m at each distance here)."""
     start = np.array([6.2, -0.9, math.radians(-88.0)])  # in the side passage, facing its closed end
     m = IdcMatcher()
     tp = start
