@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 from gndreplay.errors import ConfigError
 from gndreplay.pipeline.local import (
+    _CLOSER_PER_M,
     LOCAL_STRATEGIES,
     LocalCommand,
     LocalParams,
@@ -229,7 +230,8 @@ def _swept_travel(q: np.ndarray, robot: RobotConfig, margin: float, d: float, tu
                   step: float) -> float:
     """Brute force: the first translation (in ``step`` increments, up to 6 m) along ``d`` at which a point
     enters the grown footprint; a point already inside blocks (0) if it is inside the real footprint or
-    the first step brings it closer, else it is skipped; inf when none does."""
+    the first step brings it closer (by more than the kernel's tolerance), else it is skipped; inf when none
+    does."""
     c, s = math.cos(d), math.sin(d)
     if turn_first:  # the footprint faces d, then drives straight ahead
         q = np.column_stack((q[:, 0] * c + q[:, 1] * s, q[:, 1] * c - q[:, 0] * s))
@@ -239,7 +241,7 @@ def _swept_travel(q: np.ndarray, robot: RobotConfig, margin: float, d: float, tu
     inside = _grown_contains(moved, robot, margin)
     dist = footprint_dist(moved.reshape(-1, 2), robot).reshape(moved.shape[:2])
     start = inside[0]
-    blocks_now = start & ((dist[0] <= 0.0) | (dist[1] < dist[0]))
+    blocks_now = start & ((dist[0] <= 0.0) | (dist[1] < dist[0] - _CLOSER_PER_M * step))
     if blocks_now.any():
         return 0.0
     later = inside[:, ~start]

@@ -56,6 +56,10 @@ LOCAL_STRATEGIES: tuple[str, ...] = ("nd", "free-space", "wall-left", "wall-righ
 
 _TWO_PI = 2.0 * math.pi
 _HALF_PI = 0.5 * math.pi
+# a motion brings a point within the margin closer only if its distance falls by more than this per metre
+# travelled (1e-9 rad from parallel): a direction parallel to a wall up to rounding (d = -1e-189 beside a
+# point 2.5 cm off the chair's side) slides along it, as supervisor.arc_touches' 1e-9 m tolerance has it
+_CLOSER_PER_M = 1e-9
 
 
 @dataclass(frozen=True, slots=True)
@@ -265,11 +269,11 @@ def _travel_kernel(px: F64, py: F64, c: F64, s: F64, turn_first: bool, circle: b
     the points (px, py) comes within ``margin`` of it; inf if none ever does. ``turn_first``: the points
     are first turned into the frame of a footprint facing the direction, which then moves straight ahead.
 
-    Per point: a point already within the margin blocks (0) only a motion that brings it closer (distance
-    to a convex set along a line is convex, so a motion that does not bring it closer never does); a point
-    inside the real footprint blocks every motion. The grown rectangle keeps square corners
-    (conservative). Entry / exit times of the line through the grown footprint: a quadratic for the
-    circle, two slabs for the rectangle."""
+    Per point: a point already within the margin blocks (0) only a motion that brings it closer (by more
+    than ``_CLOSER_PER_M`` per metre; distance to a convex set along a line is convex, so a motion that does
+    not bring it closer never does); a point inside the real footprint blocks every motion. The grown
+    rectangle keeps square corners (conservative). Entry / exit times of the line through the grown
+    footprint: a quadratic for the circle, two slabs for the rectangle."""
     inf = np.inf
     out = np.full(c.size, inf)
     rad = radius + margin
@@ -291,7 +295,7 @@ def _travel_kernel(px: F64, py: F64, c: F64, s: F64, turn_first: bool, circle: b
                 t_in, t_out = b - root, b + root
                 hit = disc >= 0.0 and t_out >= 0.0
                 in_real = q2 <= radius * radius
-                closer = b > 0.0
+                closer = b > _CLOSER_PER_M * math.sqrt(q2)
             else:
                 if turn_first:  # straight ahead: no y slab to cross
                     t_in, t_out = qx - front - margin, qx + rear + margin
@@ -304,7 +308,7 @@ def _travel_kernel(px: F64, py: F64, c: F64, s: F64, turn_first: bool, circle: b
                 nx = qx - min(max(qx, -rear), front)
                 ny = qy - min(max(qy, -hw), hw)
                 in_real = nx == 0.0 and ny == 0.0
-                closer = nx * dx + ny * dy > 0.0
+                closer = nx * dx + ny * dy > _CLOSER_PER_M * math.hypot(nx, ny)
             if not hit:
                 continue
             # within the margin already: blocks only if inside the real footprint or coming closer
