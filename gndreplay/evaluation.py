@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import detmath as dm
 from .errors import GndReplayError
 from .fsutil import atomic_write_text, format_stamp
 from .geometry import relative, wrap_angle
@@ -290,7 +291,7 @@ def read_tum(path: str | os.PathLike[str]) -> tuple[NDArray[np.int64], NDArray[n
             t_ns.append(_seconds_to_ns(tok[0]))
         except ValueError as err:
             raise GndReplayError(f"{p} line {lineno}: not a TUM pose 't x y z qx qy qz qw' ({err})") from err
-        poses.append((x, y, 2.0 * math.atan2(qz, qw)))
+        poses.append((x, y, 2.0 * dm.atan2(qz, qw)))
     return np.asarray(t_ns, dtype=np.int64), np.asarray(poses, dtype=np.float64).reshape(len(poses), 3)
 
 
@@ -306,7 +307,7 @@ def write_tum(path: str | os.PathLike[str], t_ns: ArrayLike, poses: ArrayLike) -
     """
     t, p = _trajectory_arrays(t_ns, poses)
     half = 0.5 * p[:, 2]
-    qz, qw = np.sin(half), np.cos(half)
+    qz, qw = dm.sin_a(half), dm.cos_a(half)
     lines = [f"{format_stamp(int(ti))} {x!r} {y!r} 0.0 0.0 0.0 {z!r} {w!r}\n"
              for ti, x, y, z, w in zip(t.tolist(), p[:, 0].tolist(), p[:, 1].tolist(), qz.tolist(),
                                        qw.tolist(), strict=True)]

@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import detmath as dm
+
 __all__ = ["compose", "inverse", "relative", "rotation", "transform_points", "wrap_angle"]
 
 F64 = NDArray[np.float64]
@@ -22,7 +24,7 @@ def wrap_angle(a: ArrayLike) -> F64 | float:
 
 def rotation(theta: float) -> F64:
     """2x2 rotation matrix of angle ``theta`` [rad]."""
-    c, s = np.cos(theta), np.sin(theta)
+    c, s = dm.cos_a(theta), dm.sin_a(theta)
     return np.array([[c, -s], [s, c]])
 
 
@@ -30,7 +32,7 @@ def compose(a: ArrayLike, b: ArrayLike) -> F64:
     """a ∘ b for poses of shape (3,) or (N, 3) (broadcasting)."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
-    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    c, s = dm.cos_a(a[..., 2]), dm.sin_a(a[..., 2])
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
     th = wrap_angle(a[..., 2] + b[..., 2])
@@ -40,7 +42,7 @@ def compose(a: ArrayLike, b: ArrayLike) -> F64:
 def inverse(a: ArrayLike) -> F64:
     """Inverse pose: ``compose(inverse(a), a) == 0``."""
     a = np.asarray(a, dtype=np.float64)
-    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    c, s = dm.cos_a(a[..., 2]), dm.sin_a(a[..., 2])
     x = -(c * a[..., 0] + s * a[..., 1])
     y = s * a[..., 0] - c * a[..., 1]
     return np.stack([x, y, np.asarray(wrap_angle(-a[..., 2]))], axis=-1)
@@ -55,7 +57,7 @@ def transform_points(pose: ArrayLike, points: ArrayLike) -> F64:
     """Map ``(N, 2)`` points from the frame of ``pose`` (shape (3,)) to its parent frame."""
     p = np.asarray(pose, dtype=np.float64)
     pts = np.asarray(points, dtype=np.float64)
-    c, s = np.cos(p[2]), np.sin(p[2])
+    c, s = dm.cos_a(p[2]), dm.sin_a(p[2])
     out = np.empty_like(pts)
     out[:, 0] = p[0] + c * pts[:, 0] - s * pts[:, 1]
     out[:, 1] = p[1] + s * pts[:, 0] + c * pts[:, 1]

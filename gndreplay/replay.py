@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import __version__
+from . import detmath as dm
 from .config import Config, config_to_dict, config_to_toml
 from .errors import FOLLOW_NEEDS_SUBGOALS, ConfigError, LogFormatError
 from .evaluation import write_tum
@@ -162,7 +163,7 @@ def _warm_up_matcher(cfg: Config) -> None:
         angles.flags.writeable = not angles_ro
         for k in range(3):
             pose = Pose2D(0.05 * k, 0.0, 0.01 * k)
-            ranges = 4.0 + 0.4 * np.sin(5.0 * (angles + pose.theta)) - pose.x * np.cos(angles)
+            ranges = 4.0 + 0.4 * dm.sin_a(5.0 * (angles + pose.theta)) - pose.x * dm.cos_a(angles)
             ranges.flags.writeable = not ranges_ro
             matcher.update(Scan(t_ns=k, ranges_m=ranges, angles_rad=angles, max_range_m=30.0), pose)
 
@@ -368,7 +369,7 @@ def motion_agreement(
     dist = np.hypot(rel[:, 0], rel[:, 1])
     v_act = dist * np.sign(rel[:, 0]) / dt
     w_act = rel[:, 2] / dt
-    bearing = np.arctan2(rel[:, 1], rel[:, 0])
+    bearing = dm.atan2_a(rel[:, 1], rel[:, 0])
     moved = (dist >= min_motion_m) & np.isfinite(cmd[i, 2]) & (cmd[i, 0] > 0)
     err = np.abs(np.asarray(wrap_angle(cmd[i, 2] - bearing)))[moved]
     out: dict[str, float] = {

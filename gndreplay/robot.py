@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -57,7 +58,8 @@ class RobotConfig:
         """Radius of the smallest circle about the rotation centre that contains the footprint."""
         if self.shape == "circle":
             return self.radius_m
-        return float((max(self.front_m, self.rear_m) ** 2 + (self.width_m / 2.0) ** 2) ** 0.5)
+        lon, lat = max(self.front_m, self.rear_m), self.width_m / 2.0
+        return math.sqrt(lon * lon + lat * lat)
 
 
 WHEELCHAIR_ROBOT = RobotConfig()

@@ -13,6 +13,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from . import detmath as dm
 from .geometry import compose, inverse, wrap_angle
 
 __all__ = ["Command", "Flag", "Odometry", "Pose2D", "Scan", "Subgoal", "SubgoalKind", "Tick"]
@@ -111,7 +112,7 @@ class Scan:
         """(M, 2) hit points in the sensor frame."""
         ok = self.hits
         r, a = self.ranges_m[ok], self.angles_rad[ok]
-        return np.column_stack([r * np.cos(a), r * np.sin(a)])
+        return np.column_stack([r * dm.cos_a(a), r * dm.sin_a(a)])
 
 
 @dataclass(frozen=True, slots=True)

@@ -63,6 +63,7 @@ from typing import IO, Self
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..errors import LogFormatError
 from ..fsutil import atomic_path, format_stamp
 from ..types import NS_PER_S, Odometry, Pose2D, Scan, Tick
@@ -276,13 +277,13 @@ def _pose(v: list[float], what: str = "pose") -> Pose2D:
 
 def _relative(a: Pose2D, b: Pose2D) -> Pose2D:
     """inverse(a) ∘ b with scalar math (per line, so no numpy overhead)."""
-    c, s = math.cos(a.theta), math.sin(a.theta)
+    c, s = dm.cos(a.theta), dm.sin(a.theta)
     dx, dy = b.x - a.x, b.y - a.y
     return Pose2D(c * dx + s * dy, -s * dx + c * dy, wrap(b.theta - a.theta))
 
 
 def _compose(a: Pose2D, b: Pose2D) -> Pose2D:
-    c, s = math.cos(a.theta), math.sin(a.theta)
+    c, s = dm.cos(a.theta), dm.sin(a.theta)
     return Pose2D(a.x + c * b.x - s * b.y, a.y + s * b.x + c * b.y, wrap(a.theta + b.theta))
 
 

@@ -41,6 +41,7 @@ from typing import Any, Literal, Self
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..errors import LogFormatError
 from ..types import NS_PER_S, Command, Odometry, Pose2D, Scan, Tick
 from . import rosraw
@@ -125,7 +126,7 @@ def _frame(name: str) -> str:
 
 
 def _compose(a: Pose2D, b: Pose2D) -> Pose2D:
-    c, s = math.cos(a.theta), math.sin(a.theta)
+    c, s = dm.cos(a.theta), dm.sin(a.theta)
     return Pose2D(a.x + c * b.x - s * b.y, a.y + s * b.x + c * b.y, wrap(a.theta + b.theta))
 
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..types import NS_PER_S
 
 __all__ = [
@@ -123,7 +124,7 @@ def is_little_cdr(raw: bytes | memoryview) -> bool:
 def yaw_of(q: tuple[float, float, float, float]) -> float:
     """Yaw [rad] of a quaternion (x, y, z, w), in (-pi, pi]."""
     qx, qy, qz, qw = q
-    yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    yaw = dm.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
     return math.pi if yaw <= -math.pi else yaw  # NaN (a NaN quaternion) stays NaN
 
 

@@ -180,7 +180,8 @@ def free_cspace(
     if grid_cells.size == 0:
         return np.zeros(grid_cells.shape, dtype=np.bool_)
     # blocked iff dx^2 + dy^2 <= r2 (integers), r2 = floor of the squared effective radius in cells
-    r2 = math.floor(max(inflate_m / cell_m - 0.5, 0.0) ** 2 * (1.0 + 1e-9))
+    r_cells = max(inflate_m / cell_m - 0.5, 0.0)
+    r2 = math.floor(r_cells * r_cells * (1.0 + 1e-9))
     n_k = min(math.isqrt(r2) + 1, grid_cells.shape[0])  # rows farther than the grid's height never count
     half_width = np.array(
         [*(math.isqrt(r2 - k * k) for k in range(n_k)), -(grid_cells.shape[1] + 2)], dtype=np.int64

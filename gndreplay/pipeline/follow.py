@@ -63,6 +63,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..geometry import wrap_angle
 from ..robot import RobotConfig
 from ..types import Pose2D, Subgoal
@@ -197,8 +198,8 @@ def _coeffs(p0: NDArray[np.float64], p1: NDArray[np.float64], p2: NDArray[np.flo
     """(M,) curvature knots at s = 0, sf/3, 2 sf/3, sf -> (M, 4) polynomial coefficients a, b, c, d."""
     a = p0
     b = -(11.0 * p0 - 18.0 * p1 + 9.0 * p2 - 2.0 * p3) / (2.0 * sf)
-    c = 9.0 * (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) / (2.0 * sf**2)
-    d = -9.0 * (p0 - 3.0 * p1 + 3.0 * p2 - p3) / (2.0 * sf**3)
+    c = 9.0 * (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) / (2.0 * sf * sf)
+    d = -9.0 * (p0 - 3.0 * p1 + 3.0 * p2 - p3) / (2.0 * sf * sf * sf)
     return np.stack([a, b, c, d], axis=-1)
 
 
@@ -221,7 +222,16 @@ def _simpson_ends(co: NDArray[np.float64], sf: NDArray[np.float64]) -> NDArray[n
     w = np.ones(_SIMPSON_N + 1)
     w[1:-1:2], w[2:-1:2] = 4.0, 2.0
     w *= 1.0 / (3.0 * _SIMPSON_N)
-    return np.column_stack([sf * (np.cos(th) @ w), sf * (np.sin(th) @ w), th[:, -1]])
+    return np.column_stack([sf * _weighted_rows(dm.cos_a(th), w), sf * _weighted_rows(dm.sin_a(th), w),
+                            th[:, -1]])
+
+
+def _weighted_rows(a: NDArray[np.float64], w: NDArray[np.float64]) -> NDArray[np.float64]:
+    """a @ w for (M, K) a, summed over k in order (BLAS's order depends on the CPU)."""
+    acc = a[:, 0] * w[0]
+    for k in range(1, w.shape[0]):
+        acc = acc + a[:, k] * w[k]
+    return acc
 
 
 def _spiral_ends(q: NDArray[np.float64], k0: float, kf: float) -> NDArray[np.float64]:
@@ -248,7 +258,7 @@ def _guesses(d: float, alpha: float, gt: float, k0: float,
         a_mat = np.array([[end[1], end[2]], [area[1], area[2]]])
         rhs = np.array([gt - k0 * end[0] - kf * end[3], alpha * sf - k0 * area[0] - kf * area[3]])
         try:
-            p1, p2 = np.linalg.solve(a_mat, rhs)
+            p1, p2 = dm.solve(a_mat, rhs)
             out.append((sf, (float(p1), float(p2))))
         except np.linalg.LinAlgError:
             pass
@@ -256,6 +266,11 @@ def _guesses(d: float, alpha: float, gt: float, k0: float,
     p = (8.0 * gt / sf - k0 - kf) / 6.0
     out.append((sf, (p, p)))
     return out
+
+
+def _norm3(r: NDArray[np.float64]) -> float:
+    """Euclidean norm of a 3-vector, summed in order (np.linalg.norm goes through BLAS)."""
+    return math.sqrt(float(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]))
 
 
 def _newton(q: NDArray[np.float64], target: NDArray[np.float64], k0: float,
@@ -274,18 +289,18 @@ def _newton(q: NDArray[np.float64], target: NDArray[np.float64], k0: float,
         h = 1e-6 * np.maximum(1.0, np.abs(q))
         jac = ((residual(q + np.diag(h)) - r) / h[:, None]).T
         try:
-            step = np.linalg.solve(jac, -r)
+            step = dm.solve(jac, -r)
         except np.linalg.LinAlgError:
             return None
         if not np.all(np.isfinite(step)):
             return None
-        norm = float(np.linalg.norm(r))
+        norm = _norm3(r)
         t = 1.0
         while t >= 1.0 / 64.0:
             qn = q + t * step
             if qn[2] > 0.0:
                 rn = residual(qn[None])[0]
-                if float(np.linalg.norm(rn)) < norm:
+                if _norm3(rn) < norm:
                     q, r = qn, rn
                     break
             t *= 0.5
@@ -306,14 +321,14 @@ def solve_spiral(start: tuple[float, float, float], goal: tuple[float, float, fl
     """
     x0, y0, t0 = start
     dx, dy = goal[0] - x0, goal[1] - y0
-    c, s = math.cos(t0), math.sin(t0)
+    c, s = dm.cos(t0), dm.sin(t0)
     gx, gy = c * dx + s * dy, -s * dx + c * dy
     gt = float(wrap_angle(goal[2] - t0))
     d = math.hypot(gx, gy)
     if d < 1e-6:
         return None
     target = np.array([gx, gy, gt])
-    alpha = math.atan2(gy, gx)
+    alpha = dm.atan2(gy, gx)
     for sf0, (p1, p2) in _guesses(d, alpha, gt, kappa0, kappaf):
         q = _newton(np.array([p1, p2, sf0]), target, kappa0, kappaf)
         if q is None or q[2] > 2.5 * d + math.pi / kappa_max:
@@ -335,15 +350,15 @@ def sample_spiral(spiral: Spiral, sample_m: float) -> tuple[NDArray[np.float64],
     th = _heading(co, s)[0]
     k = _curvature(co, s)[0]
     ds = np.diff(s)
-    cx = np.concatenate([[0.0], np.cumsum(0.5 * (np.cos(th[1:]) + np.cos(th[:-1])) * ds)])
-    cy = np.concatenate([[0.0], np.cumsum(0.5 * (np.sin(th[1:]) + np.sin(th[:-1])) * ds)])
+    cx = np.concatenate([[0.0], np.cumsum(0.5 * (dm.cos_a(th[1:]) + dm.cos_a(th[:-1])) * ds)])
+    cy = np.concatenate([[0.0], np.cumsum(0.5 * (dm.sin_a(th[1:]) + dm.sin_a(th[:-1])) * ds)])
     if spiral.length > 0.0:
         end = _simpson_ends(co, np.array([spiral.length]))[0]
         frac = s / spiral.length
         cx = cx + frac * (end[0] - cx[-1])
         cy = cy + frac * (end[1] - cy[-1])
     x0, y0, t0 = spiral.start
-    c, si = math.cos(t0), math.sin(t0)
+    c, si = dm.cos(t0), dm.sin(t0)
     xy = np.column_stack([x0 + c * cx - si * cy, y0 + si * cx + c * cy])
     return xy, np.asarray(wrap_angle(th + t0), dtype=np.float64), k, s
 
@@ -386,7 +401,7 @@ def _extend(xy: NDArray[np.float64], heading: NDArray[np.float64], kappa: NDArra
     n = max(math.ceil(extend_m / sample_m), 1)
     t = np.linspace(0.0, extend_m, n + 1)[1:]
     h = float(heading[-1])
-    ext = xy[-1] + t[:, None] * np.array([math.cos(h), math.sin(h)])
+    ext = xy[-1] + t[:, None] * np.array([dm.cos(h), dm.sin(h)])
     return (np.vstack([xy, ext]), np.concatenate([heading, np.full(n, h)]),
             np.concatenate([kappa, np.zeros(n)]), np.concatenate([s, s[-1] + t]))
 
@@ -408,7 +423,7 @@ def plan_trajectory(pose: Pose2D, goal: Subgoal, params: FollowParams, *, direct
     if spiral is None:
         d = math.hypot(end[0] - start[0], end[1] - start[1])
         # beside the subgoal already: turn to its heading rather than to a bearing of no meaning
-        bearing = math.atan2(end[1] - start[1], end[0] - start[0]) if d > params.settle_m else end[2]
+        bearing = dm.atan2(end[1] - start[1], end[0] - start[0]) if d > params.settle_m else end[2]
         turn_to = bearing
         kind = "turn-spiral"
         spiral = solve_spiral((start[0], start[1], bearing), end, kappa_max=km)
@@ -433,8 +448,9 @@ def _project(traj: Trajectory, p: NDArray[np.float64], s_lo: float, s_hi: float)
     sel = np.arange(i0, i1)
     a, b = traj.xy[i0:i1], traj.xy[i0 + 1:i1 + 1]
     ab = b - a
-    L2 = np.einsum("ij,ij->i", ab, ab)
-    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.where(L2 > 0.0, L2, 1.0), 0.0, 1.0)
+    L2 = dm.sqdist(ab)
+    ap = p - a
+    t = np.clip((ap[:, 0] * ab[:, 0] + ap[:, 1] * ab[:, 1]) / np.where(L2 > 0.0, L2, 1.0), 0.0, 1.0)
     q = a + t[:, None] * ab
     dist = np.hypot(q[:, 0] - p[0], q[:, 1] - p[1])
     j = int(np.argmin(dist))
@@ -474,12 +490,12 @@ def kanayama_command(pose_d: tuple[float, float, float], ref: tuple[float, float
     heading, curvature) moving at ``v_ref`` -> (v, w) before limits."""
     x, y, th = pose_d
     rx, ry, rth, rk = ref
-    c, s = math.cos(th), math.sin(th)
+    c, s = dm.cos(th), dm.sin(th)
     ex = c * (rx - x) + s * (ry - y)
     ey = -s * (rx - x) + c * (ry - y)
     et = float(wrap_angle(rth - th))
-    v = v_ref * math.cos(et) + params.k_x * ex
-    w = v_ref * (rk + params.k_y * ey + params.k_theta * math.sin(et))
+    v = v_ref * dm.cos(et) + params.k_x * ex
+    w = v_ref * (rk + params.k_y * ey + params.k_theta * dm.sin(et))
     return v, w
 
 
@@ -491,12 +507,12 @@ def aicardi_command(pose_d: tuple[float, float, float], goal_d: tuple[float, flo
     -> (v, w) before limits."""
     dx, dy = goal_d[0] - pose_d[0], goal_d[1] - pose_d[1]
     e = math.hypot(dx, dy)
-    line = math.atan2(dy, dx)
+    line = dm.atan2(dy, dx)
     alpha = float(wrap_angle(line - pose_d[2]))
     phi = float(wrap_angle(line - goal_d[2]))
-    sinc = math.sin(alpha) / alpha if abs(alpha) > 1e-9 else 1.0
-    v = params.k_rho * e * math.cos(alpha)
-    w = params.k_alpha * alpha + params.k_rho * math.cos(alpha) * sinc * (alpha + params.k_phi * phi)
+    sinc = dm.sin(alpha) / alpha if abs(alpha) > 1e-9 else 1.0
+    v = params.k_rho * e * dm.cos(alpha)
+    w = params.k_alpha * alpha + params.k_rho * dm.cos(alpha) * sinc * (alpha + params.k_phi * phi)
     return v, w
 
 
@@ -504,7 +520,7 @@ def is_passed(pose: Pose2D, goal: Subgoal, next_goal: Subgoal, margin_m: float) 
     """The skip rule (module notes): the robot lies more than ``margin_m`` beyond the line through ``goal``
     perpendicular to its driving direction, and nearer ``next_goal`` than ``goal`` is."""
     h = goal.theta + (math.pi if goal.kind == "reverse" else 0.0)
-    beyond = (pose.x - goal.x) * math.cos(h) + (pose.y - goal.y) * math.sin(h) > margin_m
+    beyond = (pose.x - goal.x) * dm.cos(h) + (pose.y - goal.y) * dm.sin(h) > margin_m
     nearer = math.hypot(pose.x - next_goal.x, pose.y - next_goal.y) < math.hypot(goal.x - next_goal.x,
                                                                                   goal.y - next_goal.y)
     return beyond and nearer
@@ -664,7 +680,7 @@ class PathFollower:
         dist = math.hypot(dx, dy)
         if dist > self.params.horizon_m:
             f = self.params.horizon_m / dist
-            line = math.atan2(dy, dx) + (math.pi if d < 0 else 0.0)  # the robot's heading along the line
+            line = dm.atan2(dy, dx) + (math.pi if d < 0 else 0.0)  # the robot's heading along the line
             goal = Subgoal(pose.x + f * dx, pose.y + f * dy, float(wrap_angle(line)), goal.kind)
             stops, partial = False, True
         traj = plan_trajectory(pose, goal, self.params, direction=d, stops=stops, kappa0=kappa0)

@@ -42,6 +42,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from .. import detmath as dm
 from ..errors import ConfigError
 from ..robot import RobotConfig
 from .nd import _drive, _sectorise, _wrap, robot_boundary_m, sector_angles, sector_of
@@ -235,7 +236,7 @@ def polar_map(obstacles_xy: NDArray[np.float64], robot: RobotConfig, params: Loc
     keep = r <= cap  # also drops nan / inf rows
     if keep.any():
         p, r = pts[keep], r[keep]
-        a = np.arctan2(p[:, 1], p[:, 0])
+        a = dm.atan2_a(p[:, 1], p[:, 0])
         idx = sector_of(a, n)
         f = np.maximum(r - robot_boundary_m(robot, a), 0.0)
         order = np.lexsort((f, idx))  # by sector, then free distance: the first of each sector is its min
@@ -255,7 +256,7 @@ def _arcs(polar: PolarMap, robot: RobotConfig) -> tuple[F64, F64]:
     half = math.pi / polar.angles_rad.size
     a = (ang[:, None] + np.array([-half, 0.0, half])).ravel()
     rr = np.repeat(r, 3)
-    return rr * np.cos(a), rr * np.sin(a)
+    return rr * dm.cos_a(a), rr * dm.sin_a(a)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -349,7 +350,7 @@ def travel_m(polar: PolarMap, directions_rad: ArrayLike, robot: RobotConfig, *, 
     if px.size == 0:
         return np.full(d.shape, np.inf)
     circle = robot.shape == "circle"
-    res: F64 = _travel_kernel(px, py, np.cos(d), np.sin(d), turn_first, circle,
+    res: F64 = _travel_kernel(px, py, dm.cos_a(d), dm.sin_a(d), turn_first, circle,
                               robot.radius_m if circle else 0.0, 0.0 if circle else robot.front_m,
                               0.0 if circle else robot.rear_m, 0.0 if circle else 0.5 * robot.width_m,
                               float(margin_m))
@@ -367,14 +368,14 @@ def _turn_limits(polar: PolarMap, robot: RobotConfig, params: LocalParams) -> tu
     near = r < robot.outer_radius_m
     if not near.any():
         return math.inf, math.inf
-    r, a = np.maximum(r[near], 1e-9), np.arctan2(py[near], px[near])  # r > 0: the safety angle below
+    r, a = np.maximum(r[near], 1e-9), dm.atan2_a(py[near], px[near])  # r > 0: the safety angle below
     phi_max = min(math.pi, robot.wmax_radps * params.approach_s + params.safety_m / float(r.min()))
     phi = np.arange(0.0, phi_max + params.rotation_step_rad, params.rotation_step_rad)
     hw = 0.5 * robot.width_m
     limits = []
     for sign in (1.0, -1.0):  # w > 0 turns the obstacles clockwise in the robot frame
         ang = a[:, None] - sign * phi[None, :]
-        x, y = r[:, None] * np.cos(ang), r[:, None] * np.sin(ang)
+        x, y = r[:, None] * dm.cos_a(ang), r[:, None] * dm.sin_a(ang)
         inside = (x <= robot.front_m) & (x >= -robot.rear_m) & (np.abs(y) <= hw)
         first = np.where(inside.any(axis=1), inside.argmax(axis=1), phi.size)
         clear_phi = phi[np.maximum(first - 1, 0)]
@@ -393,7 +394,7 @@ def _limit(theta: float, polar: PolarMap, robot: RobotConfig, params: LocalParam
     v, vy, w = _drive(theta, robot.vmax_mps, robot)
     speed = math.hypot(v, vy)
     if speed > 0.0:
-        motion = math.atan2(vy, v)
+        motion = dm.atan2(vy, v)
         full = robot.vmax_mps * params.approach_s  # travel beyond this allows full speed
         d = float(travel_m(polar, motion, robot, margin_m=params.safety_m, reach_m=full)[0])
         allowed = d / params.approach_s
@@ -426,7 +427,7 @@ def _boundary_direction(polar: PolarMap, side: int, distance_m: float, window: N
     angles = polar.free_angle_rad if polar.free_angle_rad is not None else polar.angles_rad
     bearing = float(angles[i])
     err = float(polar.free_m[i]) - distance_m
-    corr = min(max(math.atan(params.distance_gain_per_m * err), -params.max_correction_rad),
+    corr = min(max(dm.atan(params.distance_gain_per_m * err), -params.max_correction_rad),
                params.max_correction_rad)
     return _wrap(bearing - side * _HALF_PI + side * corr)
 
@@ -453,7 +454,7 @@ def _target(target_xy: NDArray[np.float64] | None) -> tuple[float, float] | None
     t = np.asarray(target_xy, dtype=np.float64).reshape(-1)
     if t.shape != (2,) or not np.all(np.isfinite(t)):
         raise ValueError(f"target_xy must be two finite numbers or None, got {target_xy!r}")
-    return math.hypot(t[0], t[1]), _wrap(math.atan2(t[1], t[0]))
+    return math.hypot(t[0], t[1]), _wrap(dm.atan2(t[1], t[0]))
 
 
 def _contour(polar: PolarMap, target: tuple[float, float] | None, robot: RobotConfig, params: LocalParams,
@@ -536,7 +537,7 @@ def _free_space(polar: PolarMap, target: tuple[float, float] | None, robot: Robo
         lo = float(ang[order[f]]) - 0.5 * step  # the cluster covers [lo, lo + width] counter-clockwise
         width = float(la - f + 1) * step
         r_lo, r_hi = float(ranges[order[f - 1]]), float(ranges[order[(la + 1) % n]])  # edge obstacles
-        gap = math.sqrt(max(r_lo * r_lo + r_hi * r_hi - 2.0 * r_lo * r_hi * math.cos(width), 0.0))
+        gap = math.sqrt(max(r_lo * r_lo + r_hi * r_hi - 2.0 * r_lo * r_hi * dm.cos(width), 0.0))
         if width < math.pi and gap < 2.0 * half_w:
             continue
         off = float(np.mod(pref - lo, _TWO_PI))
@@ -544,7 +545,7 @@ def _free_space(polar: PolarMap, target: tuple[float, float] | None, robot: Robo
         score = float(free[order[f:la + 1]].mean()) * width * (1.0 - params.target_weight * miss / math.pi)
         if score > best_score:
             best_score = score
-            best = (lo, width, math.atan2(half_w, r_lo), math.atan2(half_w, r_hi))
+            best = (lo, width, dm.atan2(half_w, r_lo), dm.atan2(half_w, r_hi))
     if best is None:  # nowhere to fit through: the deepest sector (the speed law keeps it safe)
         return _limit(float(ang[int(np.argmax(free))]), polar, robot, params, 0)
     lo, width, g_lo, g_hi = best

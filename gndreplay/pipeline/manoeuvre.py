@@ -31,6 +31,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..robot import RobotConfig
 
 F64 = NDArray[np.float64]
@@ -109,8 +110,8 @@ def _end(x: float, y: float, th: float, ds: float, dth: float) -> tuple[float, f
     elif abs(dth) < 1e-9:
         lx, ly = ds, 0.0
     else:
-        lx, ly = ds * math.sin(dth) / dth, ds * (1.0 - math.cos(dth)) / dth
-    c, s = math.cos(th), math.sin(th)
+        lx, ly = ds * dm.sin(dth) / dth, ds * (1.0 - dm.cos(dth)) / dth
+    c, s = dm.cos(th), dm.sin(th)
     return x + c * lx - s * ly, y + s * lx + c * ly, th + dth
 
 
@@ -137,8 +138,8 @@ def _blocked(px: F64, py: F64, margin: F64, x0: float, y0: float, th0: float, ds
     for k in range(n + 1):
         f = k / n
         x, y, th = _end(x0, y0, th0, ds * f, dth * f)
-        c = math.cos(th)
-        sn = math.sin(th)
+        c = dm.cos(th)
+        sn = dm.sin(th)
         for t in range(m):
             i = idx[t]
             dx = px[i] - x
@@ -181,7 +182,7 @@ def plan_manoeuvre(points_xy: F64, margins_m: F64, robot: RobotConfig, want_rad:
     p = params
     reach = (p.radius_m + p.step_m + robot.outer_radius_m + p.room_m + p.extra_margin_m
              + float(np.max(margins_m, initial=0.0)))
-    near = np.einsum("ij,ij->i", points_xy, points_xy) <= reach * reach
+    near = dm.sqdist(points_xy) <= reach * reach
     pts = np.ascontiguousarray(points_xy[near])
     margin = np.ascontiguousarray(margins_m[near] + p.extra_margin_m)
     px, py = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
@@ -201,7 +202,7 @@ def plan_manoeuvre(points_xy: F64, margins_m: F64, robot: RobotConfig, want_rad:
             return False
         # room_m on from the start, not only from where the robot backed to: a pose behind the start
         # on its own heading sees the straight way the start had, and driving it comes back to the start
-        behind = max(0.0, -(x * math.cos(th) + y * math.sin(th)))
+        behind = max(0.0, -(x * dm.cos(th) + y * dm.sin(th)))
         room = Primitive(p.room_m + behind, 0.0)
         return not blocked(x, y, th, room, _steps(room.ds_m, 0.0, robot))
 

@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from .. import detmath as dm
 from ..errors import ConfigError
 from ..types import Pose2D, Scan
 
@@ -277,8 +278,8 @@ def _integrate_kernel(
         if not (math.isnan(r) or r < min_range or r >= max_range or math.isinf(r)):
             ok[i] = True
             a = sth + angles[i]
-            px[i] = sx + r * inv_cell * math.cos(a)
-            py[i] = sy + r * inv_cell * math.sin(a)
+            px[i] = sx + r * inv_cell * dm.cos(a)
+            py[i] = sy + r * inv_cell * dm.sin(a)
     prev_hit = np.empty(m, np.int64)  # nearest hit at or before each beam, -1 for none
     next_hit = np.empty(m, np.int64)  # nearest hit at or after each beam, -1 for none
     last = -1
@@ -314,7 +315,7 @@ def _integrate_kernel(
         if length <= 0.0:
             continue
         a = sth + angles[i]
-        ux, uy = math.cos(a), math.sin(a)
+        ux, uy = dm.cos(a), dm.sin(a)
         len_c = length * inv_cell
         ex = sx + len_c * ux
         ey = sy + len_c * uy
@@ -464,7 +465,7 @@ class RobotCentredGrid:
         shift = self.recentre(robot_pose)
         p = self.params
         sp = scan.sensor_pose
-        ct, st = math.cos(robot_pose.theta), math.sin(robot_pose.theta)
+        ct, st = dm.cos(robot_pose.theta), dm.sin(robot_pose.theta)
         lx = robot_pose.x + ct * sp.x - st * sp.y
         ly = robot_pose.y + st * sp.x + ct * sp.y
         inv = 1.0 / p.cell_m
@@ -556,6 +557,6 @@ class RobotCentredGrid:
         dy = (rows + (r0 + self._off_row) + 0.5) * c - robot_pose.y
         keep = dx * dx + dy * dy <= radius_m * radius_m
         dx, dy = dx[keep], dy[keep]
-        ct, st = math.cos(robot_pose.theta), math.sin(robot_pose.theta)
+        ct, st = dm.cos(robot_pose.theta), dm.sin(robot_pose.theta)
         pts = np.column_stack([ct * dx + st * dy, -st * dx + ct * dy])
         return pts, seen[rows[keep], cols[keep]].astype(np.int64)

@@ -108,6 +108,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from .. import detmath as dm
 from ..errors import ConfigError
 from ..geometry import transform_points
 from ..robot import RobotConfig
@@ -298,7 +299,7 @@ def robot_boundary_m(robot: RobotConfig, sector_angles_rad: ArrayLike) -> F64:
     a = np.asarray(sector_angles_rad, dtype=np.float64)
     if robot.shape == "circle":
         return np.full(a.shape, float(robot.radius_m))
-    c, s = np.cos(a), np.abs(np.sin(a))
+    c, s = dm.cos_a(a), np.abs(dm.sin_a(a))
     big = np.inf
     along = np.where(c > 0.0, robot.front_m, robot.rear_m)
     ex = np.divide(along, np.abs(c), out=np.full(a.shape, big), where=np.abs(c) > 1e-12)
@@ -336,9 +337,9 @@ def security_boundary_m(robot: RobotConfig, sector_angles_rad: ArrayLike, *, sec
     q2x, q2y = p1x - ds_min * sin_t, p1y + ds_min * cos_t
     q3x, q3y = p2x - ds_max * sin_t, p2y + ds_max * cos_t
     r_front = math.hypot(p2x, p2y) + ds_max
-    lim1, lim2 = math.atan2(q1y, q1x), math.atan2(q2y, q2x)
-    lim3, lim4 = math.atan2(q3y, q3x), math.atan2(p2y, p2x)
-    c, s = np.cos(a), np.sin(a)
+    lim1, lim2 = dm.atan2(q1y, q1x), dm.atan2(q2y, q2x)
+    lim3, lim4 = dm.atan2(q3y, q3x), dm.atan2(p2y, p2x)
+    c, s = dm.cos_a(a), dm.sin_a(a)
     with np.errstate(divide="ignore", invalid="ignore"):
         r1 = q1x / c  # the line behind
         t = p1x * c + p1y * s
@@ -396,7 +397,7 @@ def _sectorise_kernel(points: F64, scale: float, max_range_m: float, dist: F64, 
         r2 = x * x + y * y
         if not r2 <= max2:  # also skips nan / inf
             continue
-        a = math.atan2(y, x)
+        a = dm.atan2(y, x)
         i = math.floor(a * scale + _SECTOR_OFFSET) % n
         if r2 < dist[i]:
             dist[i] = r2
@@ -436,7 +437,7 @@ def _navigable(px: F64, py: F64, goal_r: float, goal_a: float, gap_m: float) -> 
     |y| <= gap_m count; unreachable if one is within gap_m/2 of the sub-goal, or if a point on the left
     (y > 0) and one on the right (y <= 0) are closer than gap_m to each other.
     """
-    c, s = math.cos(goal_a), math.sin(goal_a)
+    c, s = dm.cos(goal_a), dm.sin(goal_a)
     m = px.size
     xs = np.empty(m)
     ys = np.empty(m)
@@ -492,7 +493,7 @@ def _select_region(dist: F64, ang: F64, bisectors: F64, goal_r: float, goal_a: f
     n = dist.size
     g = int(sector_of(goal_a, n))
     occ = np.isfinite(dist)
-    px, py = dist[occ] * np.cos(ang[occ]), dist[occ] * np.sin(ang[occ])
+    px, py = dist[occ] * dm.cos_a(ang[occ]), dist[occ] * dm.sin_a(ang[occ])
     in_view = (not occ[g]) or goal_r <= dist[g]
     bounds = np.flatnonzero(_discontinuities(dist, gap_m))  # boundary k lies between k and k+1
     if bounds.size == 0:
@@ -524,9 +525,9 @@ def _select_region(dist: F64, ang: F64, bisectors: F64, goal_r: float, goal_a: f
             a_sub = ang[near] + 0.5 * _wrap(float(bisectors[far] - ang[near]))
             r_sub = dist[near] + _FAR_M
         else:
-            x = 0.5 * (dist[i] * math.cos(ang[i]) + dist[j] * math.cos(ang[j]))
-            y = 0.5 * (dist[i] * math.sin(ang[i]) + dist[j] * math.sin(ang[j]))
-            a_sub, r_sub = math.atan2(y, x), math.hypot(x, y)
+            x = 0.5 * (dist[i] * dm.cos(ang[i]) + dist[j] * dm.cos(ang[j]))
+            y = 0.5 * (dist[i] * dm.sin(ang[i]) + dist[j] * dm.sin(ang[j]))
+            a_sub, r_sub = dm.atan2(y, x), math.hypot(x, y)
         a_sub = _wrap(float(a_sub))
         kept = prev_rad is not None and abs(_wrap(a_sub - prev_rad)) <= 0.5 * commit_rad
         if best is not None and not kept:
@@ -591,12 +592,12 @@ def _passage_axis(dist: F64, ang: F64, left: NDArray[np.bool_], right: NDArray[n
     li, ri = np.flatnonzero(left & near), np.flatnonzero(right & near)
     if li.size == 0 or ri.size == 0:
         return None
-    lx, ly = dist[li] * np.cos(ang[li]), dist[li] * np.sin(ang[li])
-    rx, ry = dist[ri] * np.cos(ang[ri]), dist[ri] * np.sin(ang[ri])
+    lx, ly = dist[li] * dm.cos_a(ang[li]), dist[li] * dm.sin_a(ang[li])
+    rx, ry = dist[ri] * dm.cos_a(ang[ri]), dist[ri] * dm.sin_a(ang[ri])
     ex, ey = lx[:, None] - rx[None, :], ly[:, None] - ry[None, :]
     w2 = ex * ex + ey * ey
     num = rx[None, :] * ey - ry[None, :] * ex
-    bx, by = math.cos(beta), math.sin(beta)
+    bx, by = dm.cos(beta), dm.sin(beta)
     den = bx * ey - by * ex  # the beta ray meets the line r + s (l - r) at t = (r x (l - r)) / (b x (l - r))
     with np.errstate(divide="ignore", invalid="ignore"):
         t = num / den
@@ -618,7 +619,7 @@ def _passage_axis(dist: F64, ang: F64, left: NDArray[np.bool_], right: NDArray[n
         return None
     ux, uy = (lx[a] - rx[b]) / width, (ly[a] - ry[b]) / width
     nx, ny = uy, -ux  # the left point's side turned clockwise: the axis through the pair
-    if nx * math.cos(beta) + ny * math.sin(beta) < 0.0:
+    if nx * dm.cos(beta) + ny * dm.sin(beta) < 0.0:
         nx, ny = -nx, -ny
     return 0.5 * float(lx[a] + rx[b]), 0.5 * float(ly[a] + ry[b]), float(nx), float(ny)
 
@@ -635,7 +636,7 @@ def _follow_axis(axis: tuple[float, float, float, float], lookahead_m: float) ->
     cx, cy, nx, ny = axis
     along = -(cx * nx + cy * ny)  # the rotation centre's coordinate along the axis, from the midpoint
     tx, ty = cx + (along + lookahead_m) * nx, cy + (along + lookahead_m) * ny
-    return _wrap(math.atan2(ty, tx))
+    return _wrap(dm.atan2(ty, tx))
 
 
 def _drive(theta: float, v_nd: float, robot: RobotConfig) -> tuple[float, float, float]:
@@ -649,7 +650,7 @@ def _drive(theta: float, v_nd: float, robot: RobotConfig) -> tuple[float, float,
     tc = min(max(theta, -_HALF_PI), _HALF_PI)
     w = robot.wmax_radps * tc / _HALF_PI
     if robot.drive == "holonomic":
-        return v_nd * math.cos(theta), v_nd * math.sin(theta), w
+        return v_nd * dm.cos(theta), v_nd * dm.sin(theta), w
     return v_nd * (1.0 - abs(tc) / _HALF_PI), 0.0, w
 
 
@@ -783,7 +784,7 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
     min_clearance = _footprint_clearance(pts, robot, params.max_range_m) if occ.any() else math.inf
     dist = np.where(occ, np.maximum(dist, geo.boundary + params.contact_m), dist)
 
-    goal_r, goal_a = math.hypot(goal[0], goal[1]), _wrap(math.atan2(goal[1], goal[0]))  # -0.0 y: pi
+    goal_r, goal_a = math.hypot(goal[0], goal[1]), _wrap(dm.atan2(goal[1], goal[0]))  # -0.0 y: pi
     region = _select_region(dist, ang, geo.angles, goal_r, goal_a, geo.gap_m,
                             None if prev is None else prev.subgoal_rad, params.commit_rad)
     if region is None:
@@ -806,7 +807,7 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
     if region.kind is _Kind.GOAL:
         theta_p = beta
     elif wide:  # pass the discontinuity's corner at (r_c, a_c), towards the inside of the region
-        off = math.atan2(0.5 * geo.gap_m + params.security_m, float(dist[region.corner]))
+        off = dm.atan2(0.5 * geo.gap_m + params.security_m, float(dist[region.corner]))
         a_c = float(ang[region.corner])
         theta_p = _wrap(a_c + off if region.kind is _Kind.FIRST_EDGE else a_c - off)
     else:  # bisector of the region
@@ -851,7 +852,7 @@ def _footprint_clearance(points: F64, robot: RobotConfig, max_range_m: float) ->
     """Smallest exact distance [m] from the points within ``max_range_m`` to the real footprint (negative
     inside), not along the sector bisectors: at a rectangle's corner the two differ by centimetres."""
     with np.errstate(invalid="ignore", over="ignore"):
-        near = points[np.einsum("ij,ij->i", points, points) <= max_range_m * max_range_m]
+        near = points[dm.sqdist(points) <= max_range_m * max_range_m]
     return float(np.min(footprint_signed_distance(near, robot))) if near.shape[0] else math.inf
 
 

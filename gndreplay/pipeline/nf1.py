@@ -55,6 +55,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from .. import detmath as dm
 from ..geometry import wrap_angle
 from ..types import Flag
 from .cspace import free_cspace
@@ -836,7 +837,7 @@ def path_direction(waypoints: NDArray[np.float64], lookahead_cells: float) -> fl
         i -= 1
     p = w[i] + seg[i] * ((s - cum[i]) / lens[i])
     d = p - w[0]
-    return float(wrap_angle(math.atan2(d[0], d[1])))
+    return float(wrap_angle(dm.atan2(d[0], d[1])))
 
 
 def _nearest(
@@ -855,7 +856,7 @@ def _nearest(
     rows = slice(max(r0 - k, 0), min(r0 + k + 1, shape[0]))
     cols = slice(max(c0 - k, 0), min(c0 + k + 1, shape[1]))
     rr, cc = np.mgrid[rows, cols]
-    d2 = (rr - r0) ** 2 + (cc - c0) ** 2
+    d2 = np.square(rr - r0) + np.square(cc - c0)
     ok = valid(rows, cols, rr, cc) & (d2 <= radius_cells * radius_cells)
     if not ok.any():
         return None
@@ -1056,7 +1057,7 @@ def plan(
         direction = path_direction(waypoints, params.lookahead_m / cell_m)
     else:  # same cell: head for the goal point itself
         d = g - 0.5 - np.asarray(start, dtype=np.float64)
-        direction = float(wrap_angle(math.atan2(d[0], d[1])))
+        direction = float(wrap_angle(dm.atan2(d[0], d[1])))
     cost_cells = float(nf[entry]) + float(np.hypot(*(np.subtract(entry, start))))
     return PlanResult(
         ok=True,
@@ -1105,7 +1106,7 @@ def _rejoin(
     """The held route followed on from the robot cell: a straight line to the route's cell nearest the robot,
     then the rest of the route, string-pulled like a new plan (``_tighten``). Returns its raw cells and its
     waypoints, or None when that line or a cell of the rest is no longer free."""
-    i = int(np.argmin(((route - np.asarray(start)) ** 2).sum(axis=1)))
+    i = int(np.argmin(np.square(route - np.asarray(start)).sum(axis=1)))
     r, c = int(route[i, 0]), int(route[i, 1])
     rest = route[i:]
     if not free[rest[:, 0], rest[:, 1]].all() or not _visible(free, start[0], start[1], r, c):

@@ -31,6 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..robot import RobotConfig
 from .supervisor import SupervisorParams, swept_touch, unconfirmed_cells
 
@@ -80,14 +81,14 @@ def intention_xy(
     A still command has no intention (None)."""
     speed = math.hypot(v_mps, vy_mps)
     if speed > 0.0:
-        heading = math.atan2(vy_mps, v_mps)
+        heading = dm.atan2(vy_mps, v_mps)
         turn = w_radps * lookahead_m / speed  # heading change over the lookahead distance
         bearing = heading + 0.5 * max(-math.pi, min(math.pi, turn))  # the chord bisects the turn
     elif w_radps != 0.0:
         bearing = math.copysign(0.5 * math.pi, w_radps)
     else:
         return None
-    return np.array([lookahead_m * math.cos(bearing), lookahead_m * math.sin(bearing)])
+    return np.array([lookahead_m * dm.cos(bearing), lookahead_m * dm.sin(bearing)])
 
 
 @dataclass(frozen=True, slots=True)

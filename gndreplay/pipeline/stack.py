@@ -19,6 +19,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..errors import FOLLOW_NEEDS_SUBGOALS, ConfigError
 from ..geometry import compose, relative, transform_points, wrap_angle
 from ..robot import RobotConfig
@@ -347,7 +348,7 @@ class NavigationStack:
 
         rotating = mode is Mode.ROTATE
         mode, v, vy, w, flags = self._reflexive(tick, pose, mode, v, vy, w, flags, unreachable,
-                                                want_rad=math.atan2(target[1], target[0]))
+                                                want_rad=dm.atan2(target[1], target[0]))
         self._rotate_sign = (1.0 if w > 0.0 else -1.0) if rotating and w != 0.0 else 0.0
         path = planned.waypoints_cells
         path_xy = self.grid.cells_to_world(path) if path.shape[0] else np.zeros((0, 2))
@@ -434,7 +435,7 @@ class NavigationStack:
         if points is not None:
             # no trap escape for the driver: dithering under teleop is the driver's own (and an escape
             # begun under local navigation ends when the driver has the robot again)
-            want = math.nan if intention is None else math.atan2(intention[1], intention[0])
+            want = math.nan if intention is None else dm.atan2(intention[1], intention[0])
             mode, v, vy, w, flags = self._reflexive(tick, pose, mode, v, vy, w, flags, points=points,
                                                     trap=active != "teleop", want_rad=want)
         if active != "local":
@@ -483,9 +484,9 @@ class NavigationStack:
             held = _to_robot(pose, self._intent[0][None, :])[0]
             if not _intention_changed(self._intent[1], cmd, held, rel):
                 return held
-        bearing = math.atan2(rel[1], rel[0])
+        bearing = dm.atan2(rel[1], rel[0])
         dists = np.arange(p.planner.lookahead_m, TELEOP_REACH * p.planner.lookahead_m + 1e-9, p.grid.cell_m)
-        ray = np.column_stack([dists * math.cos(bearing), dists * math.sin(bearing)])
+        ray = np.column_stack([dists * dm.cos(bearing), dists * dm.sin(bearing)])
         world = transform_points(pose.as_array(), ray)
         i = first_free_point(world, self.grid, inflate_m=p.robot.inner_radius_m + p.cspace_margin_m,
                              unknown_is_free=False)
@@ -520,7 +521,7 @@ class NavigationStack:
         target's world bearing moved by more than ``ND_MEMORY_RESET_RAD`` since the previous tick (a new
         target: choose afresh)."""
         p = self.params
-        bearing = pose.theta + math.atan2(target[1], target[0])
+        bearing = pose.theta + dm.atan2(target[1], target[0])
         held = self._nd_memory.pop(user, None)
         prev = None
         if held is not None and abs(math.remainder(bearing - held[1], math.tau)) <= ND_MEMORY_RESET_RAD:
@@ -535,7 +536,7 @@ class NavigationStack:
         it lasts (the turn actually executed, also when the safety check reversed it): choosing it afresh
         every tick flips it each time the goal bearing crosses 0 or +-pi, a turn that never turns."""
         p = self.params
-        w = rotate_command(math.atan2(goal_rel[1], goal_rel[0]), p.robot, p.supervisor)
+        w = rotate_command(dm.atan2(goal_rel[1], goal_rel[0]), p.robot, p.supervisor)
         return abs(w) * self._rotate_sign if self._rotate_sign else w
 
     def _unreachable(self, planned: PlanResult, pose: Pose2D, nd_to_goal: bool) -> bool:
@@ -584,7 +585,7 @@ class NavigationStack:
         if planned.ok and math.isfinite(planned.direction_rad):
             bearing = float(wrap_angle(planned.direction_rad - pose.theta))
             d = self.params.planner.lookahead_m
-            return np.array([d * math.cos(bearing), d * math.sin(bearing)])
+            return np.array([d * dm.cos(bearing), d * dm.sin(bearing)])
         return _to_robot(pose, goal[None, :])[0]
 
     def _reach_m(self) -> float:
@@ -852,7 +853,7 @@ def _intention_changed(a: tuple[float, float, float], b: tuple[float, float, flo
     obstacle (teleop_into_wall)."""
     if any(np.sign(x) != np.sign(y) for x, y in zip(a[:2], b[:2], strict=True)):
         return True
-    diff = math.atan2(rel[1], rel[0]) - math.atan2(held_rel[1], held_rel[0])
+    diff = dm.atan2(rel[1], rel[0]) - dm.atan2(held_rel[1], held_rel[0])
     return abs(math.remainder(diff, math.tau)) > TELEOP_REAIM_RAD
 
 

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..geometry import compose, inverse, relative, wrap_angle
 from ..robot import RobotConfig
 from ..types import Flag
@@ -225,7 +226,7 @@ def seen_through(points_xy: NDArray[np.float64], ranges_m: NDArray[np.float64],
     lx, ly, lth = laser_pose
     dx, dy = points_xy[:, 0] - lx, points_xy[:, 1] - ly
     r = np.hypot(dx, dy)
-    a = np.asarray(wrap_angle(np.arctan2(dy, dx) - lth))
+    a = np.asarray(wrap_angle(dm.atan2_a(dy, dx) - lth))
     in_view = (a >= angles_rad[0]) & (a <= angles_rad[-1])
     i = np.clip(np.searchsorted(angles_rad, a), 1, angles_rad.shape[0] - 1)
     i = np.where(np.abs(angles_rad[i - 1] - a) <= np.abs(angles_rad[i] - a), i - 1, i)
@@ -318,7 +319,7 @@ def arc_touches(
     travel = math.hypot(v_mps, vy_mps) * t_end_s
     # only points the moving footprint's enclosing circle can reach (the centre moves at most ``travel``)
     bound = robot.outer_radius_m + travel + margin_m
-    points_xy = points_xy[np.einsum("ij,ij->i", points_xy, points_xy) <= bound * bound]
+    points_xy = points_xy[dm.sqdist(points_xy) <= bound * bound]
     if points_xy.shape[0] == 0:
         return False
     reach = travel + abs(w_radps) * robot.outer_radius_m * t_end_s
@@ -327,7 +328,7 @@ def arc_touches(
     th = w_radps * ts
     # constant-twist integration (exact for an arc); the limit w -> 0 is a straight line
     if abs(w_radps) > 1e-9:
-        s, c1 = np.sin(th) / w_radps, (1.0 - np.cos(th)) / w_radps
+        s, c1 = dm.sin_a(th) / w_radps, (1.0 - dm.cos_a(th)) / w_radps
     else:
         s, c1 = ts, np.zeros_like(ts)
     px = v_mps * s - vy_mps * c1
@@ -335,7 +336,7 @@ def arc_touches(
     # points expressed in each future robot frame: R(-th) (p - t)
     dx = points_xy[None, :, 0] - px[:, None]
     dy = points_xy[None, :, 1] - py[:, None]
-    ct, st = np.cos(th)[:, None], np.sin(th)[:, None]
+    ct, st = dm.cos_a(th)[:, None], dm.sin_a(th)[:, None]
     local = np.stack([ct * dx + st * dy, -st * dx + ct * dy], axis=-1)
     d = footprint_signed_distance(local, robot)  # (n + 1, M); row 0 is now
     closer = d[1:] < d[:1] - 1e-9
@@ -375,7 +376,7 @@ def blind_points(points_xy: NDArray[np.float64], robot: RobotConfig, laser_pose:
     if points_xy.shape[0] == 0:
         return points_xy
     lx, ly, lth = laser_pose
-    bearing = np.arctan2(points_xy[:, 1] - ly, points_xy[:, 0] - lx) - lth
+    bearing = dm.atan2_a(points_xy[:, 1] - ly, points_xy[:, 0] - lx) - lth
     bearing = np.mod(bearing - fov_rad[0], 2.0 * math.pi)  # 0 at the first beam, counter-clockwise
     blind = (bearing > fov_rad[1] - fov_rad[0]) & (footprint_signed_distance(points_xy, robot) >= 0.0)
     out: NDArray[np.float64] = points_xy[blind]
@@ -394,7 +395,8 @@ def unconfirmed_cells(grid_xy: NDArray[np.float64], scan_xy: NDArray[np.float64]
     if grid_xy.shape[0] == 0 or scan_xy.shape[0] == 0:
         return grid_xy
     r = 0.5 * math.sqrt(2.0) * cell_m
-    d2 = (grid_xy[:, None, 0] - scan_xy[None, :, 0]) ** 2 + (grid_xy[:, None, 1] - scan_xy[None, :, 1]) ** 2
+    d2 = (np.square(grid_xy[:, None, 0] - scan_xy[None, :, 0])
+          + np.square(grid_xy[:, None, 1] - scan_xy[None, :, 1]))
     keep: NDArray[np.float64] = grid_xy[~np.any(d2 <= r * r, axis=1)]
     return keep
 
@@ -524,7 +526,7 @@ def safe_command(
     creep = params.escape_v_frac * robot.vmax_mps
 
     def in_view(v: float, vy: float) -> bool:  # the direction of travel lies within the laser's view
-        return (math.atan2(vy, v) - view_rad[0]) % math.tau <= view_rad[1] - view_rad[0]
+        return (dm.atan2(vy, v) - view_rad[0]) % math.tau <= view_rad[1] - view_rad[0]
 
     def into_blind(v: float, vy: float, w: float) -> bool:  # translation towards cells not seen lately
         if blind is None or (v == 0.0 and vy == 0.0):
@@ -606,7 +608,7 @@ def _look_w(v_mps: float, vy_mps: float, w_radps: float, robot: RobotConfig,
     least rotate_w_frac * wmax; the commanded turn direction when the travel points more than 135 deg off
     straight ahead (either way round is then about as long, and keeping the reactor's choice does not
     flip the turn when the direction wobbles across 180 deg)."""
-    bearing = math.atan2(vy_mps, v_mps)
+    bearing = dm.atan2(vy_mps, v_mps)
     rate = max(abs(w_radps), params.rotate_w_frac * robot.wmax_radps)
     if w_radps != 0.0 and abs(bearing) > 0.75 * math.pi:
         return math.copysign(rate, w_radps)

@@ -133,6 +133,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from .. import detmath as dm
 from ..geometry import wrap_angle
 from ..types import Flag
 from .cspace import free_cspace
@@ -259,8 +260,11 @@ def _ray_table(
     ``exact`` and walk with ``_march`` itself (at 1 deg: the 8 rays with sin or cos = +-1/2)."""
     dtheta = 2.0 * math.pi / n_rays
     theta = np.arange(n_rays) * dtheta
-    sin_t = np.sin(theta)
-    cos_t = np.cos(theta)
+    sin_t = np.empty(n_rays)
+    cos_t = np.empty(n_rays)
+    for k in range(n_rays):
+        sin_t[k] = dm.sin(theta[k])
+        cos_t[k] = dm.cos(theta[k])
     offsets = np.empty((n_rays, n_t), np.int32)
     exact = np.zeros(n_rays, np.bool_)
     for k in range(n_rays):
@@ -454,7 +458,7 @@ def _search(
     # sin of the angle up to 90 deg, then 1 (the nearest point of the other ray is the origin)
     sin_j = np.empty(n_rays // 2)
     for j in range(n_rays // 2):
-        sin_j[j] = math.sin(min((j + 1) * dtheta, 0.5 * math.pi))
+        sin_j[j] = dm.sin(min((j + 1) * dtheta, 0.5 * math.pi))
     nr[0] = start_r
     nc[0] = start_c
     parent[0] = -1
@@ -586,12 +590,12 @@ def _search(
             # the rays past the corner that reach d: a tilt stays within their bundle, at most to its middle
             # (a channel narrower than the tilt, e.g. a door barely wider than the robot seen from its mouth,
             # is threaded by its middle ray, not jumped over)
-            max_tilt = math.floor(math.atan2(4.0, max(rng[near], 1.0)) / dtheta + 0.5)
+            max_tilt = math.floor(dm.atan2(4.0, max(rng[near], 1.0)) / dtheta + 0.5)
             run = 1
             while run <= 2 * max_tilt and rng[(far + step * run) % n_rays] >= d:
                 run += 1
             for lateral in (0.0, 1.0, 2.0, 4.0):  # the far ray grazes the corner: tilt away by a few cells
-                tilt = math.floor(math.atan2(lateral, max(rng[near], 1.0)) / dtheta + 0.5)
+                tilt = math.floor(dm.atan2(lateral, max(rng[near], 1.0)) / dtheta + 0.5)
                 tilt = min(tilt, (run - 1) // 2)
                 kk = (far + step * tilt) % n_rays
                 if kk == prev:
@@ -818,7 +822,7 @@ def _plan_on(
         direction = path_direction(waypoints, lookahead_m / cell_m)
     else:  # robot and goal share a cell (two equal waypoints): head for the goal point itself
         d = g - 0.5 - np.asarray(start, dtype=np.float64)
-        direction = float(wrap_angle(math.atan2(d[0], d[1])))
+        direction = float(wrap_angle(dm.atan2(d[0], d[1])))
     return _result(
         True, Flag.NONE, goal, projected, expanded=expanded, width_m=width_m, chain=chain,
         n_escape=n_escape, waypoints=waypoints, direction=direction, length_m=length_cells * cell_m,

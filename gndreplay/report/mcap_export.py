@@ -28,7 +28,6 @@ Topics (per tick = every tick the stack ran):
 
 from __future__ import annotations
 
-import math
 import shutil
 import tempfile
 import weakref
@@ -39,6 +38,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..geometry import compose, inverse
 from ..pipeline.model import RobotCentredGrid
 from ..pipeline.stack import MODULES, TickResult
@@ -95,7 +95,7 @@ class RosMessages:
         return self["Vector3"](x=x, y=y, z=z)
 
     def quat(self, yaw: float) -> Any:
-        return self["Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
+        return self["Quaternion"](x=0.0, y=0.0, z=dm.sin(yaw / 2), w=dm.cos(yaw / 2))
 
     def pose(self, x: float, y: float, yaw: float) -> Any:
         return self["Pose"](position=self["Point"](x=x, y=y, z=0.0), orientation=self.quat(yaw))
@@ -120,7 +120,7 @@ class RosMessages:
         yaw = np.zeros(p.shape[0])
         if p.shape[0] > 1:
             d = np.diff(p, axis=0)
-            yaw[:-1] = np.arctan2(d[:, 1], d[:, 0])
+            yaw[:-1] = dm.atan2_a(d[:, 1], d[:, 0])
             yaw[-1] = yaw[-2]
         hdr = self.hdr(t, MAP)
         poses = [self["PoseStamped"](header=hdr, pose=self.pose(x, y, a))

@@ -12,6 +12,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .. import detmath as dm
+
 TWO_PI = 2.0 * math.pi
 
 
@@ -72,8 +74,8 @@ def scan_points(ranges, angles, min_r, max_r):
     for i in range(n):
         r = ranges[i]
         if r >= min_r and r <= max_r:
-            px[m] = r * math.cos(angles[i])
-            py[m] = r * math.sin(angles[i])
+            px[m] = r * dm.cos(angles[i])
+            py[m] = r * dm.sin(angles[i])
             pr[m] = r
             par[m] = i & 1
             m += 1
@@ -100,7 +102,7 @@ def deskew_points(px, py, pr, par, delay, vx, vy, w):
     mean /= n
     for i in range(n):
         tau = (par[i] - mean) * delay
-        c, s = math.cos(w * tau), math.sin(w * tau)
+        c, s = dm.cos(w * tau), dm.sin(w * tau)
         qx[i] = c * px[i] - s * py[i] + vx * tau
         qy[i] = s * px[i] + c * py[i] + vy * tau
         qr[i] = math.sqrt(qx[i] * qx[i] + qy[i] * qy[i])
@@ -121,7 +123,7 @@ def render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r, blend_m, se
     bearing of each bin's point about the reference origin).
     """
     inv_res = n_bins / TWO_PI
-    c, s = math.cos(oth), math.sin(oth)
+    c, s = dm.cos(oth), dm.sin(oth)
     rmin = np.full(n_bins, np.inf)
     total = 0
     for k in range(kf_n.shape[0]):
@@ -169,7 +171,7 @@ def render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r, blend_m, se
             ref_x[b] = sx[b] / cnt[b]
             ref_y[b] = sy[b] / cnt[b]
             ref_r[b] = math.sqrt(ref_x[b] ** 2 + ref_y[b] ** 2)
-            ref_a[b] = math.atan2(ref_y[b], ref_x[b])
+            ref_a[b] = dm.atan2(ref_y[b], ref_x[b])
     nxt = np.full(n_bins, -1, dtype=np.int64)
     for b in range(n_bins):
         if not ok[b]:
@@ -320,7 +322,7 @@ def _sin2_table(n_bins, w_max):
     res = TWO_PI / n_bins
     out = np.empty(w_max + 1)
     for k in range(w_max + 1):
-        out[k] = math.sin(min(max(0.0, (k - 2) * res), 0.5 * math.pi)) ** 2
+        out[k] = dm.sin(min(max(0.0, (k - 2) * res), 0.5 * math.pi)) ** 2
     return out
 
 
@@ -422,11 +424,11 @@ def idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, seg_ex, se
     it = 0
     converged = False
     while it < max_iter:
-        bw = max(win_min, win0 * math.exp(-it / win_tau))
-        gate = max(gate_min, gate0 * math.exp(-it / win_tau))
+        bw = max(win_min, win0 * dm.exp(-it / win_tau))
+        gate = max(gate_min, gate0 * dm.exp(-it / win_tau))
         gate2 = gate * gate
         w_mrp = min(n_bins // 2 - 1, int(bw * n_bins / TWO_PI) + 2)
-        c, s = math.cos(th), math.sin(th)
+        c, s = dm.cos(th), dm.sin(th)
         n_m = 0
         n_cp = 0
         spx = 0.0
@@ -576,8 +578,8 @@ def idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, seg_ex, se
         kxy = sxy - spx * scy * inv
         kyx = syx - spy * scx * inv
         kyy = syy - spy * scy * inv
-        om = math.atan2(kxy - kyx, kxx + kyy)
-        co, so = math.cos(om), math.sin(om)
+        om = dm.atan2(kxy - kyx, kxx + kyy)
+        co, so = dm.cos(om), dm.sin(om)
         x_new = (scx - (co * spx - so * spy)) * inv
         y_new = (scy - (so * spx + co * spy)) * inv
         dt = math.sqrt((x_new - x) ** 2 + (y_new - y) ** 2)
@@ -599,7 +601,7 @@ def _pairs_point_to_line(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg
     n = px.shape[0]
     n_bins = ref_x.shape[0]
     inv_res = n_bins / TWO_PI
-    c, s = math.cos(th), math.sin(th)
+    c, s = dm.cos(th), dm.sin(th)
     h[:, :] = 0.0
     g[:] = 0.0
     hr[:, :] = 0.0
@@ -732,7 +734,7 @@ def polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_i
         g[0] -= w_t * x
         g[1] -= w_t * y
         g[2] -= w_r * th
-        step = np.linalg.solve(h, g)
+        step, _ = dm.solve_kernel(h, g)  # h is positive definite (the prior)
         x += step[0]
         y += step[1]
         th += step[2]

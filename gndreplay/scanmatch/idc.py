@@ -117,6 +117,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..geometry import transform_points
 from ..types import Pose2D, Scan
 from . import _idc_kernels as k
@@ -269,12 +270,12 @@ P3 = tuple[float, float, float]  # a pose (x, y, theta) as plain floats: the per
 
 def _compose(a: P3, b: P3) -> P3:
     """a ∘ b, theta in [-pi, pi]."""
-    c, s = math.cos(a[2]), math.sin(a[2])
+    c, s = dm.cos(a[2]), dm.sin(a[2])
     return a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], math.remainder(a[2] + b[2], 2.0 * math.pi)
 
 
 def _inverse(a: P3) -> P3:
-    c, s = math.cos(a[2]), math.sin(a[2])
+    c, s = dm.cos(a[2]), dm.sin(a[2])
     return -(c * a[0] + s * a[1]), s * a[0] - c * a[1], -a[2]
 
 
@@ -428,7 +429,7 @@ class IdcMatcher:
             self._add_keyframe(_compose(odom_a, sensor), np.column_stack([px, py]))
             return MatchResult(odom, True, 0, math.nan, 0)  # the first scan defines the corrected frame
         priors, compete, fresh = self._priors(odom_a)
-        pa = np.arctan2(py, px)
+        pa = dm.atan2_a(py, px)
         odo_laser = _compose(priors[0][0], sensor)
         standing = (p.average_when_still and odom_a == self._anchor_odom and not self._stalled
                     and self._odom_step_small)
@@ -552,7 +553,7 @@ class IdcMatcher:
         s0, s1, s2, n = f * s0 + w2, f * s1 + w2 * d, f * s2 + w2 * d * d, n + 1
         self._skew_sums = (s0, s1, s2, n)
         mean = s1 / s0
-        n_eff = (1.0 - f ** n) / (1.0 - f)
+        n_eff = (1.0 - dm.powi(f, n)) / (1.0 - f)
         se = math.sqrt(max(0.0, s2 / s0 - mean * mean) / n_eff)
         sure = n >= _SKEW_MIN_SCANS and abs(mean) >= max(_SKEW_MIN_S, 3.0 * se)
         self._skew_s = mean if sure else 0.0
@@ -646,7 +647,7 @@ class IdcMatcher:
         else:
             extra = 0
         a = p.odo_learn_rate
-        c2 = p.odo_learn_clip ** 2
+        c2 = p.odo_learn_clip * p.odo_learn_clip
         self._odo_ms = ((1.0 - a) * self._odo_ms[0] + a * min(z_t * z_t, c2),
                         (1.0 - a) * self._odo_ms[1] + a * min(z_r * z_r, c2))
         floor = (min(1.0, _ODO_SIGMA_MIN_RAD / p.odo_sigma_rad)
@@ -670,8 +671,9 @@ class IdcMatcher:
         stride = max(1, n // p.idc_points)
         w_t = w_r = 0.0
         if p.polish_iterations > 0:
-            w_t = (p.pair_sigma_m / (p.prior_sigma_m + p.prior_sigma_rel * math.hypot(incr[0], incr[1]))) ** 2
-            w_r = (p.pair_sigma_m / (p.prior_sigma_rad + p.prior_sigma_rel_rad * abs(incr[2]))) ** 2
+            r_t = p.pair_sigma_m / (p.prior_sigma_m + p.prior_sigma_rel * math.hypot(incr[0], incr[1]))
+            r_r = p.pair_sigma_m / (p.prior_sigma_rad + p.prior_sigma_rel_rad * abs(incr[2]))
+            w_t, w_r = r_t * r_t, r_r * r_r
         bin_rad = 2.0 * math.pi / p.n_bins
         coarse_step = max(1, round(p.coarse_step_rad / bin_rad))
         coarse_bins = min(round(p.coarse_window_rad / bin_rad), p.n_bins // 2) if coarse else 0

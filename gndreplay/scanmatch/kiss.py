@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..errors import ScanMatchError
 from ..geometry import compose, inverse
 from ..types import Pose2D, Scan
@@ -68,7 +69,7 @@ class KissParams:
 
 
 def _se2_to_mat(p: F64) -> F64:
-    c, s = np.cos(p[2]), np.sin(p[2])
+    c, s = dm.cos_a(p[2]), dm.sin_a(p[2])
     m = np.eye(4)
     m[0, 0], m[0, 1], m[1, 0], m[1, 1] = c, -s, s, c
     m[0, 3], m[1, 3] = p[0], p[1]
@@ -76,7 +77,7 @@ def _se2_to_mat(p: F64) -> F64:
 
 
 def _mat_to_se2(m: F64) -> F64:
-    return np.array([m[0, 3], m[1, 3], np.arctan2(m[1, 0], m[0, 0])])
+    return np.array([m[0, 3], m[1, 3], dm.atan2_a(m[1, 0], m[0, 0])])
 
 
 class KissIcpMatcher:

@@ -14,6 +14,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..errors import ScanMatchError
 from ..evaluation import Relations, RelationStats, relation_errors, write_tum
 from ..fsutil import check_output_dir, resolve_output_dir, staging_dir
@@ -110,7 +111,7 @@ def keep_by_travel(ticks: Iterable[Tick], dist_m: float, angle_rad: float) -> li
     for tick in ticks:
         o = tick.odom
         if kept:
-            c, s = math.cos(last[2]), math.sin(last[2])
+            c, s = dm.cos(last[2]), dm.sin(last[2])
             dx, dy = o.x - last[0], o.y - last[1]
             turn = abs(math.remainder(o.theta - last[2], 2.0 * math.pi))
             if math.hypot(c * dx + s * dy, -s * dx + c * dy) < dist_m and turn < angle_rad:

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..config import Config, apply_overrides
 from ..errors import ConfigError
 from ..geometry import compose, relative
@@ -105,9 +106,9 @@ def arc_step(pose: F64, vx: float, vy: float, w: float, h: float) -> F64:
     if abs(a) < 1e-12:
         dx, dy = vx * h, vy * h
     else:
-        s, c1 = math.sin(a), 1.0 - math.cos(a)
+        s, c1 = dm.sin(a), 1.0 - dm.cos(a)
         dx, dy = (vx * s - vy * c1) / w, (vx * c1 + vy * s) / w
-    c, s = math.cos(th), math.sin(th)
+    c, s = dm.cos(th), dm.sin(th)
     return np.array([x + c * dx - s * dy, y + s * dx + c * dy, _wrap(th + a)])
 
 
@@ -663,13 +664,13 @@ class ClosedLoop:
             return
         n = self.params.odometry
         z = self.odom_rng.standard_normal(4)
-        ea = math.exp(-h / n.slip_bias_tau_s)
+        ea = dm.exp(-h / n.slip_bias_tau_s)
         self.bias = ea * self.bias + n.slip_bias_sigma_radps * math.sqrt(1.0 - ea * ea) * float(z[3])
         dth = _wrap(b[2] - a[2])
         mid = a[2] + dth / 2.0
         dx, dy = b[0] - a[0], b[1] - a[1]
-        ds = dx * math.cos(mid) + dy * math.sin(mid)
-        dn = -dx * math.sin(mid) + dy * math.cos(mid)
+        ds = dx * dm.cos(mid) + dy * dm.sin(mid)
+        dn = -dx * dm.sin(mid) + dy * dm.cos(mid)
         wb = n.wheelbase_m
         dl, dr = ds - dth * wb / 2.0, ds + dth * wb / 2.0
         k = n.wheel_sigma_m_per_sqrt_m
@@ -680,7 +681,7 @@ class ClosedLoop:
         ds_o = (dl_m + dr_m) / 2.0
         dth_o = (dr_m - dl_m) / (wb * (1.0 + n.wheelbase_scale)) + (self.bias * h if moving else 0.0)
         mid_o = self.odom[2] + dth_o / 2.0
-        c, s = math.cos(mid_o), math.sin(mid_o)
+        c, s = dm.cos(mid_o), dm.sin(mid_o)
         self.odom = np.array([self.odom[0] + ds_o * c - dn_m * s, self.odom[1] + ds_o * s + dn_m * c,
                               _wrap(self.odom[2] + dth_o)])
 

@@ -16,6 +16,8 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .. import detmath as dm
+
 __all__ = [
     "Shapes",
     "box_vertices",
@@ -50,8 +52,8 @@ def box_vertices(cx: float, cy: float, length_m: float, width_m: float, theta_ra
     """Corners (counter-clockwise) of a rectangle centred at (cx, cy), ``length_m`` along ``theta_rad``."""
     hx, hy = length_m / 2.0, width_m / 2.0
     local = np.array([[hx, -hy], [hx, hy], [-hx, hy], [-hx, -hy]])
-    c, s = math.cos(theta_rad), math.sin(theta_rad)
-    return local @ np.array([[c, s], [-s, c]]) + np.array([cx, cy])
+    c, s = dm.cos(theta_rad), dm.sin(theta_rad)
+    return np.column_stack([cx + c * local[:, 0] - s * local[:, 1], cy + s * local[:, 0] + c * local[:, 1]])
 
 
 def footprint_vertices(front_m: float, rear_m: float, width_m: float) -> F64:
@@ -121,8 +123,8 @@ class Shapes:
 def ray_kernel(ox: float, oy: float, angles: F64, edges: F64, circles: F64, max_range: float,
                 out: F64) -> None:  # pragma: no cover - compiled
     for i in range(angles.shape[0]):
-        dx = math.cos(angles[i])
-        dy = math.sin(angles[i])
+        dx = dm.cos(angles[i])
+        dy = dm.sin(angles[i])
         best = math.inf
         for j in range(edges.shape[0]):
             px = edges[j, 0]
@@ -329,8 +331,8 @@ def _robot_kernel(x: float, y: float, th: float, local: F64, radius: float, edge
     if k == 0:
         _circle_kernel(x, y, radius, edges, poly_off, circles, out)
         return
-    c = math.cos(th)
-    s = math.sin(th)
+    c = dm.cos(th)
+    s = dm.sin(th)
     fp = np.empty((k, 4))
     for i in range(k):
         fp[i, 0] = x + c * local[i, 0] - s * local[i, 1]

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import detmath as dm
 from ..config import Config, apply_overrides, load_config, preset
 from ..errors import ConfigError
 from .closedloop import ClosedLoop, SimParams
@@ -286,5 +287,5 @@ def footprint_outline(cfg: Config) -> np.ndarray:
     r = cfg.robot
     if r.shape == "circle":
         a = np.linspace(0.0, 2.0 * math.pi, 33)[:-1]
-        return np.column_stack([r.radius_m * np.cos(a), r.radius_m * np.sin(a)])
+        return np.column_stack([r.radius_m * dm.cos_a(a), r.radius_m * dm.sin_a(a)])
     return footprint_vertices(r.front_m, r.rear_m, r.width_m)

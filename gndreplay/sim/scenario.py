@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.signal import lfilter
 
+from .. import detmath as dm
 from ..errors import ConfigError, OutputError
 from ..geometry import compose, wrap_angle
 from ..robot import WHEELCHAIR_ROBOT, RobotConfig
@@ -158,10 +159,10 @@ def _integrate(pose: F64, v: float, w: float, dt: float) -> F64:
     """Exact unicycle motion with constant (v, w) for ``dt``."""
     x, y, th = pose
     if abs(w) < 1e-9:
-        return np.array([x + v * dt * math.cos(th), y + v * dt * math.sin(th), th])
+        return np.array([x + v * dt * dm.cos(th), y + v * dt * dm.sin(th), th])
     th1 = th + w * dt
     r = v / w
-    return np.array([x + r * (math.sin(th1) - math.sin(th)), y - r * (math.cos(th1) - math.cos(th)),
+    return np.array([x + r * (dm.sin(th1) - dm.sin(th)), y - r * (dm.cos(th1) - dm.cos(th)),
                      float(wrap_angle(th1))])
 
 
@@ -215,7 +216,7 @@ def follow_route(route: Sequence[ArrayLike], start: Pose2D, params: DriveParams)
             target = _point_at(path, cum, s + params.lookahead_m)
             to_target = target - pose[:2]
             dist = float(np.hypot(*to_target))
-            bearing = math.atan2(to_target[1], to_target[0])
+            bearing = dm.atan2(to_target[1], to_target[0])
             alpha = float(wrap_angle(bearing - pose[2])) if dist > 1e-6 else 0.0
             if abs(alpha) > params.rotate_enter_rad:
                 rotating = True
@@ -227,7 +228,7 @@ def follow_route(route: Sequence[ArrayLike], start: Pose2D, params: DriveParams)
                 w_des = math.copysign(min(params.wmax_radps,
                                           math.sqrt(2.0 * params.ang_accel_radps2 * abs(alpha))), alpha)
             else:
-                kappa = 2.0 * math.sin(alpha) / max(dist, 1e-6)
+                kappa = 2.0 * dm.sin(alpha) / max(dist, 1e-6)
                 v_des = min(params.vmax_mps, math.sqrt(2.0 * params.accel_mps2 * max(remaining, 0.0)))
                 if abs(kappa) > 1e-9:
                     v_des = min(v_des, params.wmax_radps / abs(kappa))
@@ -303,14 +304,14 @@ def corrupt_odometry(
     dth = np.asarray(wrap_angle(np.diff(p[:, 2])))
     mid = p[:-1, 2] + dth / 2.0
     dxy = np.diff(p[:, :2], axis=0)
-    ds = dxy[:, 0] * np.cos(mid) + dxy[:, 1] * np.sin(mid)
+    ds = dxy[:, 0] * dm.cos_a(mid) + dxy[:, 1] * dm.sin_a(mid)
     b = noise.wheelbase_m
     dl, dr = ds - dth * b / 2.0, ds + dth * b / 2.0
     k = noise.wheel_sigma_m_per_sqrt_m
     dl_m = dl * (1.0 + noise.left_scale) + k * np.sqrt(np.abs(dl)) * z[:n]
     dr_m = dr * (1.0 + noise.right_scale) + k * np.sqrt(np.abs(dr)) * z[n:2 * n]
     # heading-rate bias: b_k = a b_{k-1} + c e_k, stationary std sigma
-    a = math.exp(-dt_s / noise.slip_bias_tau_s)
+    a = dm.exp(-dt_s / noise.slip_bias_tau_s)
     c = noise.slip_bias_sigma_radps * math.sqrt(1.0 - a * a)
     b0 = noise.slip_bias_sigma_radps * z[2 * n]
     bias = lfilter([c], [1.0, -a], z[2 * n + 1:], zi=[a * b0])[0]
@@ -319,8 +320,8 @@ def corrupt_odometry(
     dth_o = (dr_m - dl_m) / (b * (1.0 + noise.wheelbase_scale)) + bias * dt_s * moving
     th = p[0, 2] + np.concatenate([[0.0], np.cumsum(dth_o)])
     mid_o = th[:-1] + dth_o / 2.0
-    x = p[0, 0] + np.concatenate([[0.0], np.cumsum(ds_o * np.cos(mid_o))])
-    y = p[0, 1] + np.concatenate([[0.0], np.cumsum(ds_o * np.sin(mid_o))])
+    x = p[0, 0] + np.concatenate([[0.0], np.cumsum(ds_o * dm.cos_a(mid_o))])
+    y = p[0, 1] + np.concatenate([[0.0], np.cumsum(ds_o * dm.sin_a(mid_o))])
     return np.column_stack([x, y, np.asarray(wrap_angle(th))])
 
 

@@ -58,6 +58,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..errors import FOLLOW_NEEDS_SUBGOALS, ConfigError
 from ..io.subgoals import MAX_ABS_SUBGOAL_M, MAX_ABS_THETA_RAD
 from ..pipeline.local import LOCAL_STRATEGIES
@@ -188,9 +189,9 @@ class Element:
         f = self.closed_fraction(t_s if door_t_s is None else door_t_s)
         x0, y0, x1, y1, th = self.segment
         if self.swing_rad:
-            a = math.atan2(y1 - y0, x1 - x0) + (1.0 - f) * self.swing_rad
+            a = dm.atan2(y1 - y0, x1 - x0) + (1.0 - f) * self.swing_rad
             length = math.hypot(x1 - x0, y1 - y0)
-            return wall_vertices(x0, y0, x0 + length * math.cos(a), y0 + length * math.sin(a), th)
+            return wall_vertices(x0, y0, x0 + length * dm.cos(a), y0 + length * dm.sin(a), th)
         if f <= 0.0:
             return None
         return wall_vertices(x0, y0, x0 + f * (x1 - x0), y0 + f * (y1 - y0), th)

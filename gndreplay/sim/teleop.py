@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import detmath as dm
 from ..geometry import wrap_angle
 from .scenario import _point_at, _polyline_lengths, _project
 
@@ -92,8 +93,8 @@ class TeleopDriver:
         target = _point_at(track, cum, self._s + sp.lookahead_m)
         dx, dy = float(target[0] - pose[0]), float(target[1] - pose[1])
         dist = math.hypot(dx, dy)
-        alpha = float(wrap_angle(math.atan2(dy, dx) - pose[2])) if dist > 1e-6 else 0.0
-        kappa = 2.0 * math.sin(alpha) / max(dist, 1e-6)
+        alpha = float(wrap_angle(dm.atan2(dy, dx) - pose[2])) if dist > 1e-6 else 0.0
+        kappa = 2.0 * dm.sin(alpha) / max(dist, 1e-6)
         v = min(sp.speed_mps, math.sqrt(2.0 * self.accel * remaining))
         if abs(kappa) * v > self.wmax:
             v = self.wmax / abs(kappa)

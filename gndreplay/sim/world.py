@@ -18,6 +18,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .. import detmath as dm
 from .geometry import ray_kernel
 
 __all__ = [
@@ -65,9 +66,9 @@ def box(cx: float, cy: float, length_m: float, width_m: float, *, angle_rad: flo
     """Sides of a rectangle centred at (cx, cy): ``length_m`` along ``angle_rad``, ``width_m`` across."""
     hx, hy = length_m / 2.0, width_m / 2.0
     corners = np.array([[hx, hy], [-hx, hy], [-hx, -hy], [hx, -hy]])
-    c, s = math.cos(angle_rad), math.sin(angle_rad)
-    rot = corners @ np.array([[c, s], [-s, c]])
-    return polygon(rot + np.array([cx, cy]))
+    c, s = dm.cos(angle_rad), dm.sin(angle_rad)
+    return polygon(np.column_stack([cx + c * corners[:, 0] - s * corners[:, 1],
+                                    cy + s * corners[:, 0] + c * corners[:, 1]]))
 
 
 def regular_polygon(cx: float, cy: float, radius_m: float, *, sides: int = 8) -> F64:
@@ -75,7 +76,7 @@ def regular_polygon(cx: float, cy: float, radius_m: float, *, sides: int = 8) ->
     if sides < 3:
         raise ValueError(f"sides must be >= 3, got {sides}")
     a = np.arange(sides) * (2.0 * np.pi / sides)
-    return polygon(np.column_stack([cx + radius_m * np.cos(a), cy + radius_m * np.sin(a)]))
+    return polygon(np.column_stack([cx + radius_m * dm.cos_a(a), cy + radius_m * dm.sin_a(a)]))
 
 
 def wall(x0: float, y0: float, x1: float, y1: float, *, gaps: Sequence[tuple[float, float]] = ()) -> F64:
@@ -141,7 +142,7 @@ class SwingingDoor:
         f = _ramp(t_s, self.t_start_s, self.t_end_s)
         a = self.angle_from_rad + f * (self.angle_to_rad - self.angle_from_rad)
         hx, hy = self.hinge_xy
-        return np.array([[hx, hy, hx + self.length_m * math.cos(a), hy + self.length_m * math.sin(a)]])
+        return np.array([[hx, hy, hx + self.length_m * dm.cos(a), hy + self.length_m * dm.sin(a)]])
 
 
 @dataclass(frozen=True, slots=True)
