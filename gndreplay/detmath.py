@@ -193,6 +193,7 @@ def atan(x: float) -> float:
 
 _PI = 3.1415926535897931160e00
 _PI_LO = 1.2246467991473531772e-16
+_TWO_60 = 1152921504606846976.0
 
 
 @njit("float64(float64, float64)", cache=True)
@@ -218,12 +219,10 @@ def atan2(y: float, x: float) -> float:
         return -0.5 * _PI if neg_y else 0.5 * _PI
     ay = abs(y)
     ax = abs(x)
-    e_y = math.frexp(ay)[1]
-    e_x = math.frexp(ax)[1]
-    if e_y - e_x > 60:  # |y/x| > 2^60
+    if ay > _TWO_60 * ax:  # |y/x| > 2^60 (scaling by a power of 2 is exact; an overflow compares right)
         z = 0.5 * _PI + 0.5 * _PI_LO
         return -z if neg_y else z
-    z = 0.0 if neg_x and e_y - e_x < -60 else atan(ay / ax)  # 0 where |y/x| < 2^-60 and x < 0
+    z = 0.0 if neg_x and _TWO_60 * ay < ax else atan(ay / ax)  # 0 where |y/x| < 2^-60 and x < 0
     if not neg_x:
         return -z if neg_y else z
     if not neg_y:
