@@ -102,14 +102,13 @@ def _rem_pio2(x: float) -> tuple[int, float, float]:
     return int(fn) & 3, y0, y1
 
 
-@njit("float64(float64)", cache=True)
-def sin(x: float) -> float:
-    """sin(x) [x in rad], the same bits on every CPU (nan for nan and +-inf)."""
+@njit(cache=True, inline="always")
+def _sin_quadrants(x: float, shift: int) -> float:
+    """sin(x + shift pi/2): the kernel of the remainder's quadrant."""
     if not math.isfinite(x):
         return math.nan
-    if abs(x) <= _PIO4:
-        return _ksin(x, 0.0)
-    n, y0, y1 = _rem_pio2(x)
+    n, y0, y1 = (0, x, 0.0) if abs(x) <= _PIO4 else _rem_pio2(x)
+    n = (n + shift) & 3
     if n == 0:
         return _ksin(y0, y1)
     if n == 1:
@@ -120,20 +119,15 @@ def sin(x: float) -> float:
 
 
 @njit("float64(float64)", cache=True)
+def sin(x: float) -> float:
+    """sin(x) [x in rad], the same bits on every CPU (nan for nan and +-inf)."""
+    return _sin_quadrants(x, 0)
+
+
+@njit("float64(float64)", cache=True)
 def cos(x: float) -> float:
     """cos(x) [x in rad], the same bits on every CPU (nan for nan and +-inf)."""
-    if not math.isfinite(x):
-        return math.nan
-    if abs(x) <= _PIO4:
-        return _kcos(x, 0.0)
-    n, y0, y1 = _rem_pio2(x)
-    if n == 0:
-        return _kcos(y0, y1)
-    if n == 1:
-        return -_ksin(y0, y1)
-    if n == 2:
-        return -_kcos(y0, y1)
-    return _ksin(y0, y1)
+    return _sin_quadrants(x, 1)
 
 
 _ATANHI = (4.63647609000806093515e-01, 7.85398163397448278999e-01, 9.82793723247329054082e-01,
