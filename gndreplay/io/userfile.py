@@ -1,0 +1,213 @@
+"""Reading a file the user names, one way for every kind: configs, scenarios, subgoals, thresholds,
+relations and a run folder's own files.
+
+- A path is opened only when it is a regular file: a FIFO would block for ever and /dev/zero never ends.
+- Each kind has a size bound, checked before reading and again while reading (the file may grow between).
+- Bytes are decoded as UTF-8 (a BOM allowed); an undecodable file is named with the byte where it fails.
+- TOML, YAML and JSON are parsed with their nesting bounded (``MAX_NESTING``). A parser's recursion error
+  becomes a one-line error. YAML aliases may expand to at most ``MAX_NODES`` values, which stops a
+  "billion laughs" document.
+- Numbers go through :func:`check_number`: a bool or a string is refused, an integer too large for a float
+  is refused before any conversion, and the value must be finite and within its physical range.
+- Every error is a :class:`ConfigError` of one line naming the file. A value is quoted through
+  :func:`brief`, so a message stays short whatever the value.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import reprlib
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from ..errors import ConfigError
+from .base import special_file_kind
+
+__all__ = [
+    "MAX_NESTING", "MAX_NODES", "brief", "check_number", "check_regular_file", "load_json", "load_toml",
+    "load_yaml", "parse_yaml", "read_bytes", "read_text",
+]
+
+MAX_NESTING = 64
+"""Deepest nesting of lists and tables accepted in a TOML, YAML or JSON file."""
+MAX_NODES = 1_000_000
+"""Most values a parsed document may hold, each alias counted as often as it is used."""
+MAX_INT_DIGITS = 30
+"""An integer with more decimal digits is refused before any conversion (no physical value needs them)."""
+
+_BRIEF = reprlib.Repr()
+_BRIEF.maxlevel, _BRIEF.maxdict, _BRIEF.maxlist, _BRIEF.maxtuple = 2, 4, 4, 4
+_BRIEF.maxstring, _BRIEF.maxother, _BRIEF.maxlong = 40, 40, 40
+
+
+def brief(value: Any) -> str:
+    """A short repr for an error message: containers cut after a few items and two levels, long strings
+    and integers cut in the middle (an alias bomb or a 10,000-digit integer prints in a line)."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**MAX_INT_DIGITS:
+        return f"an integer of about {int(value.bit_length() * math.log10(2)) + 1} digits"
+    try:
+        return _BRIEF.repr(value)
+    except (ValueError, RecursionError):  # an int beyond Python's str() limit deep inside a container
+        return f"a {type(value).__name__}"
+
+
+def _one_line(err: BaseException) -> str:
+    return " ".join(str(err).split())[:300]
+
+
+def check_regular_file(path: Path, what: str, max_bytes: int) -> int:
+    """The size of ``path`` if it is a regular file of at most ``max_bytes``, without opening it.
+
+    Raises:
+        ConfigError: missing, a folder, a FIFO / device / socket, unreadable, or too large; one line
+        naming the path and ``what`` it should be ("config file").
+    """
+    if (kind := special_file_kind(path)) is not None:
+        raise ConfigError(f"{path}: is {kind}, not a {what} (never opened)")
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: {what} not found") from None
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot read the {what}: {_one_line(e)}") from None
+    if path.is_dir():
+        raise ConfigError(f"{path}: is a folder, not a {what}")
+    if st.st_size > max_bytes:
+        raise ConfigError(f"{path}: {st.st_size} bytes, more than the {_size(max_bytes)} a {what} may have")
+    return st.st_size
+
+
+def _size(n: int) -> str:
+    return f"{n >> 20} MB" if n >= 1 << 20 else f"{n >> 10} KB" if n >= 1 << 10 else f"{n} bytes"
+
+
+def read_bytes(path: Path, what: str, max_bytes: int) -> bytes:
+    """The whole content of a regular file of at most ``max_bytes`` (see :func:`check_regular_file`)."""
+    path = Path(path)
+    check_regular_file(path, what, max_bytes)
+    try:
+        with path.open("rb") as f:
+            data = f.read(max_bytes + 1)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: {what} not found") from None
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot read the {what}: {_one_line(e)}") from None
+    if len(data) > max_bytes:
+        raise ConfigError(f"{path}: more than the {_size(max_bytes)} a {what} may have (it grew while read)")
+    return data
+
+
+def read_text(path: Path, what: str, max_bytes: int) -> str:
+    """:func:`read_bytes` decoded as UTF-8 (a leading BOM is dropped)."""
+    data = read_bytes(path, what, max_bytes)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = data.count(b"\n", 0, e.start) + 1
+        raise ConfigError(f"{path}: line {line}: not UTF-8 text (byte {e.start}: {data[e.start]:#04x})") from None
+
+
+def _check_shape(doc: Any, where: str) -> None:
+    """Refuse a document nested deeper than MAX_NESTING, holding more than MAX_NODES values (aliases
+    counted as expanded) or containing itself, without recursion and in time proportional to its distinct
+    containers."""
+    done: dict[int, tuple[int, int]] = {}  # id -> (values, nesting) of a container fully measured
+    open_: set[int] = set()  # containers whose children are being measured
+    stack: list[tuple[Any, bool]] = [(doc, False)]
+    while stack:
+        obj, children_done = stack.pop()
+        if not isinstance(obj, dict | list | tuple) or (id(obj) in done and not children_done):
+            continue
+        children = [c for c in (obj.values() if isinstance(obj, dict) else obj)
+                    if isinstance(c, dict | list | tuple)]
+        if children_done:
+            open_.discard(id(obj))
+            size = 1 + len(obj) - len(children) + sum(done[id(c)][0] for c in children)
+            nesting = 1 + max((done[id(c)][1] for c in children), default=0)
+            if size > MAX_NODES:
+                raise ConfigError(f"{where}: more than {MAX_NODES:,} values (aliases counted as expanded)")
+            if nesting > MAX_NESTING:
+                raise ConfigError(f"{where}: nested more than {MAX_NESTING} levels deep")
+            done[id(obj)] = (size, nesting)
+            continue
+        if id(obj) in open_:
+            raise ConfigError(f"{where}: a value contains itself (a recursive alias)")
+        open_.add(id(obj))
+        stack.append((obj, True))
+        for c in children:
+            if id(c) in open_:
+                raise ConfigError(f"{where}: a value contains itself (a recursive alias)")
+            if id(c) not in done:
+                stack.append((c, False))
+        if len(open_) > MAX_NESTING:
+            raise ConfigError(f"{where}: nested more than {MAX_NESTING} levels deep")
+
+
+def load_toml(path: Path, what: str, max_bytes: int) -> dict[str, Any]:
+    """A TOML file as a dict (see the module docstring for the bounds)."""
+    text = read_text(path, what, max_bytes)
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{path}: not a valid TOML file: {_one_line(e)}") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: nested more than {MAX_NESTING} levels deep") from None
+    _check_shape(doc, str(path))
+    return doc
+
+
+def parse_yaml(text: str, where: str) -> Any:
+    """A YAML document (safe types only) from text; ``where`` names it in errors."""
+    import yaml
+
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise ConfigError(f"{where}: not valid YAML: {_one_line(e)}") from None
+    except RecursionError:
+        raise ConfigError(f"{where}: nested more than {MAX_NESTING} levels deep") from None
+    _check_shape(doc, where)
+    return doc
+
+
+def load_yaml(path: Path, what: str, max_bytes: int) -> Any:
+    """A YAML file (see :func:`parse_yaml`)."""
+    return parse_yaml(read_text(path, what, max_bytes), str(path))
+
+
+def load_json(path: Path, what: str, max_bytes: int) -> Any:
+    """A JSON file (see the module docstring for the bounds)."""
+    text = read_text(path, what, max_bytes)
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise ConfigError(f"{path}: not valid JSON: {_one_line(e)}") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: nested more than {MAX_NESTING} levels deep") from None
+    except ValueError as e:  # an integer beyond Python's str() limit
+        raise ConfigError(f"{path}: not valid JSON: {_one_line(e)}") from None
+    _check_shape(doc, str(path))
+    return doc
+
+
+def check_number(value: Any, where: str, lo: float = -math.inf, hi: float = math.inf) -> float:
+    """``value`` as a float when it is a number (not a bool), finite and within [lo, hi].
+
+    An integer of more than MAX_INT_DIGITS digits is refused before it is converted (float() of a 400-digit
+    integer raises OverflowError; one of 5,000 digits cannot even be printed).
+
+    Raises:
+        ConfigError: "<where>: must be a number ..." in one line.
+    """
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f"{where}: must be a number, got {brief(value)}")
+    if isinstance(value, int) and abs(value) >= 10**MAX_INT_DIGITS:
+        raise ConfigError(f"{where}: must be a number from {lo:g} to {hi:g}, got {brief(value)}")
+    x = float(value)
+    if not math.isfinite(x):
+        raise ConfigError(f"{where}: must be finite, got {x!r}")
+    if not lo <= x <= hi:
+        raise ConfigError(f"{where}: must be from {lo:g} to {hi:g}, got {x:g}")
+    return x
