@@ -2,24 +2,30 @@
 
 Every command goes through :func:`cli_errors`, the single error boundary: a :class:`GndReplayError` becomes
 one line ``gndreplay: error: <message>`` on stderr and exit code 2; Ctrl-C exits with 130. Anything else is a
-bug and keeps its traceback. Heavy imports happen inside the commands so ``--help`` stays fast.
+bug and keeps its traceback. A bad command line (an unknown option, a value typer or a callback refuses) is
+reported the same way by the command group (:class:`_Commands`). Every number an option gives is checked
+against its physical range (``userfile.check_number``; the seed by ``sim.scenario.check_seed``), and a value
+misspelt among fixed choices (matcher, preset, planner, mode) gets a "did you mean". Heavy imports happen
+inside the commands so ``--help`` stays fast.
 """
 
 from __future__ import annotations
 
 import functools
+import importlib
 import logging
 import math
 import sys
 import warnings
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, ParamSpec, TextIO, TypeVar, cast
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn, ParamSpec, TextIO, TypeVar, cast
 
 import typer
+from typer.core import TyperGroup
 
 from . import __version__
-from .errors import GndReplayError
+from .errors import ConfigError, GndReplayError
 
 if TYPE_CHECKING:  # the CLI imports its heavy modules lazily, inside the commands, to start fast
     from rich.console import Console
@@ -39,8 +45,133 @@ R = TypeVar("R")
 
 EXIT_ERROR = 2
 EXIT_INTERRUPTED = 130
+#: Suffixes of the files the commands read: an argument starting with "-" and ending so is a file's name.
+_FILE_SUFFIXES = (".clf", ".log", ".carmen", ".gz", ".bz2", ".bag", ".mcap", ".db3", ".yaml", ".yml", ".toml",
+                  ".txt", ".relations")
+#: Longest command-line error message printed (click quotes the value given, which may be any length).
+_MAX_MESSAGE = 400
+#: The exceptions of the click typer parses with (its own copy in recent versions, not the click package).
+_click = importlib.import_module(typer.BadParameter.__module__)
+_NoArgsIsHelp = getattr(_click, "NoArgsIsHelpError", ())  # click >= 8.2: help for a bare command
+
+
+class _Commands(TyperGroup):
+    """The command group: a command line click or typer refuses (an unknown option, a missing argument, a
+    bad value) or an option callback's :class:`GndReplayError` becomes one line on stderr and exit 2, as
+    :func:`cli_errors` reports the commands' own errors."""
+
+    def make_context(self, info_name: str | None, args: list[str], parent: Any = None, **extra: Any) -> Any:
+        try:
+            return super().make_context(info_name, args, parent=parent, **extra)
+        except _NoArgsIsHelp:
+            raise
+        except (_click.ClickException, GndReplayError) as err:
+            _command_line_error(err, args)
+
+    def invoke(self, ctx: Any) -> Any:
+        # the command and its arguments, before it parses them (click's private field, as TyperGroup reads)
+        args = [*getattr(ctx, "_protected_args", ()), *ctx.args]
+        try:
+            return super().invoke(ctx)
+        except _NoArgsIsHelp:
+            raise
+        except (_click.ClickException, GndReplayError) as err:
+            _command_line_error(err, args)
+
+
+def _command_line_error(err: Exception, args: Sequence[str]) -> NoReturn:
+    """Print a refused command line as one ``gndreplay: error:`` line and exit 2."""
+    typer.echo(f"gndreplay: error: {_command_line_message(err, args)}", err=True)
+    raise typer.Exit(EXIT_ERROR)
+
+
+def _command_line_message(err: Exception, args: Sequence[str]) -> str:
+    """The message of a refused command line in one line of at most ``_MAX_MESSAGE`` characters; an
+    unknown option that is a file's name starting with "-" says how to give it."""
+    if isinstance(err, _click.NoSuchOption) and (name := _dash_file(err.option_name, args)) is not None:
+        return (f"{name}: a name starting with '-' reads as an option; write ./{name} to give that file "
+                f"(or put -- before it)")
+    text = " ".join((err.format_message() if isinstance(err, _click.ClickException) else str(err)).split())
+    ctx = getattr(err, "ctx", None)
+    if isinstance(err, _click.UsageError) and not isinstance(err, _click.BadParameter) and ctx is not None:
+        command = " ".join(["gndreplay", *ctx.command_path.split()[1:]])  # not a value: the usage is wrong
+        text = f"{text.rstrip('.')} (see {command} --help)"
+    return text if len(text) <= _MAX_MESSAGE else f"{text[:_MAX_MESSAGE - 25]} ... {text[-20:]}"
+
+
+def _dash_file(option: str, args: Sequence[str]) -> str | None:
+    """The argument an unknown ``option`` was read from when it names a file: it starts with "-", holds the
+    option's letters and exists or ends like the files gndreplay reads (``-dash.clf``)."""
+    for a in args:
+        if a.startswith("-") and option.lstrip("-") in a and (
+                Path(a).suffix.lower() in _FILE_SUFFIXES or _exists(a)):
+            return a
+    return None
+
+
+def _exists(name: str) -> bool:
+    try:
+        return Path(name).exists()
+    except (OSError, ValueError):  # a name too long for the system, a NUL byte
+        return False
+
+
+def _bounded(option: str, lo: float, hi: float) -> Callable[[Any], Any]:
+    """A typer callback passing an option's number through ``userfile.check_number`` within [lo, hi] (None,
+    the option not given, passes)."""
+
+    def check(value: Any) -> Any:
+        if value is not None:
+            from .io.userfile import check_number
+
+            check_number(value, option, lo, hi)
+        return value
+
+    return check
+
+
+def _seed(value: int) -> int:
+    """``--seed``: an integer numpy's SeedSequence takes (``sim.scenario.check_seed``)."""
+    from .sim.scenario import check_seed
+
+    return check_seed(value, "--seed")
+
+
+def _choice(option: str, value: str | None, choices: Sequence[str]) -> str | None:
+    """``value`` lower-cased when it is one of ``choices`` (None passes).
+
+    Raises:
+        ConfigError: "<option>: expected one of ..., got '...'" with the closest choice.
+    """
+    if value is None:
+        return None
+    from .io.userfile import brief, did_you_mean
+
+    if value.strip().lower() not in choices:
+        raise ConfigError(f"{option}: expected one of {', '.join(choices)}, got {brief(value)}"
+                          f"{did_you_mean(value.strip(), choices)}")
+    return value.strip().lower()
+
+
+def _check_preset(name: str | None) -> None:
+    """Refuse an unknown ``--preset`` before any file is read (with the closest preset)."""
+    from .config import PRESETS
+
+    _choice("--preset", name, sorted(PRESETS))
+
+
+#: Bounds of the options' numbers, equal to the library's (not imported: the modules holding them are slow
+#: to import, and --help stays fast): |x|, |y| of --goal and --goal-ahead [m] (io.subgoals.MAX_ABS_SUBGOAL_M,
+#: the readers' bound on positions); --until, --timeout [s] (io.base.MAX_ABS_TIME_NS, the readers' bound on
+#: time stamps); --time-limit [s] (sim.scenario_file.MAX_TIME_S); --every; --jobs.
+_MAX_POSITION_M = 1e6
+_MAX_SECONDS = 4.5e9
+_MAX_SCENARIO_TIME_S = 1e6
+_MAX_EVERY = 1_000_000
+_MAX_JOBS = 4096
 
 app = typer.Typer(
+    cls=_Commands,
     add_completion=False,
     rich_markup_mode="rich",
     no_args_is_help=True,
@@ -250,8 +381,8 @@ PerfectOdometryOpt = Annotated[
 TimeLimitOpt = Annotated[
     float | None,
     typer.Option(
-        "--time-limit", min=0.1, help="Scenarios: override each scenario's time limit (seconds).",
-        show_default=False,
+        "--time-limit", callback=_bounded("--time-limit", 0.1, _MAX_SCENARIO_TIME_S),
+        help="Scenarios: override each scenario's time limit (seconds, 0.1 to 1e6).", show_default=False,
     ),
 ]
 LogArg = Annotated[
@@ -342,16 +473,22 @@ SAMPLE_LOG = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.b
 
 
 def _parse_goal(value: str | None) -> tuple[float, float] | None:
+    """``--goal X,Y``: two numbers, each within the readers' bound on positions.
+
+    Raises:
+        ConfigError: not two numbers separated by a comma, or one not finite or out of range.
+    """
     if value is None:
         return None
+    from .io.userfile import brief, check_number
+
     parts = value.replace(" ", "").split(",")
     try:
         x, y = (float(p) for p in parts)
     except ValueError:
-        raise typer.BadParameter(f"expected X,Y in metres (e.g. 3.5,-1.0), got {value!r}") from None
-    if not (math.isfinite(x) and math.isfinite(y)):
-        raise typer.BadParameter(f"the goal must be finite, got {value!r}")
-    return (x, y)
+        raise ConfigError(f"--goal: expected X,Y in metres (e.g. 3.5,-1.0), got {brief(value)}") from None
+    return (check_number(x, "--goal: X", -_MAX_POSITION_M, _MAX_POSITION_M),
+            check_number(y, "--goal: Y", -_MAX_POSITION_M, _MAX_POSITION_M))
 
 
 def _sample_log() -> Path:
@@ -419,7 +556,7 @@ def run(
         float | None,
         typer.Option(
             "--goal-ahead",
-            min=0.1,
+            callback=_bounded("--goal-ahead", 0.1, _MAX_POSITION_M),
             help="Goal = the pose this many metres further along the log's corrected trajectory.",
             rich_help_panel=_NAV_PANEL,
             show_default="5.0",
@@ -457,7 +594,7 @@ def run(
         float | None,
         typer.Option(
             "--until",
-            min=0.0,
+            callback=_bounded("--until", 0.0, _MAX_SECONDS),
             help="Stop after T seconds of log time.",
             rich_help_panel=_RUN_PANEL,
         ),
@@ -466,7 +603,7 @@ def run(
         int,
         typer.Option(
             "--every",
-            min=1,
+            callback=_bounded("--every", 1, _MAX_EVERY),
             help="Run the stack on every N-th scan.",
             rich_help_panel=_RUN_PANEL,
         ),
@@ -522,7 +659,8 @@ def run(
 
     goal_xy = _parse_goal(goal)
     if goal_xy is not None and goal_ahead is not None:
-        raise typer.BadParameter("--goal and --goal-ahead exclude each other: give one", param_hint="--goal")
+        raise ConfigError("--goal and --goal-ahead exclude each other: give one")
+    _check_preset(preset_name)
     log_path = log if log is not None else _sample_log()
     cfg = _with_planner(load_config(config, preset_name=preset_name), planner)
     if matcher is not None:
@@ -616,7 +754,10 @@ def scanmatch(
     from .scanmatch import METHODS, run_scanmatch
 
     if matcher != "all" and matcher not in METHODS:
-        raise typer.BadParameter(f"--matcher must be one of {', '.join(METHODS)} or all, got {matcher!r}")
+        from .io.userfile import brief, did_you_mean
+
+        raise ConfigError(f"--matcher must be one of {', '.join(METHODS)} or all, got {brief(matcher)}"
+                          f"{did_you_mean(matcher, (*METHODS, 'all'))}")
     methods: list[Method] = list(METHODS) if matcher == "all" else [cast("Method", matcher)]
     cfg = load_config(config)
     refs = load_relations(relations) if relations is not None else None
@@ -707,7 +848,7 @@ def report(
     """
     from .report import build_report
 
-    for path in build_report(run_dir):
+    for path in build_report(run_dir, require_marker=True):
         typer.echo(str(path))
 
 
@@ -729,7 +870,9 @@ def simulate(
     config: Annotated[Path | None, typer.Option("--config", help="TOML overriding the preset.")] = None,
     planner: PlannerOpt = None,
     seed: Annotated[
-        int, typer.Option("--seed", help="Seed of every random draw (the same seed gives the same bytes).")
+        int,
+        typer.Option("--seed", callback=_seed,
+                     help="Seed of every random draw (the same seed gives the same bytes; 0 to 2^63 - 1)."),
     ] = 0,
     out: Annotated[
         Path | None,
@@ -767,7 +910,9 @@ def simulate(
             typer.echo(f"{name:24s} {text}")
         return
     if scenario is None:
-        raise typer.BadParameter("give a scenario file or name (or --list)")
+        raise ConfigError("simulate: give a scenario file or name (or --list)")
+    _check_preset(preset_name)
+    planner = _planner(planner)
     from .sim.scenario import SCENARIOS
 
     if scenario in SCENARIOS:
@@ -834,7 +979,9 @@ def batch(
             show_default=False,
         ),
     ] = None,
-    jobs: Annotated[int, typer.Option("--jobs", "-j", min=1, help="Worker processes.")] = 1,
+    jobs: Annotated[
+        int, typer.Option("--jobs", "-j", callback=_bounded("--jobs", 1, _MAX_JOBS), help="Worker processes.")
+    ] = 1,
     thresholds: Annotated[
         Path | None,
         typer.Option(
@@ -875,13 +1022,19 @@ def batch(
     config: Annotated[Path | None, typer.Option("--config", help="TOML overriding the preset.")] = None,
     planner: PlannerOpt = None,
     goal_ahead: Annotated[
-        float, typer.Option("--goal-ahead", min=0.1, help="Goal distance ahead (m; logs).")
+        float,
+        typer.Option("--goal-ahead", callback=_bounded("--goal-ahead", 0.1, _MAX_POSITION_M),
+                     help="Goal distance ahead (m; logs)."),
     ] = 5.0,
     until: Annotated[
-        float | None, typer.Option("--until", min=0.0, help="Replay only the first T seconds of each log.")
+        float | None,
+        typer.Option("--until", callback=_bounded("--until", 0.0, _MAX_SECONDS),
+                     help="Replay only the first T seconds of each log."),
     ] = None,
     every: Annotated[
-        int, typer.Option("--every", min=1, help="Run the stack on every N-th scan (logs).")
+        int,
+        typer.Option("--every", callback=_bounded("--every", 1, _MAX_EVERY),
+                     help="Run the stack on every N-th scan (logs)."),
     ] = 1,
     latency: LatencyOpt = "0",
     perfect_odometry: PerfectOdometryOpt = False,
@@ -893,7 +1046,7 @@ def batch(
         float,
         typer.Option(
             "--timeout",
-            min=0.001,
+            callback=_bounded("--timeout", 0.001, _MAX_SECONDS),
             help="Per-input time limit (s): a longer input is stopped, its worker killed, and it is reported "
             "as an error; the batch goes on.",
         ),
@@ -941,6 +1094,7 @@ def batch(
     from .replay import RunOptions
     from .sim.runner import parse_latency
 
+    _check_preset(preset_name)
     cfg = _with_navigation(_with_planner(load_config(config, preset_name=preset_name), planner), mode, local,
                            no_selector)
     goals = _load_subgoals(subgoals)  # read once, for the scenarios and the logs alike
@@ -1039,12 +1193,13 @@ def _with_planner(cfg: Config, planner: str | None) -> Config:
     """``cfg`` with ``[planner] kind`` set from ``--planner`` (None keeps the config's)."""
     from .config import apply_overrides
 
-    if planner is None:
-        return cfg
-    try:
-        return apply_overrides(cfg, {"planner": {"kind": planner.lower()}})
-    except GndReplayError:
-        raise typer.BadParameter(f"--planner must be nf1 or tunnel, got {planner!r}") from None
+    kind = _planner(planner)
+    return cfg if kind is None else apply_overrides(cfg, {"planner": {"kind": kind}})
+
+
+def _planner(planner: str | None) -> str | None:
+    """``--planner`` lower-cased, or ConfigError naming the planners (and the closest)."""
+    return _choice("--planner", planner, ("nf1", "tunnel"))
 
 
 def _with_navigation(cfg: Config, mode: str | None, local: str | None, no_selector: bool) -> Config:
@@ -1078,11 +1233,13 @@ def _with_scenario_navigation(spec: ScenarioSpec, mode: str | None, local: str |
 
 def _with_matcher(cfg: Config, matcher: str) -> Config:
     from .config import apply_overrides
+    from .io.userfile import brief, did_you_mean
 
     try:
         return apply_overrides(cfg, {"scanmatch": {"method": matcher}})
     except GndReplayError:
-        raise typer.BadParameter(f"--matcher must be idc, kiss-icp or odom, got {matcher!r}") from None
+        raise ConfigError(f"--matcher must be idc, kiss-icp or odom, got {brief(matcher)}"
+                          f"{did_you_mean(matcher, ('idc', 'kiss-icp', 'odom'))}") from None
 
 
 def _run_sinks(

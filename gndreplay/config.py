@@ -5,7 +5,9 @@ supervisor) so a stage receives only its own section; this module composes them 
 owns the presets (case-insensitive names) and the TOML loader (unknown keys and wrong types are errors
 naming the key and file), and holds the physical range of every numeric setting in one table, ``RANGES``,
 plus the constraints between fields, ``CROSS_CHECKS``: every loaded configuration is checked against both
-(``[robot] vmax_mps = -1`` -> "cfg.toml: robot.vmax_mps must be in (0, 10], got -1.0").
+(``[robot] vmax_mps = -1`` -> "cfg.toml: robot.vmax_mps must be in (0, 10], got -1.0"). The file is read
+through :mod:`gndreplay.io.userfile` (a regular file of at most 1 MB, nesting bounded), and each number
+goes through ``userfile.check_number`` with its range as it is read, before any section is built from it.
 """
 
 from __future__ import annotations
@@ -13,7 +15,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import tomllib
 import types
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -21,7 +22,8 @@ from pathlib import Path
 from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
 from .errors import ConfigError
-from .io.subgoals import check_small_file
+from .io.base import MAX_BEAMS
+from .io.userfile import brief, check_number, did_you_mean, load_toml
 from .pipeline.follow import FollowParams
 from .pipeline.local import LocalParams
 from .pipeline.model import GRID_400, GridParams
@@ -192,7 +194,8 @@ def preset(name: str) -> Config:
     try:
         return PRESETS[_preset_key(name)]
     except KeyError:
-        raise ConfigError(f"unknown preset {name!r}; known: {', '.join(sorted(PRESETS))}") from None
+        raise ConfigError(f"unknown preset {brief(name)}{did_you_mean(name, PRESETS)}; known: "
+                          f"{', '.join(sorted(PRESETS))}") from None
 
 
 # --------------------------------------------------------------------------------------------------
@@ -262,7 +265,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (RobotConfig, "laser_x_m"): Range(-10.0, 10.0),
     (RobotConfig, "laser_y_m"): Range(-10.0, 10.0),
     (RobotConfig, "laser_theta_rad"): _ANGLE,
-    (LaserConfig, "beams"): _count(2, 100_000),
+    (LaserConfig, "beams"): _count(2, MAX_BEAMS),
     (LaserConfig, "fov_deg"): _pos(360.0),
     (LaserConfig, "max_range_m"): _pos(_RANGE_M),
     (LaserConfig, "noise_std_m"): _nonneg(10.0),
@@ -488,6 +491,33 @@ def range_of(section: type, name: str) -> Range | None:
     return None
 
 
+def _check_range(value: Any, where: str, allowed: Range, *, as_float: bool = False) -> float:
+    """``value`` as a float when :func:`~gndreplay.io.userfile.check_number` takes it (a number, not a bool,
+    no integer too long for a float, finite) and it lies in ``allowed``.
+
+    Raises:
+        ConfigError: "<where> must be in <range>, got <value>", the value quoted as the float the setting
+            would hold when ``as_float`` (``-1`` -> ``-1.0``) and bounded whatever it is.
+    """
+    try:
+        x = check_number(value, where, allowed.lo, allowed.hi)
+    except ConfigError:
+        x = math.nan
+    if x not in allowed:
+        raise ConfigError(f"{where} must be in {allowed}, got {_quoted(value, as_float)}")
+    return x
+
+
+def _quoted(value: Any, as_float: bool) -> str:
+    """A refused number as the setting would hold it, bounded (an integer beyond a float stays an integer)."""
+    if as_float and isinstance(value, int) and not isinstance(value, bool):
+        try:
+            return brief(float(value))
+        except OverflowError:
+            pass
+    return brief(value)
+
+
 def validate_config(cfg: Config) -> Config:
     """``cfg`` if every number is in its physical range (:data:`RANGES`) and the cross-field constraints
     (:data:`CROSS_CHECKS`) hold; else ConfigError naming the first bad key (``robot.vmax_mps``)."""
@@ -495,11 +525,8 @@ def validate_config(cfg: Config) -> Config:
         for name in numeric_fields(type(section)):
             value = getattr(section, name)
             allowed = range_of(type(section), name)
-            if value is None or allowed is None:
-                continue
-            if value not in allowed:
-                key = f"{where}.{name}" if where else name
-                raise ConfigError(f"{key} must be in {allowed}, got {value!r}")
+            if value is not None and allowed is not None:
+                _check_range(value, f"{where}.{name}" if where else name, allowed)
         for cls, keys, holds, what in CROSS_CHECKS:
             if type(section) is cls and not holds(section):
                 raise ConfigError(f"[{where}] {keys}: {what}")
@@ -509,14 +536,18 @@ def validate_config(cfg: Config) -> Config:
 # --------------------------------------------------------------------------------------------------
 # TOML: load with validation, dump the resolved configuration
 
+MAX_CONFIG_BYTES = 1 << 20
+"""Largest config file read (1 MB: a resolved configuration is about 10 KB)."""
 
-def _check_value(value: Any, tp: Any, where: str) -> Any:
-    """Validate one TOML value against a field type; returns the value converted (int -> float)."""
+
+def _check_value(value: Any, tp: Any, where: str, allowed: Range | None) -> Any:
+    """Validate one TOML value against a field type and, for a number, its range ``allowed`` (checked here,
+    before the section is built from it); returns the value converted (int -> float)."""
     origin = get_origin(tp)
     if origin is Literal:
         if value not in get_args(tp):
-            allowed = ", ".join(repr(a) for a in get_args(tp))
-            raise ConfigError(f"{where}: expected one of {allowed}, got {value!r}")
+            allowed_values = ", ".join(repr(a) for a in get_args(tp))
+            raise ConfigError(f"{where}: expected one of {allowed_values}, got {brief(value)}")
         return value
     if origin in (types.UnionType, Union):
         errors = []
@@ -524,29 +555,30 @@ def _check_value(value: Any, tp: Any, where: str) -> Any:
             if alt is type(None):
                 continue
             try:
-                return _check_value(value, alt, where)
+                return _check_value(value, alt, where, allowed)
             except ConfigError as err:
                 errors.append(str(err))
-        raise ConfigError(errors[0] if errors else f"{where}: unexpected value {value!r}")
+        raise ConfigError(errors[0] if errors else f"{where}: unexpected value {brief(value)}")
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError(f"{where}: expected true or false, got {value!r}")
+            raise ConfigError(f"{where}: expected true or false, got {brief(value)}")
         return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{where}: expected an integer, got {value!r}")
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(f"{where}: expected a number, got {value!r}")
-        return float(value)
+    if tp is int or tp is float:
+        if isinstance(value, bool) or not isinstance(value, int if tp is int else int | float):
+            kind = "an integer" if tp is int else "a number"
+            raise ConfigError(f"{where}: expected {kind}, got {brief(value)}")
+        if allowed is None:
+            x = check_number(value, where)
+        else:
+            x = _check_range(value, where, allowed, as_float=tp is float)
+        return value if tp is int else x
     if tp is str:
         if not isinstance(value, str):
-            raise ConfigError(f"{where}: expected a string, got {value!r}")
+            raise ConfigError(f"{where}: expected a string, got {brief(value)}")
         return value
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
-            raise ConfigError(f"{where}: expected a table [{where}], got {value!r}")
+            raise ConfigError(f"{where}: expected a table [{where}], got {brief(value)}")
         return value
     raise ConfigError(f"{where}: unsupported setting type {tp!r}")  # pragma: no cover
 
@@ -560,9 +592,9 @@ def _override(obj: Any, table: dict[str, Any], prefix: str) -> Any:
         where = f"{prefix}.{key}" if prefix else key
         if key not in names:
             known = ", ".join(sorted(names))
-            raise ConfigError(f"unknown key {where!r} (known in [{prefix or 'top level'}]: {known})")
+            raise ConfigError(f"unknown key {brief(where)} (known in [{prefix or 'top level'}]: {known})")
         tp = hints[key]
-        checked = _check_value(value, tp, where)
+        checked = _check_value(value, tp, where, range_of(type(obj), key))
         if dataclasses.is_dataclass(tp):
             checked = _override(getattr(obj, key), checked, where)
         changes[key] = checked
@@ -584,22 +616,15 @@ def load_config(path: Path | None = None, *, preset_name: str | None = None) -> 
     with the TOML file's tables applied. Errors name the file and the key."""
     table: dict[str, Any] = {}
     if path is not None:
-        check_small_file(Path(path), "config file", 1 << 20)  # never open a FIFO or read a device
-        try:
-            with open(path, "rb") as f:
-                table = tomllib.load(f)
-        except FileNotFoundError:
-            raise ConfigError(f"{path}: config file not found") from None
-        except (OSError, tomllib.TOMLDecodeError) as err:
-            raise ConfigError(f"{path}: not a valid TOML file: {err}") from None
+        table = load_toml(Path(path), "config file", MAX_CONFIG_BYTES)
     name = preset_name or table.get("preset") or "wheelchair"
     if not isinstance(name, str):
-        raise ConfigError(f"{path}: preset: expected a string, got {name!r}")
+        raise ConfigError(f"{path}: preset: expected a string, got {brief(name)}")
     in_file = table.get("preset")
     if preset_name and in_file is not None and (
         not isinstance(in_file, str) or _preset_key(in_file) != _preset_key(preset_name)
     ):
-        raise ConfigError(f"{path}: preset {in_file!r} conflicts with --preset {preset_name}")
+        raise ConfigError(f"{path}: preset {brief(in_file)} conflicts with --preset {preset_name}")
     try:
         cfg = apply_overrides(preset(name), table)
     except ConfigError as err:

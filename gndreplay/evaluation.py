@@ -26,13 +26,19 @@ from . import detmath as dm
 from .errors import GndReplayError
 from .fsutil import atomic_write_text, format_stamp
 from .geometry import relative, wrap_angle
+from .io.base import MAX_ABS_TIME_NS
+from .io.userfile import brief, read_text
 
-__all__ = ["SPANS", "RelationStats", "Relations", "SpanStats", "load_relations", "read_tum",
-           "relation_errors", "relations_from_trajectory", "write_tum"]
+__all__ = ["MAX_RELATIONS_BYTES", "MAX_TUM_BYTES", "SPANS", "RelationStats", "Relations", "SpanStats",
+           "load_relations", "read_tum", "relation_errors", "relations_from_trajectory", "write_tum"]
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 NS_PER_S = 1_000_000_000
+MAX_RELATIONS_BYTES = 64 << 20
+"""Largest relations file read (64 MB: the SLAM benchmark's files are a few MB)."""
+MAX_TUM_BYTES = 256 << 20
+"""Largest TUM trajectory read back (256 MB: about 2.5 million poses, a week of scans at 4 Hz)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,11 +81,25 @@ def relations_from_trajectory(t_ns: ArrayLike, poses: ArrayLike, steps: tuple[in
 
 
 def _seconds_to_ns(text: str) -> int:
-    """Exact decimal seconds -> int ns (no float rounding: stamps are ~1e9 s)."""
+    """Exact decimal seconds -> int ns (no float rounding: stamps are ~1e9 s).
+
+    Raises:
+        ValueError: not a decimal number, or a stamp beyond the readers' bound (``MAX_ABS_TIME_NS``: the
+            stamps are stored as int64 ns).
+    """
     whole, _, frac = text.strip().partition(".")
     sign = -1 if whole.startswith("-") else 1
     frac_ns = int((frac + "000000000")[:9]) if frac else 0
-    return int(whole) * NS_PER_S + sign * frac_ns
+    ns = int(whole) * NS_PER_S + sign * frac_ns
+    if not -MAX_ABS_TIME_NS <= ns <= MAX_ABS_TIME_NS:
+        raise ValueError(f"stamp {brief(text)} s out of range")
+    return ns
+
+
+def _why(err: ValueError) -> str:
+    """A parse error's text on one line of at most 120 characters (float() quotes the whole token)."""
+    text = " ".join(str(err).split())
+    return text if len(text) <= 120 else f"{text[:100]}...{text[-17:]}"
 
 
 def load_relations(path: str | os.PathLike[str]) -> Relations:
@@ -88,13 +108,11 @@ def load_relations(path: str | os.PathLike[str]) -> Relations:
     Blank lines and lines starting with ``#`` are skipped; z, roll and pitch are ignored (planar).
 
     Raises:
-        GndReplayError: the file is missing or a line does not have 8 numbers.
+        GndReplayError: the file is missing, not a regular file of at most ``MAX_RELATIONS_BYTES`` of UTF-8
+            text, or a line does not have 8 numbers.
     """
     p = Path(path)
-    try:
-        text = p.read_text()
-    except OSError as err:
-        raise GndReplayError(f"{p}: cannot read relations file ({err.strerror})") from err
+    text = read_text(p, "relations file", MAX_RELATIONS_BYTES)
     t1: list[int] = []
     t2: list[int] = []
     vals: list[tuple[float, float, float]] = []
@@ -111,7 +129,7 @@ def load_relations(path: str | os.PathLike[str]) -> Relations:
             t2.append(_seconds_to_ns(tok[1]))
             vals.append((float(tok[2]), float(tok[3]), float(tok[7])))
         except ValueError as err:
-            raise GndReplayError(f"{p} line {lineno}: not a number ({err})") from err
+            raise GndReplayError(f"{p} line {lineno}: not a number ({_why(err)})") from err
     v = np.array(vals, dtype=np.float64).reshape(-1, 3)
     return Relations(np.array(t1, dtype=np.int64), np.array(t2, dtype=np.int64), v[:, 0].copy(),
                      v[:, 1].copy(), v[:, 2].copy())
@@ -271,13 +289,11 @@ def read_tum(path: str | os.PathLike[str]) -> tuple[NDArray[np.int64], NDArray[n
     (N, 3) poses (x, y [m], yaw [rad] from qz, qw), the inverse of :func:`write_tum`.
 
     Raises:
-        GndReplayError: unreadable file, or a line without 8 numbers (the message names file and line).
+        GndReplayError: unreadable file (not a regular file of at most ``MAX_TUM_BYTES`` of UTF-8 text), or a
+            line without 8 numbers (the message names file and line).
     """
     p = Path(path)
-    try:
-        text = p.read_text()
-    except OSError as err:
-        raise GndReplayError(f"{p}: cannot read trajectory ({err.strerror or err})") from err
+    text = read_text(p, "trajectory", MAX_TUM_BYTES)
     t_ns: list[int] = []
     poses: list[tuple[float, float, float]] = []
     for lineno, line in enumerate(text.splitlines(), start=1):
@@ -290,7 +306,9 @@ def read_tum(path: str | os.PathLike[str]) -> tuple[NDArray[np.int64], NDArray[n
             x, y, qz, qw = float(tok[1]), float(tok[2]), float(tok[6]), float(tok[7])
             t_ns.append(_seconds_to_ns(tok[0]))
         except ValueError as err:
-            raise GndReplayError(f"{p} line {lineno}: not a TUM pose 't x y z qx qy qz qw' ({err})") from err
+            raise GndReplayError(
+                f"{p} line {lineno}: not a TUM pose 't x y z qx qy qz qw' ({_why(err)})"
+            ) from err
         poses.append((x, y, 2.0 * dm.atan2(qz, qw)))
     return np.asarray(t_ns, dtype=np.int64), np.asarray(poses, dtype=np.float64).reshape(len(poses), 3)
 

@@ -3,34 +3,43 @@
 - Files are written atomically (a temporary sibling, then a rename), so no reader and no failed run ever
   sees half a file; final files get the usual permissions (0666 / 0777 less the umask), not mkstemp's 0600.
 - Output directories (a run directory, a batch folder) are built in a staging directory beside the target
-  and renamed into place only when complete. Each carries ``RUN_MARKER``, a file listing what gndreplay
-  wrote there; only such a directory may be replaced (and only when every entry in it is listed).
-- Staging directories are named ``.gndreplay-tmp-<host>-<pid>-<random>``: they are removed on every exit
-  Python sees (exceptions, Ctrl-C, SIGTERM) and, when a run was killed, by the next run in the same folder
-  (the owning process is gone).
+  and renamed into place only when complete, under the first name still free at that moment (a rename
+  onto a taken name fails, so two runs started at once never meet). Each carries ``RUN_MARKER``, a regular
+  file listing what gndreplay wrote there, itself replaced atomically (never written through a link); only
+  such a directory may be replaced (and only when every entry in it is listed).
+- Staging directories are named ``.gndreplay-tmp-<host>-<pid>-<random>`` and hold ``STAGING_PROOF``, which
+  repeats that name: they are removed on every exit Python sees (exceptions, Ctrl-C, SIGTERM) and, when a
+  run was killed, by the next run in the same folder (the owning process is gone and the proof matches; a
+  folder that merely looks like one is never touched).
+- A full disk, an exceeded quota or a read-only file system is one ``OutputError`` naming what could not
+  be written (``write_errors``); the staging directory is removed, an earlier output stays as it was.
 - Timestamps are printed from integer nanoseconds by one function, ``format_stamp``, in every file.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import re
 import secrets
 import shutil
 import signal
 import socket
+import stat
 import tempfile
 import threading
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager, suppress
 from pathlib import Path
-from types import FrameType
+from types import FrameType, TracebackType
 
 from .errors import OutputError
 
 __all__ = [
     "RUN_MARKER",
+    "STAGING_PROOF",
     "TMP_PREFIX",
+    "Staging",
     "add_to_marker",
     "atomic_path",
     "atomic_write_text",
@@ -45,13 +54,20 @@ __all__ = [
     "staging_dir",
     "terminate_raises",
     "umask_mode",
+    "write_errors",
     "write_marker",
 ]
 
 RUN_MARKER = ".gndreplay"
 TMP_PREFIX = ".gndreplay-tmp-"
+STAGING_PROOF = ".gndreplay-staging"
 _MARKER_HEAD = "# gndreplay output directory: the entries below were written by gndreplay\n"
 _NS_PER_S = 1_000_000_000
+#: Errors of the disk rather than of the run: no space, quota exceeded, read-only file system.
+_NO_ROOM = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS})
+#: A rename onto a name that is taken (a non-empty folder, a file) fails with one of these.
+_TAKEN = frozenset({errno.EEXIST, errno.ENOTEMPTY, errno.ENOTDIR, errno.EISDIR})
+_CLAIM_TRIES = 100
 
 
 def format_stamp(t_ns: int) -> str:
@@ -70,20 +86,53 @@ def umask_mode(base: int) -> int:
     return base & ~mask
 
 
+def _no_room(err: BaseException) -> OSError | None:
+    """The full-disk, quota or read-only ``OSError`` behind ``err`` (itself, or along its chain of causes, as
+    when a library wraps it), else None."""
+    seen: set[int] = set()
+    e: BaseException | None = err
+    while e is not None and id(e) not in seen:
+        if isinstance(e, OSError) and e.errno in _NO_ROOM:
+            return e
+        seen.add(id(e))
+        e = e.__cause__ or (None if e.__suppress_context__ else e.__context__)
+    return None
+
+
+@contextmanager
+def write_errors(where: Path, note: str = "") -> Iterator[None]:
+    """Turn a full disk, an exceeded quota or a read-only file system met inside the block into one
+    ``OutputError`` naming ``where`` and the reason (plus ``note``); other errors pass unchanged. Nested,
+    the outermost names the error: the output the user asked for, not a temporary inside it."""
+    try:
+        yield
+    except Exception as err:
+        cause = _no_room(err)
+        if cause is None:
+            raise
+        raise OutputError(f"{where}: cannot write ({cause.strerror or cause}){note}") from err
+
+
 @contextmanager
 def atomic_path(path: Path) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; on success it replaces ``path``, on error it is removed."""
+    """Yield a temporary path beside ``path``; on success it replaces ``path`` (a link there is replaced,
+    never followed), on error it is removed.
+
+    Raises:
+        OutputError: the disk is full, the quota exceeded or the file system read-only (``write_errors``).
+    """
     path = Path(path)
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp = Path(name)
-    try:
-        yield tmp
-        os.chmod(tmp, umask_mode(0o666))
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with write_errors(path):
+        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.close(fd)
+        tmp = Path(name)
+        try:
+            yield tmp
+            os.chmod(tmp, umask_mode(0o666))
+            os.replace(tmp, path)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
 
 
 def atomic_write_text(path: Path, text: str) -> None:
@@ -107,27 +156,66 @@ def safe_name(name: str, default: str = "run") -> str:
 # ---- the marker ----------------------------------------------------------------------------------------
 
 
+def _marker(directory: Path) -> Path | None:
+    """The ``RUN_MARKER`` file of ``directory``, None when there is none.
+
+    Raises:
+        OutputError: it is a symbolic link or not a regular file (gndreplay writes neither, and reading or
+            writing through one would reach a file elsewhere).
+    """
+    path = Path(directory) / RUN_MARKER
+    try:
+        mode = path.lstat().st_mode
+    except OSError:
+        return None
+    if stat.S_ISREG(mode):
+        return path
+    what = "is a symbolic link" if stat.S_ISLNK(mode) else "is not a regular file"
+    raise OutputError(f"{path}: {what}, not a marker gndreplay wrote; not using this folder")
+
+
+def _read_regular(path: Path) -> str | None:
+    """The text of the regular file ``path``, read without following a link (None: missing, a link, not
+    a regular file, unreadable)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except OSError:
+        return None
+    with os.fdopen(fd, "rb") as f:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return None
+        return f.read().decode("utf-8", errors="replace")
+
+
 def is_output_dir(path: Path) -> bool:
-    """``path`` is a directory gndreplay created (it carries ``RUN_MARKER``)."""
-    return (Path(path) / RUN_MARKER).is_file()
+    """``path`` is a directory gndreplay created (it carries ``RUN_MARKER``).
+
+    Raises:
+        OutputError: its marker is a symbolic link or not a regular file.
+    """
+    return _marker(Path(path)) is not None
 
 
 def _owned(directory: Path) -> set[str]:
-    try:
-        text = (directory / RUN_MARKER).read_text(encoding="utf-8", errors="replace")
-    except OSError:
+    text = _read_regular(Path(directory) / RUN_MARKER)
+    if text is None:
         return set()
     return {line for line in text.splitlines() if line and not line.startswith("#")} | {RUN_MARKER}
 
 
 def write_marker(directory: Path, names: Sequence[str] | None = None) -> None:
     """Write ``RUN_MARKER`` into ``directory`` listing ``names`` (default: every entry there now) as
-    written by gndreplay; call it again when more entries are added (a batch folder)."""
+    written by gndreplay; call it again when more entries are added (a batch folder). The marker is
+    replaced atomically, so a link or another name of the old file is never written through.
+
+    Raises:
+        OutputError: the marker there is a symbolic link or not a regular file; the disk is full.
+    """
     directory = Path(directory)
+    _marker(directory)
     listed = sorted(names if names is not None else (p.name for p in directory.iterdir()))
     body = "".join(f"{n}\n" for n in listed if n != RUN_MARKER)
-    (directory / RUN_MARKER).write_text(_MARKER_HEAD + body, encoding="utf-8")
-    os.chmod(directory / RUN_MARKER, umask_mode(0o666))
+    atomic_write_text(directory / RUN_MARKER, _MARKER_HEAD + body)
 
 
 def add_to_marker(directory: Path, names: Sequence[str]) -> None:
@@ -288,24 +376,43 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
+def _proof_text(name: str) -> str:
+    """What ``STAGING_PROOF`` holds in the staging folder called ``name``."""
+    return f"gndreplay staging folder {name}\n"
+
+
+def _staged_by_gndreplay(entry: Path) -> bool:
+    """``entry`` is a staging folder gndreplay made: a folder (not a link) whose ``STAGING_PROOF`` is a
+    regular file repeating the folder's name."""
+    try:
+        if not stat.S_ISDIR(entry.lstat().st_mode):
+            return False
+    except OSError:
+        return False
+    return _read_regular(entry / STAGING_PROOF) == _proof_text(entry.name)
+
+
+def _staging_pid(name: str, host: str) -> int | None:
+    """The process id in the name of a staging folder of ``host``, None when the name is not one."""
+    parts = name[len(TMP_PREFIX) + len(host) + 1:].split("-")
+    return int(parts[0]) if len(parts) == 2 and parts[0].isdigit() else None
+
+
 def remove_stale_staging(parent: Path) -> list[Path]:
     """Remove staging directories in ``parent`` left by killed gndreplay processes of this host: named
-    ``TMP_PREFIX<host>-<pid>-<random>``, carrying ``RUN_MARKER``, and their process gone. Returns them."""
+    ``TMP_PREFIX<host>-<pid>-<random>``, their process gone, and holding the ``STAGING_PROOF`` of that name
+    (a folder that merely looks like one is left alone). Returns them."""
     parent = Path(parent)
     removed: list[Path] = []
     if not parent.is_dir():
         return removed
     host = _host()
     for entry in parent.glob(f"{TMP_PREFIX}{host}-*"):
-        parts = entry.name[len(TMP_PREFIX) + len(host) + 1:].split("-")
-        if len(parts) != 2 or not parts[0].isdigit():
+        pid = _staging_pid(entry.name, host)
+        if pid is None or pid == os.getpid() or _pid_alive(pid) or not _staged_by_gndreplay(entry):
             continue
-        pid = int(parts[0])
-        if pid == os.getpid() or _pid_alive(pid):
-            continue
-        if entry.is_dir() and not entry.is_symlink() and is_output_dir(entry):
-            shutil.rmtree(entry, ignore_errors=True)
-            removed.append(entry)
+        shutil.rmtree(entry, ignore_errors=True)
+        removed.append(entry)
     return removed
 
 
@@ -314,57 +421,89 @@ def _staging_name(parent: Path) -> Path:
 
 
 def _new_staging(parent: Path) -> Path:
-    """A fresh marked staging folder in ``parent`` (created if missing).
+    """A fresh staging folder in ``parent`` (created if missing) holding its ``STAGING_PROOF`` and an empty
+    ``RUN_MARKER``; nothing is left behind when that fails.
 
     Raises:
-        OutputError: it cannot be created (read-only or special file system), naming the folder.
+        OutputError: it cannot be created (read-only or special file system, full disk), naming the folder.
     """
+    tmp: Path | None = None
     try:
         parent.mkdir(parents=True, exist_ok=True)
-        while True:
-            tmp = _staging_name(parent)
-            try:
-                tmp.mkdir(mode=0o700)
-            except FileExistsError:
-                continue
-            write_marker(tmp, [])
-            return tmp
-    except OSError as err:
-        raise OutputError(f"{parent}: cannot create the output folder there ({err.strerror or err})") from err
+        while tmp is None:
+            cand = _staging_name(parent)
+            with suppress(FileExistsError):
+                cand.mkdir(mode=0o700)
+                tmp = cand
+        (tmp / STAGING_PROOF).write_text(_proof_text(tmp.name), encoding="utf-8")
+        (tmp / RUN_MARKER).write_text(_MARKER_HEAD, encoding="utf-8")  # a new folder: no link to follow
+        return tmp
+    except BaseException as err:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(err, OSError):
+            why = err.strerror or err
+            raise OutputError(f"{parent}: cannot create the output folder there ({why})") from err
+        raise
+
+
+class _NameTaken(OutputError):
+    """The name to publish at is taken (a concurrent run may have published there meanwhile)."""
 
 
 def publish_dir(tmp: Path, out: Path, *, overwrite: bool = False) -> None:
     """Move the complete staging directory ``tmp`` to ``out``: list its entries in ``RUN_MARKER``, give it
-    the usual permissions, and rename it into place. An existing ``out`` must be empty, or a gndreplay
-    output directory holding only listed entries and ``overwrite`` given; it is then swapped out (renamed
-    to a staging name, so a crash in between leaves nothing a later run would not clean) and removed.
+    the usual permissions, and rename it into place. The rename claims the name atomically: it replaces an
+    empty folder and fails, moving nothing, when ``out`` is (or has just become) anything else. With
+    ``overwrite``, a gndreplay output directory at ``out`` holding only listed entries is swapped out
+    instead (``_swap``).
 
     Raises:
-        OutputError: ``out`` appeared meanwhile and may not be replaced.
+        OutputError: ``out`` is taken and may not be replaced (a ``_NameTaken`` when another name would do).
     """
     tmp, out = Path(tmp), _abs(out)
     try:
         _publish(tmp, out, overwrite=overwrite)
     except OSError as err:
+        if err.errno in _TAKEN:
+            raise _NameTaken(f"{out}: was taken meanwhile (by another run?); nothing moved there") from err
         raise OutputError(f"{out}: cannot move the finished output there ({err.strerror or err})") from err
+
+
+def _occupied(path: Path) -> bool:
+    """Something other than an empty folder is at ``path``."""
+    if path.is_symlink() or (path.exists() and not path.is_dir()):
+        return True
+    return path.is_dir() and any(path.iterdir())
 
 
 def _publish(tmp: Path, out: Path, *, overwrite: bool) -> None:
     write_marker(tmp)
     os.chmod(tmp, umask_mode(0o777))
-    if out.is_dir() and not out.is_symlink() and not any(out.iterdir()):
-        os.rename(tmp, out)  # replaces an empty directory
-        return
-    if out.exists() or out.is_symlink():
-        check_output_dir(out, overwrite=True)
-        if not (overwrite and is_output_dir(out)):
-            raise OutputError(f"{out}: exists (a previous run); pass --overwrite to replace it")
-        trash = _staging_name(out.parent)
-        os.rename(out, trash)  # the old run keeps its marker: a stale trash dir is recognised too
+    if not _occupied(out):
         os.rename(tmp, out)
+    elif overwrite:
+        _swap(tmp, out)
+    else:
+        raise _NameTaken(f"{out}: exists (a previous run); pass --overwrite to replace it")
+
+
+def _swap(tmp: Path, out: Path) -> None:
+    """Replace the gndreplay output directory ``out`` (checked: every entry listed) by ``tmp``. The old one
+    is first moved into a fresh staging folder, so a crash in between leaves nothing a later run would not
+    clean; it is put back when ``tmp`` cannot take its place, and removed otherwise."""
+    check_output_dir(out, overwrite=True)
+    trash = _new_staging(out.parent)
+    try:
+        os.rename(out, trash / "old")
+        try:
+            os.rename(tmp, out)
+        except OSError:
+            with suppress(OSError):
+                os.rename(trash / "old", out)
+            raise
+    finally:
         shutil.rmtree(trash, ignore_errors=True)
-        return
-    os.rename(tmp, out)
 
 
 class _Terminated(SystemExit):
@@ -393,22 +532,61 @@ def terminate_raises() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
-@contextmanager
-def staging_dir(out: Path, *, overwrite: bool = False) -> Iterator[Path]:
-    """Yield a fresh staging directory beside ``out``; when the block completes it is published as ``out``
-    (``publish_dir``), on any exception (Ctrl-C and SIGTERM included) it is removed. Stale staging
-    directories of killed runs in the same folder are removed first.
+class Staging:
+    """A staging directory beside ``out``, the value of ``with``: published when the block completes
+    (``publish_dir``), removed on any exception (Ctrl-C and SIGTERM included). Stale staging directories of
+    killed runs in the same folder are removed first. Write everything (figures and report included) inside
+    the block: the output appears only when complete.
 
-    Write everything (figures and report included) inside the block: ``out`` appears only when complete.
+    After the block, ``out`` is where it was published: the name asked for or, when a concurrent run took
+    that one meanwhile, the next free name beside ``base`` (``resolve_output_dir``), as a run started after
+    the other would get. A full disk, quota or read-only file system is one ``OutputError`` naming ``out``.
     """
-    out = _abs(out)
-    parent = out.parent
-    remove_stale_staging(parent)
-    with terminate_raises():
-        tmp = _new_staging(parent)
-        try:
-            yield tmp
-            publish_dir(tmp, out, overwrite=overwrite)
-        except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
-            raise
+
+    def __init__(self, out: Path, *, overwrite: bool = False, base: Path | None = None) -> None:
+        self.out = Path(out)
+        self.base = Path(base) if base is not None else self.out
+        self.overwrite = overwrite
+        self._active: AbstractContextManager[Path] | None = None
+
+    def __enter__(self) -> Path:
+        self._active = self._staged()
+        return self._active.__enter__()
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> bool | None:
+        active, self._active = self._active, None
+        return None if active is None else active.__exit__(exc_type, exc, tb)
+
+    @contextmanager
+    def _staged(self) -> Iterator[Path]:
+        parent = _abs(self.out).parent
+        remove_stale_staging(parent)
+        with terminate_raises():
+            tmp = _new_staging(parent)
+            with write_errors(self.out, "; nothing was written"):
+                try:
+                    yield tmp
+                    self._publish(tmp)
+                except BaseException:
+                    shutil.rmtree(tmp, ignore_errors=True)
+                    raise
+
+    def _publish(self, tmp: Path) -> None:
+        """Publish ``tmp`` (without its ``STAGING_PROOF``) at ``out``, or at the next free name while
+        concurrent runs take them first."""
+        (tmp / STAGING_PROOF).unlink(missing_ok=True)
+        for _ in range(_CLAIM_TRIES):
+            try:
+                publish_dir(tmp, self.out, overwrite=self.overwrite)
+                return
+            except _NameTaken:
+                self.out = resolve_output_dir(self.base, overwrite=self.overwrite)
+        raise OutputError(f"{self.base}: every free name beside it was taken meanwhile; nothing was written")
+
+
+def staging_dir(out: Path, *, overwrite: bool = False, base: Path | None = None) -> Staging:
+    """``with staging_dir(out) as tmp:`` writes into ``tmp`` what appears as ``out`` when the block completes
+    (a ``Staging``: its ``out`` says where it went when a concurrent run took the name; ``base`` is the
+    name the next free ``base-2``, ``base-3``, ... derive from, default ``out``)."""
+    return Staging(out, overwrite=overwrite, base=base)

@@ -643,11 +643,12 @@ def run_replay(
     ``out_dir`` is checked before any work (``fsutil.check_output_dir``: never a file, the current folder,
     a folder holding the log or files gndreplay did not write). An existing run directory there is
     replaced only with ``overwrite``; otherwise the run is written beside it as ``out_dir-2``, ... (the
-    returned summary says where). Everything, the sinks' files included, is written into a staging
-    directory beside it that is published only when complete and removed on any failure.
+    returned summary says where; also when a concurrent run took the name first). Everything, the sinks'
+    files included, is written into a staging directory beside it that is published only when complete
+    and removed on any failure.
 
     Raises:
-        OutputError: ``out_dir`` is unsafe to write.
+        OutputError: ``out_dir`` is unsafe to write, or the disk is full (quota, read-only) while writing.
         ConfigError: navigation mode "follow" without ``options.subgoals`` (checked first).
     """
     out_dir = Path(out_dir)
@@ -658,7 +659,8 @@ def run_replay(
     stage = on_stage if on_stage is not None else (lambda name: None)
     sinks = list(sinks)
     enforce = cfg.supervisor.enforce_budgets
-    with staging_dir(target, overwrite=overwrite) as tmp:
+    staging = staging_dir(target, overwrite=overwrite, base=out_dir)
+    with staging as tmp:
         try:
             for sink in sinks:
                 if isinstance(sink, StagedSink):
@@ -701,7 +703,7 @@ def run_replay(
             for sink in sinks:
                 sink.abort()
             raise
-    return RunSummary(out_dir=target, ticks=len(rec.t_s), data=summary)
+    return RunSummary(out_dir=staging.out, ticks=len(rec.t_s), data=summary)
 
 
 @dataclass(frozen=True, slots=True)

@@ -317,10 +317,13 @@ def test_default_thresholds_are_generous_multiples_of_the_supervisor_time_outs()
             "[inputs.x]\nrelation = 'a'",
             r"\[inputs.'x'\] unknown key 'relation' \(did you mean 'relations'\?\)",
         ),
-        ("[inputs.x]\nrelations = 'nope.relations'", r"\[inputs.'x'\] relations file not found: .*nope"),
+        (
+            "[inputs.x]\nrelations = 'nope.relations'",
+            r"\[inputs.'x'\] .*nope\.relations: relations file not found",
+        ),
         ("[inputs.x]\ngoal = [1]", r"\[inputs.'x'\] goal must be \[x, y\] in metres, got \[1\]"),
         ("[inputs]\nx = 1", r"\[inputs.'x'\] must be a table"),
-        ("[thresholds\n", r"limits.toml: not valid TOML"),
+        ("[thresholds\n", r"limits.toml: not a valid TOML file"),
     ],
 )
 def test_thresholds_file_errors_name_the_file_and_key(tmp_path: Path, text: str, match: str) -> None:
@@ -329,7 +332,7 @@ def test_thresholds_file_errors_name_the_file_and_key(tmp_path: Path, text: str,
 
 
 def test_thresholds_missing_file(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError, match=r"nope.toml: cannot read thresholds file"):
+    with pytest.raises(ConfigError, match=r"nope.toml: thresholds file not found"):
         load_thresholds(tmp_path / "nope.toml")
 
 

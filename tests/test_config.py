@@ -90,7 +90,7 @@ def test_preset_from_file_and_from_option(tmp_path: Path) -> None:
         ("[robot]\nshape = 'oval'\n", r"robot.shape: expected one of 'circle', 'rectangle', got 'oval'"),
         ("[planner]\nconnectivity = 6\n", r"planner.connectivity: expected one of 4, 8, got 6"),
         ("robot = 3\n", r"robot: expected a table"),
-        ("[grid]\ncell_m = -1.0\n", r"cell_m must be > 0"),
+        ("[grid]\ncell_m = -1.0\n", r"cfg.toml: grid.cell_m must be in \[0.001, 10\], got -1.0"),
         ("[scanmatch.idc]\nnot_a_key = 1\n", r"unknown key 'scanmatch.idc.not_a_key'"),
         ("[robot\n", r"cfg.toml: not a valid TOML file"),
     ],

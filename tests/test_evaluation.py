@@ -40,7 +40,7 @@ def test_load_relations_errors_name_file_and_line(tmp_path: Path) -> None:
     p = _write(tmp_path / "nan.relations", "1 2 x 0 0 0 0 0\n")
     with pytest.raises(GndReplayError, match=r"nan\.relations line 1: not a number"):
         load_relations(p)
-    with pytest.raises(GndReplayError, match="cannot read relations file"):
+    with pytest.raises(GndReplayError, match=r"missing\.relations: relations file not found"):
         load_relations(tmp_path / "missing.relations")
 
 

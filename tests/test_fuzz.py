@@ -1,4 +1,5 @@
-"""Hostile input: a seeded fuzz run over every format, and one regression test per failure class of issue 12.
+"""Hostile input: a seeded fuzz run over every log format and every other file a user hands gndreplay
+(scenario, config, thresholds, run folder), and one regression test per failure class of the log readers.
 
 Every damaged log must end as LogFormatError (one line naming the file, and the line / message when known),
 or be read with the damaged records skipped and counted; never another exception, a hang, a value that can
@@ -17,6 +18,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import fuzz_files
 import fuzzing
 import numpy as np
 import pytest
@@ -51,6 +53,33 @@ def test_fuzzed_logs_raise_only_our_error(seeds: fuzzing.Seeds, fmt: str, tmp_pa
     bad = [f"#{o.index} {o.kind}: {o.detail}" for o in outcomes if o.kind in ("other", "hang")]
     assert not bad, "\n".join(bad)
     assert kinds["ok"] > 0 and kinds["error"] > 0, kinds  # the mutations neither all break nor all miss
+    assert max(o.peak_mb for o in outcomes) < 500
+
+
+# inputs per kind of user file in CI (the scenario runs 0.6 s of closed loop per input)
+FILE_PER_FORMAT = {"scenario": 40, "config": 80, "thresholds": 80, "rundir": 40}
+
+
+@pytest.fixture(scope="module")
+def file_seeds(tmp_path_factory: pytest.TempPathFactory) -> fuzz_files.FileSeeds:
+    return fuzz_files.FileSeeds.make(tmp_path_factory.mktemp("file-seeds"))
+
+
+@pytest.mark.parametrize("fmt", fuzz_files.FILE_FORMATS)
+def test_fuzzed_user_files_raise_only_our_error_and_touch_nothing_outside(
+        file_seeds: fuzz_files.FileSeeds, fmt: str, tmp_path: Path) -> None:
+    decoy = fuzz_files.make_decoy(tmp_path / "decoy")  # beside "in": where planted links point
+    digest = fuzz_files.decoy_digest(decoy)
+    outcomes = []
+    with fuzzing.memory_guard():
+        for i in range(FILE_PER_FORMAT[fmt]):
+            seed = fuzz_files.make_file_input(file_seeds, fmt, i)
+            outcomes.append(fuzzing.run_input(seed, fmt, i, tmp_path / "in"))
+            assert fuzz_files.decoy_digest(decoy) == digest, f"#{i} changed a file outside its folder"
+    kinds = Counter(o.kind for o in outcomes)
+    bad = [f"#{o.index} {o.kind}: {o.detail}" for o in outcomes if o.kind in ("other", "hang")]
+    assert not bad, "\n".join(bad)
+    assert kinds["ok"] > 0 and kinds["error"] > 0, kinds
     assert max(o.peak_mb for o in outcomes) < 500
 
 

@@ -5,6 +5,7 @@ Every case snapshots the user's files (paths and bytes) before and checks they a
 
 from __future__ import annotations
 
+import errno
 import os
 import shutil
 import signal
@@ -13,6 +14,7 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from typer.testing import CliRunner
@@ -214,23 +216,34 @@ def test_interrupt_while_drawing_figures_leaves_no_run_directory(tmp_path: Path)
     assert not out.exists() and not staging_dirs(tmp_path)
 
 
-def test_stale_staging_of_a_dead_process_only_is_removed(tmp_path: Path) -> None:
+def _dead_pid() -> int:
     proc = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
                           text=True, check=True)
-    dead = int(proc.stdout)
+    return int(proc.stdout)
+
+
+def _staged_by_a_dead_process(parent: Path) -> Path:
+    """A staging folder of a run that was killed (its process is gone), made by the real code."""
+    code = ("import os, sys; from pathlib import Path; from gndreplay.fsutil import staging_dir; "
+            "stage = staging_dir(Path(sys.argv[1]) / 'run'); tmp = stage.__enter__(); "
+            "(tmp / 'commands.csv').write_text('x'); print(tmp, flush=True); os._exit(0)")
+    proc = subprocess.run([sys.executable, "-c", code, str(parent)], capture_output=True, text=True,
+                          check=True)
+    return Path(proc.stdout.strip())
+
+
+def test_stale_staging_of_a_dead_process_only_is_removed(tmp_path: Path) -> None:
     from gndreplay.fsutil import _host
 
-    def fake(pid: int, marked: bool) -> Path:
-        d = tmp_path / f"{TMP_PREFIX}{_host()}-{pid}-abcd1234"
-        d.mkdir()
-        (d / "commands.csv").write_text("x\n")
-        if marked:
-            (d / RUN_MARKER).write_text("")
-        return d
-
-    stale, alive, foreign = fake(dead, True), fake(os.getpid(), True), fake(dead + 1_000_000, False)
-    assert remove_stale_staging(tmp_path) == [stale]
-    assert not stale.exists() and alive.exists() and foreign.exists()
+    with staging_dir(tmp_path / "alive") as alive:  # this process's: never removed
+        stale = _staged_by_a_dead_process(tmp_path)
+        assert stale.parent == tmp_path and stale.name.startswith(TMP_PREFIX)
+        assert (stale / "commands.csv").is_file()
+        look_alike = tmp_path / f"{TMP_PREFIX}{_host()}-{_dead_pid()}-abcd1234"
+        look_alike.mkdir()
+        (look_alike / "commands.csv").write_text("x\n")
+        assert remove_stale_staging(tmp_path) == [stale]
+        assert not stale.exists() and alive.exists() and look_alike.exists()
 
 
 def _spawn_run(out: Path, tmpdir: Path, *extra: str) -> subprocess.Popen[bytes]:
@@ -354,3 +367,224 @@ def test_a_symlinked_out_is_refused_before_any_work(tmp_path: Path) -> None:
     code, text = cli("run", SAMPLE, "--out", link, *FAST)
     assert code == 2 and "linkout: is a symbolic link" in text and len(text.strip().splitlines()) == 1
     assert link.is_symlink() and list(target.iterdir()) == [] and not staging_dirs(tmp_path)
+
+
+# ---- the marker is a file gndreplay wrote; look-alike staging folders; full disks; concurrent runs -------
+
+
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A run directory written by ``gndreplay run`` (copy it before changing anything)."""
+    out = tmp_path_factory.mktemp("finished") / "run"
+    code, text = cli("run", SAMPLE, "--out", out, *FAST)
+    assert code == 0, text
+    return out
+
+
+def one_error_line(code: int, text: str) -> str:
+    """The single stderr line of a refused command (exit 2, no traceback)."""
+    lines = text.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and "Traceback" not in text, text
+    return lines[0]
+
+
+def test_a_symlinked_marker_is_refused_and_never_written_through(finished_run: Path, tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    shutil.copytree(finished_run, out)
+    elsewhere = tmp_path / "elsewhere.txt"
+    elsewhere.write_text("mine\n")
+    (out / RUN_MARKER).unlink()
+    (out / RUN_MARKER).symlink_to(elsewhere)
+    before = snapshot(tmp_path)
+    for args in (("report", out), ("run", SAMPLE, "--out", out, *FAST),
+                 ("run", SAMPLE, "--out", out, "--overwrite", *FAST)):
+        line = one_error_line(*cli(*args))
+        assert f"{out / RUN_MARKER}: is a symbolic link" in line, line
+    with pytest.raises(OutputError, match=rf"{RUN_MARKER}: is a symbolic link"):
+        write_marker(out)
+    assert_kept(before, tmp_path)
+    assert elsewhere.read_text() == "mine\n" and (out / RUN_MARKER).is_symlink()
+    assert not list(out.glob("fig_*")) and not (out / "report.md").exists()
+    assert not out.with_name("run-2").exists() and not staging_dirs(tmp_path)
+    (out / RUN_MARKER).unlink()
+    (out / RUN_MARKER).mkdir()  # not a regular file either
+    with pytest.raises(OutputError, match=rf"{RUN_MARKER}: is not a regular file"):
+        write_marker(out)
+    line = one_error_line(*cli("report", out))
+    assert f"{out / RUN_MARKER}: is not a regular file" in line, line
+
+
+def test_the_marker_is_replaced_not_written_in_place(finished_run: Path, tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    shutil.copytree(finished_run, out)
+    inode = (out / RUN_MARKER).stat().st_ino
+    hard = tmp_path / "hardlink"  # another name of the same file: must keep the old text
+    os.link(out / RUN_MARKER, hard)
+    old = hard.read_text()
+    assert cli("report", out)[0] == 0
+    assert hard.read_text() == old and (out / RUN_MARKER).stat().st_ino != inode
+    assert "report.md" in (out / RUN_MARKER).read_text().splitlines()
+
+
+def test_report_refuses_a_folder_gndreplay_did_not_write(finished_run: Path, tmp_path: Path) -> None:
+    from gndreplay.report import build_report
+
+    mine = tmp_path / "mine"
+    shutil.copytree(finished_run, mine)
+    (mine / RUN_MARKER).unlink()  # the user's copy of a run's files, say
+    before = snapshot(mine)
+    with pytest.raises(OutputError, match=rf"mine: not a gndreplay run folder \(no {RUN_MARKER} marker\)"):
+        build_report(mine, require_marker=True)
+    assert snapshot(mine) == before
+
+
+def test_a_look_alike_staging_folder_is_never_removed(tmp_path: Path) -> None:
+    from gndreplay.fsutil import _host
+
+    parent = tmp_path / "runs"
+    parent.mkdir()
+    dead = _dead_pid()
+    plain = parent / f"{TMP_PREFIX}{_host()}-{dead}-abcd1234"  # named like a killed run's staging folder
+    plain.mkdir()
+    (plain / "thesis.tex").write_text("mine\n")
+    marked = parent / f"{TMP_PREFIX}{_host()}-{dead}-0123beef"  # ... and marked, as a copied run folder is
+    marked.mkdir()
+    (marked / "thesis.tex").write_text("mine too\n")
+    write_marker(marked)
+    forged = _staged_by_a_dead_process(tmp_path)  # proof of another folder's name: not this one's
+    copy = parent / f"{TMP_PREFIX}{_host()}-{dead}-feedf00d"
+    shutil.copytree(forged, copy)
+    (copy / "thesis.tex").write_text("mine three\n")
+    before = snapshot(tmp_path)
+    assert remove_stale_staging(parent) == []
+    code, text = cli("run", SAMPLE, "--out", parent / "out", *FAST)
+    assert code == 0, text
+    assert_kept(before, tmp_path)
+    assert plain.is_dir() and marked.is_dir() and copy.is_dir()
+
+
+NO_ROOM = [errno.ENOSPC, errno.EROFS, errno.EDQUOT]
+
+
+def _fail_writing(monkeypatch: pytest.MonkeyPatch, name: str, code: int) -> None:
+    """``Path.write_text`` of a file called ``name`` raises OSError(code)."""
+    real = Path.write_text
+
+    def write_text(self: Path, *args: Any, **kw: Any) -> int:
+        if self.name == name:
+            raise OSError(code, os.strerror(code), str(self))
+        return real(self, *args, **kw)
+
+    monkeypatch.setattr(Path, "write_text", write_text)
+
+
+@pytest.mark.parametrize("code", NO_ROOM, ids=errno.errorcode.get)
+def test_a_full_disk_during_a_run_is_one_line_and_the_earlier_run_stays(
+        finished_run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, code: int) -> None:
+    out = tmp_path / "run"
+    shutil.copytree(finished_run, out)
+    before = snapshot(tmp_path)
+    _fail_writing(monkeypatch, "summary.json", code)
+    for extra, target in (([], out.with_name("run-2")), (["--overwrite"], out)):
+        line = one_error_line(*cli("run", SAMPLE, "--out", out, *extra, *FAST))
+        assert line.startswith(f"gndreplay: error: {target}: cannot write ({os.strerror(code)})"), line
+    assert_kept(before, tmp_path)
+    assert snapshot(tmp_path) == before and not staging_dirs(tmp_path)
+
+
+@pytest.mark.parametrize("code", NO_ROOM, ids=errno.errorcode.get)
+def test_a_full_disk_during_report_is_one_line(finished_run: Path, tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch, code: int) -> None:
+    out = tmp_path / "run"
+    shutil.copytree(finished_run, out)
+    before = snapshot(tmp_path)
+
+    def savefig(self: Any, fname: Any, **kw: Any) -> None:
+        Path(fname).write_bytes(b"\x89PNG half")
+        raise OSError(code, os.strerror(code))
+
+    monkeypatch.setattr("matplotlib.figure.Figure.savefig", savefig)
+    line = one_error_line(*cli("report", out))
+    assert line.startswith(f"gndreplay: error: {out}: cannot write ({os.strerror(code)})"), line
+    assert snapshot(tmp_path) == before  # no half figure, no temporary
+
+
+def test_a_full_disk_during_simulate_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    _fail_writing(monkeypatch, "result.json", errno.ENOSPC)
+    out = tmp_path / "sim"
+    line = one_error_line(*cli("simulate", "u_trap", "--out", out, "--time-limit", "0.5", "--no-figures"))
+    assert line.startswith(f"gndreplay: error: {out}: cannot write (No space left on device)"), line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_writing_a_simulated_log_is_one_line(tmp_path: Path,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    import gndreplay.io.carmen as carmen
+
+    def full(*args: Any, **kw: Any) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(carmen, "_write_body", full)
+    monkeypatch.setattr("gndreplay.sim.scenario.run_scenario", lambda scn, seed: None)
+    monkeypatch.setattr("gndreplay.sim.scenario.iter_ticks", lambda run, t0_ns: iter(()))
+    monkeypatch.setattr("gndreplay.sim.scenario.iter_odometry", lambda run, t0_ns: iter(()))
+    out = tmp_path / "office.clf.bz2"
+    line = one_error_line(*cli("simulate", "office", "--out", out))
+    assert line.startswith(f"gndreplay: error: {out}: cannot write (No space left on device)"), line
+    assert list(tmp_path.iterdir()) == []
+
+
+class _ConcurrentRun:
+    """A sink whose ``finish`` publishes another run at ``out`` while this one is still staged: the race of
+    two runs started at once with the same --out."""
+
+    def __init__(self, out: Path) -> None:
+        self.out = out
+
+    def add_scan(self, tick: object, pose: object) -> None: ...
+    def add_result(self, tick: object, result: object, grid: object) -> None: ...
+    def abort(self) -> None: ...
+
+    def finish(self, run_dir: Path) -> None:
+        with staging_dir(self.out) as tmp:
+            (tmp / "other.txt").write_text("the other run\n")
+
+
+def test_a_name_taken_while_staged_goes_to_the_next_free_one(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    stage = staging_dir(out)
+    with stage as tmp:
+        (tmp / "a.txt").write_text("mine\n")
+        with staging_dir(out) as other:  # a concurrent run, published first
+            (other / "b.txt").write_text("other\n")
+    assert stage.out == out.with_name("run-2") and (stage.out / "a.txt").read_text() == "mine\n"
+    assert (out / "b.txt").read_text() == "other\n" and not (out / "a.txt").exists()
+    summary = run_log(SAMPLE, PRESETS["wheelchair"], out, options=RunOptions(until_s=2.0),
+                      sinks=[_ConcurrentRun(out.with_name("run-3"))])
+    assert summary.out_dir == out.with_name("run-4")  # run-3 was taken while it ran: the next free name
+    assert (out.with_name("run-3") / "other.txt").is_file() and (summary.out_dir / "commands.csv").is_file()
+    assert is_output_dir(summary.out_dir) and not staging_dirs(tmp_path)
+
+
+def _error_runner(task: Any) -> Any:
+    """A batch runner (module level: workers unpickle it) for which every input is unreadable."""
+    from gndreplay.errors import LogFormatError
+
+    raise LogFormatError(f"{task.job.path}: not a log")
+
+
+def test_a_batch_folder_taken_while_staged_goes_to_the_next_free_one(tmp_path: Path) -> None:
+    from gndreplay.batch import Job, run_batch
+
+    (tmp_path / "a.clf").write_text("not a log\n")
+    out = tmp_path / "batch"
+
+    def progress(result: Any) -> None:
+        with staging_dir(out) as tmp:  # another batch, published while this one runs
+            (tmp / "summary.csv").write_text("theirs\n")
+
+    res = run_batch([Job(name="a", path=tmp_path / "a.clf")], cfg=PRESETS["wheelchair"],
+                    options=RunOptions(), out_dir=out, runner=_error_runner, progress=progress)
+    assert res.out_dir == out.with_name("batch-2") and (out / "summary.csv").read_text() == "theirs\n"
+    assert res.summary_csv == res.out_dir / "summary.csv" and res.summary_csv.is_file()
+    assert not staging_dirs(tmp_path)

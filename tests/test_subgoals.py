@@ -67,7 +67,7 @@ def test_unreadable_files(tmp_path: Path) -> None:
         load_subgoals(tmp_path)
     binary = tmp_path / "bin.txt"
     binary.write_bytes(b"\xff\xfe\x00 1 2 3\n")
-    with pytest.raises(ConfigError, match="cannot read the subgoal file"):
+    with pytest.raises(ConfigError, match=r"bin\.txt: line 1: not UTF-8 text \(byte 0: 0xff\)"):
         load_subgoals(binary)
 
 

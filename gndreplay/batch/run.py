@@ -309,7 +309,8 @@ def run_batch(
     work: never a file, the current folder, a folder holding an input, or a non-empty folder gndreplay did
     not write. It is built in a staging directory beside it and appears, marked, only when complete; an
     earlier batch folder there is replaced only with ``overwrite``, otherwise the batch is written beside
-    it as ``out_dir-2``, ... (``BatchResult.out_dir`` says where).
+    it as ``out_dir-2``, ... (``BatchResult.out_dir`` says where; also when a concurrent batch took the
+    name first).
 
     Args:
         jobs: the inputs (``expand_inputs`` makes them from paths); names must be unique.
@@ -331,7 +332,8 @@ def run_batch(
     Raises:
         ConfigError: no jobs, bad names, FIFO / device inputs, ``workers`` < 1, bad timeout, dask missing
             or unreachable.
-        OutputError: ``out_dir`` (or ``junit``) is unsafe to write.
+        OutputError: ``out_dir`` (or ``junit``) is unsafe to write, or the disk is full (quota, read-only)
+            while writing.
     """
     t0 = time.perf_counter()
     thresholds = thresholds if thresholds is not None else Thresholds()
@@ -347,11 +349,10 @@ def run_batch(
 
     def final(r: InputResult, tmp: Path) -> InputResult:
         """The result with its run directory where it will be once the batch folder is published."""
-        if r.run_dir is None or not Path(r.run_dir).is_relative_to(tmp):
-            return r
-        return replace(r, run_dir=target / Path(r.run_dir).relative_to(tmp))
+        return _moved(r, tmp, target)
 
-    with fsutil.staging_dir(target, overwrite=overwrite) as tmp:
+    stage = fsutil.staging_dir(target, overwrite=overwrite, base=out_dir)
+    with stage as tmp:
         staged = [replace(t, run_dir=tmp / t.run_dir.name) for t in tasks]
         shown = None if progress is None else (lambda r: progress(final(r, tmp)))
         results = tuple(
@@ -371,14 +372,25 @@ def run_batch(
             _mkdirs_marked(tmp, junit_rel.parent)
             atomic_write_text(tmp / junit_rel, junit_xml(results, aggregates))
             fsutil.add_to_marker((tmp / junit_rel).parent, [junit_rel.name])
+    if stage.out != target:  # a concurrent batch took the name first: the folder is at the next free one
+        results = tuple(_moved(r, target, stage.out) for r in results)
+        target = stage.out
     if junit_out is not None:
-        junit_out.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(junit_out, junit_xml(results, aggregates))
+        with fsutil.write_errors(junit_out):
+            junit_out.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(junit_out, junit_xml(results, aggregates))
     junit_path = target / junit_rel if junit_rel is not None else junit_out
     return BatchResult(
         results, target, target / "summary.csv", target / "summary.md", junit_path, time.perf_counter() - t0,
         aggregates,
     )
+
+
+def _moved(r: InputResult, old: Path, new: Path) -> InputResult:
+    """``r`` with its run directory under ``new`` instead of ``old`` (a result outside ``old`` as it is)."""
+    if r.run_dir is None or not Path(r.run_dir).is_relative_to(old):
+        return r
+    return replace(r, run_dir=new / Path(r.run_dir).relative_to(old))
 
 
 def _mkdirs_marked(root: Path, rel: Path) -> None:

@@ -30,13 +30,17 @@ metric that is nan (relations given but none matched) fails. ``AGGREGATE_KEYS`` 
 ``collision_rate``, ``goal_missed_rate``, ``timeout_rate``, ``mean_time_to_goal_s``) bound a scenario's
 aggregate over its seeds. ``relations`` and ``goal`` apply to logs only (a scenario has its own goal and
 ground truth).
+
+A limit is a non-negative number (an integer for a count) no larger than its metric can be
+(``limit_bound``: a fraction at most 1, a latency at most an hour, a distance at most the readers' 1e6 m);
+a goal is two finite numbers within 1e6 m. The file is read through :mod:`gndreplay.io.userfile` (a regular
+file of at most 1 MB, nesting bounded).
 """
 
 from __future__ import annotations
 
 import difflib
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from fnmatch import fnmatchcase
@@ -44,17 +48,21 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError
+from ..io.base import MAX_ABS_POSITION_M
+from ..io.userfile import brief, check_number, check_regular_file, load_toml
 from .jobs import Job
 from .metrics import COUNT_METRICS, LATENCY_METRICS, RELATION_METRICS, SCENARIO_METRICS
 
 __all__ = [
     "AGGREGATE_KEYS",
     "DEFAULT_LIMITS",
+    "MAX_THRESHOLDS_BYTES",
     "MIN_KEYS",
     "THRESHOLD_KEYS",
     "InputRule",
     "Thresholds",
     "check_limits",
+    "limit_bound",
     "load_thresholds",
 ]
 
@@ -89,6 +97,20 @@ _INTEGER_KEYS = frozenset(
 )
 _RATE_KEYS = frozenset(("min_success_rate", "collision_rate", "goal_missed_rate", "timeout_rate"))
 _INPUT_SETTINGS = ("relations", "goal")
+MAX_THRESHOLDS_BYTES = 1 << 20
+"""Largest thresholds file read (1 MB: thousands of input rules)."""
+#: Physical bound of a limit by its metric's unit (the key's suffix): (largest limit, what it is).
+_UNIT_BOUNDS: tuple[tuple[str, float, str], ...] = (
+    ("_ms", 3_600_000.0, "ms (an hour)"),
+    ("_ms_per_step", 3_600_000.0, "ms (an hour)"),
+    ("_ms_per_tick", 3_600_000.0, "ms (an hour)"),
+    ("_s", 1e7, "s (about four months)"),
+    ("_m", MAX_ABS_POSITION_M, "m (the readers' bound on positions)"),
+    ("_deg", 180.0, "deg (a half turn, the largest wrapped angle)"),
+    ("_pct", 100.0, "%"),
+)
+_MAX_COUNT = 1e12
+"""Largest count limit (ticks, flags, relations: a 1 kHz log of 30 years has fewer)."""
 
 #: Thresholds when no file is given: generous bounds that catch a broken or badly slowed stack, not a tuning
 #: regression. At least one tick; p99 latencies of the reactor 50 ms, the planner 200 ms and model + planner
@@ -213,21 +235,44 @@ def check_limits(
 def _unknown(path: Path, where: str, key: str, known: tuple[str, ...]) -> ConfigError:
     close = difflib.get_close_matches(key, known, n=1)
     hint = f" (did you mean {close[0]!r}?)" if close else ""
-    return ConfigError(f"{path}: {where} unknown key {key!r}{hint}; known keys: {', '.join(known)}")
+    return ConfigError(f"{path}: {where} unknown key {brief(key)}{hint}; known keys: {', '.join(known)}")
+
+
+def limit_bound(key: str) -> tuple[float, str]:
+    """(largest value, how an error says it) of the threshold ``key``: a limit beyond it is a typo, and a
+    metric never reaches it (a fraction of the runs is at most 1, a latency at most an hour)."""
+    if key in _RATE_KEYS:
+        return 1.0, "is a fraction of the runs, from 0 to 1"
+    if key == "min_success":
+        return 1.0, "must be 0 or 1 (a run reaches its goal or not)"
+    if key in _INTEGER_KEYS:
+        return _MAX_COUNT, f"must be a count of at most {_MAX_COUNT:g}"
+    for suffix, hi, unit in _UNIT_BOUNDS:
+        if key.endswith(suffix):
+            return hi, f"must be at most {hi:g} {unit}"
+    raise KeyError(key)  # pragma: no cover - a test checks every threshold key has a bound
 
 
 def _limit(path: Path, where: str, key: str, value: Any, *, allow_off: bool) -> float | None:
+    """The limit ``value`` of ``key`` (None: switched off) if it is a non-negative number (an integer for a
+    count) within the key's bound (:func:`limit_bound`), through ``check_number``."""
     if value is False and allow_off:
         return None
     integer = key in _INTEGER_KEYS
-    ok = isinstance(value, int) if integer else isinstance(value, int | float)
-    if isinstance(value, bool) or not ok or not math.isfinite(value) or value < 0:
-        kind = "a non-negative integer" if integer else "a non-negative number"
-        off = " or false" if allow_off else ""
-        raise ConfigError(f"{path}: {where} {key} must be {kind}{off}, got {value!r}")
-    if key in _RATE_KEYS and value > 1:
-        raise ConfigError(f"{path}: {where} {key} is a fraction of the runs, from 0 to 1, got {value!r}")
-    return value
+    hi, too_large = limit_bound(key)
+    name = f"{path}: {where} {key}"
+    try:
+        check_number(value, name, 0.0, hi)
+        ok = not integer or isinstance(value, int)
+    except ConfigError:
+        ok = False
+    if ok:
+        return value
+    if isinstance(value, int | float) and not isinstance(value, bool) and value > hi:
+        raise ConfigError(f"{name} {too_large}, got {brief(value)}")
+    kind = "a non-negative integer" if integer else "a non-negative number"
+    off = " or false" if allow_off else ""
+    raise ConfigError(f"{name} must be {kind}{off}, got {brief(value)}")
 
 
 def _limits(path: Path, where: str, table: Mapping[str, Any], *, allow_off: bool) -> dict[str, float | None]:
@@ -241,30 +286,42 @@ def _limits(path: Path, where: str, table: Mapping[str, Any], *, allow_off: bool
 
 def _table(path: Path, where: str, value: Any) -> Mapping[str, Any]:
     if not isinstance(value, dict):
-        raise ConfigError(f"{path}: {where} must be a table, got {value!r}")
+        raise ConfigError(f"{path}: {where} must be a table, got {brief(value)}")
     return value
 
 
+def _relations(path: Path, where: str, relations: Path) -> Path:
+    """``relations`` if it is a regular file no larger than a relations file may be (read after the run)."""
+    from ..evaluation import MAX_RELATIONS_BYTES
+
+    try:
+        check_regular_file(relations, "relations file", MAX_RELATIONS_BYTES)
+    except ConfigError as err:
+        raise ConfigError(f"{path}: {where} {err}") from None
+    return relations
+
+
+def _goal(path: Path, where: str, value: Any) -> tuple[float, float]:
+    """A goal ``[x, y]`` of finite numbers within the readers' bound on positions [m]."""
+    if not (isinstance(value, list) and len(value) == 2):
+        raise ConfigError(f"{path}: {where} goal must be [x, y] in metres, got {brief(value)}")
+    x, y = (check_number(v, f"{path}: {where} goal[{i}]", -MAX_ABS_POSITION_M, MAX_ABS_POSITION_M)
+            for i, v in enumerate(value))
+    return x, y
+
+
 def _rule(path: Path, pattern: str, table: Mapping[str, Any]) -> InputRule:
-    where = f"[inputs.{pattern!r}]"
+    where = f"[inputs.{brief(pattern)}]"
     relations: Path | None = None
     goal: tuple[float, float] | None = None
     limit_items: dict[str, Any] = {}
     for key, value in table.items():
         if key == "relations":
             if not isinstance(value, str):
-                raise ConfigError(f"{path}: {where} relations must be a path string, got {value!r}")
-            relations = path.parent / value
-            if not relations.is_file():
-                raise ConfigError(f"{path}: {where} relations file not found: {relations}")
+                raise ConfigError(f"{path}: {where} relations must be a path string, got {brief(value)}")
+            relations = _relations(path, where, path.parent / value)
         elif key == "goal":
-            if not (
-                isinstance(value, list)
-                and len(value) == 2
-                and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
-            ):
-                raise ConfigError(f"{path}: {where} goal must be [x, y] in metres, got {value!r}")
-            goal = (float(value[0]), float(value[1]))
+            goal = _goal(path, where, value)
         elif key in THRESHOLD_KEYS:
             limit_items[key] = value
         else:
@@ -280,13 +337,7 @@ def load_thresholds(path: Path | str) -> Thresholds:
             a limit that is not a non-negative number, a bad goal, or a missing relations file.
     """
     path = Path(path)
-    try:
-        with open(path, "rb") as f:
-            doc = tomllib.load(f)
-    except OSError as err:
-        raise ConfigError(f"{path}: cannot read thresholds file ({err.strerror})") from err
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{path}: not valid TOML ({err})") from err
+    doc = load_toml(path, "thresholds file", MAX_THRESHOLDS_BYTES)
     for key in doc:
         if key not in ("thresholds", "inputs"):
             raise _unknown(path, "top level:", key, ("thresholds", "inputs"))
@@ -295,7 +346,7 @@ def load_thresholds(path: Path | str) -> Thresholds:
         _limits(path, "[thresholds]", _table(path, "[thresholds]", doc.get("thresholds", {})), allow_off=True)
     )
     rules = tuple(
-        _rule(path, pattern, _table(path, f"[inputs.{pattern!r}]", table))
+        _rule(path, pattern, _table(path, f"[inputs.{brief(pattern)}]", table))
         for pattern, table in _table(path, "[inputs]", doc.get("inputs", {})).items()
     )
     return Thresholds(limits={k: v for k, v in limits.items() if v is not None}, inputs=rules, source=path)

@@ -23,6 +23,7 @@ __all__ = [
     "MAX_ABS_BEARING_RAD",
     "MAX_ABS_POSITION_M",
     "MAX_ABS_TIME_NS",
+    "MAX_BEAMS",
     "MAX_RANGE_LIMIT_M",
     "MAX_SPEED",
     "LogDescription",
@@ -30,6 +31,7 @@ __all__ = [
     "ReadReport",
     "StreamInfo",
     "StreamRole",
+    "check_beams",
     "check_bearings",
     "check_pose",
     "check_speed",
@@ -69,6 +71,8 @@ MAX_ABS_POSITION_M = 1e6
 MAX_ABS_HEADING_RAD = 1e6
 #: |bearing| bound of laser beams [rad].
 MAX_ABS_BEARING_RAD = 4.0 * math.pi
+#: most beams a scan may have (a 2D laser has at most a few thousand; 100,000 float64 ranges are 800 KB).
+MAX_BEAMS = 100_000
 #: largest maximum range a laser may declare [m].
 MAX_RANGE_LIMIT_M = 1e5
 #: |speed| bound of recorded commands and odometry twists [m/s, rad/s].
@@ -109,6 +113,17 @@ def check_speed(v: float, what: str, *, allow_nan: bool = False) -> float:
     if abs(v) <= MAX_SPEED or (allow_nan and math.isnan(v)):
         return v
     raise ValueError(f"{what} {v:.6g} is not finite or out of range")
+
+
+def check_beams(n: int) -> int:
+    """``n`` if a scan of that many beams is within ``MAX_BEAMS`` (checked before arrays are made of them).
+
+    Raises:
+        ValueError: more beams than that.
+    """
+    if n > MAX_BEAMS:
+        raise ValueError(f"{n} beams, more than the {MAX_BEAMS} a scan may have")
+    return n
 
 
 def check_bearings(first: float, step: float, n: int) -> None:

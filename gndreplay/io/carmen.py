@@ -71,6 +71,7 @@ from .base import (
     INDEX_CLOCK_PERIOD_NS,
     MAX_ABS_POSITION_M,
     MAX_ABS_TIME_NS,
+    MAX_BEAMS,
     MAX_RANGE_LIMIT_M,
     LogDescription,
     ReadReport,
@@ -126,7 +127,6 @@ _NAME_RE = re.compile(rb"^[A-Za-z][A-Za-z0-9_\-]*$")
 _DEC_RE = re.compile(rb"^([+-]?)(\d+)(?:\.(\d*))?$")
 _HEAD_LINES = 5000
 _HEAD_SCANS = 50
-_MAX_BEAMS = 100_000
 _MAX_LINE = 4 << 20  # bytes; a 100k-beam line is ~1 MB
 _HEAD_BYTES = 16 << 20  # the head keeps at most this much text (a log of huge lines still opens cheaply)
 #: What ``_lines`` yields in place of a line longer than ``_MAX_LINE`` (the rest is skipped unread).
@@ -231,7 +231,7 @@ def _count(tok: list[bytes], i: int, what: str) -> int:
         n = int(tok[i])
     except (ValueError, IndexError):
         raise _Bad(f"{what} count missing or not an integer") from None
-    if not 0 < n <= _MAX_BEAMS:
+    if not 0 < n <= MAX_BEAMS:
         raise _Bad(f"{what} count {n} out of range")
     return n
 
@@ -989,7 +989,7 @@ class CarmenReader:
         if len(tok) < 10 + n:
             raise _Bad(f"declares {n} ranges: line ends early")
         m = int(tok[9 + n])
-        if not 0 <= m <= _MAX_BEAMS:
+        if not 0 <= m <= MAX_BEAMS:
             raise _Bad(f"remission count {m} out of range")
         tail = 11 if robot else 0
         what = f"declares {n} ranges and {m} remissions"

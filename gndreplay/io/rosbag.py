@@ -13,9 +13,9 @@
   ``/cmd_vel``) if present; otherwise, or for a topic that is not in the bag, a LogFormatError lists the
   candidates.
 
-- Values: stamps, poses, twists, bearings and range_max outside the bounds of :mod:`.base` make a message
-  malformed (skipped and counted; an error with ``strict``); what rosbags read from a bag's index or
-  ``metadata.yaml`` (topic names, types, counts) is type-checked before use.
+- Values: stamps, poses, twists, bearings, range_max and beam counts (``MAX_BEAMS``) outside the bounds of
+  :mod:`.base` make a message malformed (skipped and counted; an error with ``strict``); what rosbags read
+  from a bag's index or ``metadata.yaml`` (topic names, types, counts) is type-checked before use.
 
 rosbags' storage readers (the ones AnyReader wraps) give the raw messages; the few fields used are decoded
 directly by :mod:`.rosraw` (about 4x faster than rosbags' generic deserialiser, no per-bag code generation,
@@ -51,6 +51,7 @@ from .base import (
     ReadReport,
     StreamInfo,
     StreamRole,
+    check_beams,
     check_bearings,
     check_pose,
     check_speed,
@@ -586,9 +587,10 @@ class RosbagReader:
 
         Raises:
             ValueError, struct.error: bytes that are not a LaserScan, or values out of range (stamp,
-                bearings, a range_max above ``MAX_RANGE_LIMIT_M``).
+                bearings, a range_max above ``MAX_RANGE_LIMIT_M``, more than ``MAX_BEAMS`` beams).
         """
         f = self._scan_fields(raw)
+        n = check_beams(len(f.ranges))  # before any array is made from them (the ranges are a view of raw)
         t = check_time(f.stamp_ns or t_log)
         rmax = float(f.range_max)
         if not (math.isfinite(rmax) and rmax > 0.0):
@@ -598,7 +600,6 @@ class RosbagReader:
         rmin = float(f.range_min)
         if not (math.isfinite(rmin) and 0.0 <= rmin < rmax):
             rmin = 0.0
-        n = len(f.ranges)
         if n == 0:
             raise ValueError("LaserScan without ranges")
         key = (n, float(f.angle_min), float(f.angle_increment))
@@ -629,7 +630,9 @@ class RosbagReader:
         events = reorder(self._events(stats), stats, self._sync)
         yield from synchronise(events, stats, odom_mode=odom_mode, truth_mode=truth_mode, opts=self._sync)
         if stats.scans == 0:
-            raise LogFormatError(f"{self.path}: no scans on {self.scan_topic}")
+            first = stats.malformed_examples[0] if stats.malformed_examples else None
+            skipped = f" ({stats.malformed} malformed messages skipped, the first: {first})" if first else ""
+            raise LogFormatError(f"{self.path}: no scans on {self.scan_topic}{skipped}")
 
     def _handlers(self) -> dict[str, Callable[[bytes, int], Event | list[Event]]]:
         h: dict[str, Callable[[bytes, int], Event | list[Event]]] = {self.scan_topic: self._on_scan}

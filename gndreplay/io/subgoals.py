@@ -23,11 +23,11 @@ from typing import Any, cast, get_args
 
 from ..errors import ConfigError
 from ..types import Subgoal, SubgoalKind
-from .base import special_file_kind
+from .userfile import brief, read_text
 
 __all__ = [
     "MAX_ABS_SUBGOAL_M", "MAX_ABS_THETA_RAD", "MAX_SUBGOAL_FILE_BYTES",
-    "check_small_file", "load_subgoals", "subgoals_from_rows",
+    "load_subgoals", "subgoals_from_rows",
 ]
 
 MAX_ABS_SUBGOAL_M = 1e6
@@ -46,10 +46,10 @@ def _number(v: Any, name: str, where: str) -> float:
         raise ConfigError(f"{where}: {name} must be a number, got {v!r}")
     try:
         x = float(v)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{where}: {name} must be a number, got {v!r}") from None
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an integer beyond a float
+        raise ConfigError(f"{where}: {name} must be a number, got {brief(v)}") from None
     if not math.isfinite(x):
-        raise ConfigError(f"{where}: {name} must be finite, got {v!r}")
+        raise ConfigError(f"{where}: {name} must be finite, got {brief(v)}")
     return x
 
 
@@ -65,7 +65,7 @@ def _subgoal(fields: Sequence[Any], where: str) -> Subgoal:
         raise ConfigError(f"{where}: |theta| must be <= {MAX_ABS_THETA_RAD:g} rad, got {theta!r}")
     kind = fields[3] if len(fields) == 4 else "forward"
     if kind not in _KINDS:
-        raise ConfigError(f"{where}: kind must be one of {', '.join(_KINDS)}, got {kind!r}")
+        raise ConfigError(f"{where}: kind must be one of {', '.join(_KINDS)}, got {brief(kind)}")
     return Subgoal(x, y, theta, cast(SubgoalKind, kind))
 
 
@@ -73,51 +73,20 @@ def subgoals_from_rows(rows: Any, where: str) -> tuple[Subgoal, ...]:
     """Subgoals from rows ``[[x, y, theta, kind], ...]`` (kind optional), e.g. a scenario's YAML list;
     ``where`` names the source in errors (``"run.yaml: subgoals"`` -> ``"run.yaml: subgoals[2]: ..."``)."""
     if not isinstance(rows, list | tuple) or not rows:
-        raise ConfigError(f"{where}: expected a non-empty list of [x, y, theta, kind] rows, got {rows!r}")
+        raise ConfigError(
+            f"{where}: expected a non-empty list of [x, y, theta, kind] rows, got {brief(rows)}"
+        )
     out = []
     for i, row in enumerate(rows):
         if not isinstance(row, list | tuple):
-            raise ConfigError(f"{where}[{i}]: expected a list [x, y, theta, kind], got {row!r}")
+            raise ConfigError(f"{where}[{i}]: expected a list [x, y, theta, kind], got {brief(row)}")
         out.append(_subgoal(row, f"{where}[{i}]"))
     return tuple(out)
 
 
-def check_small_file(path: Path, what: str, max_bytes: int) -> None:
-    """Refuse, without opening it, a path that is not a regular file of at most ``max_bytes``: missing, a
-    folder, a FIFO / device / socket (reading one could block for ever) or too large.
-
-    Raises:
-        ConfigError: one line naming the path and ``what`` it should be ("subgoal file").
-    """
-    if (kind := special_file_kind(path)) is not None:
-        raise ConfigError(f"{path}: is {kind}, not a {what} (never opened)")
-    try:
-        st = path.stat()
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: {what} not found") from None
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot read the {what}: {' '.join(str(e).split())}") from None
-    if path.is_dir():
-        raise ConfigError(f"{path}: is a folder, not a {what}")
-    if st.st_size > max_bytes:
-        raise ConfigError(f"{path}: {st.st_size} bytes, more than the {max_bytes >> 20} MB a {what} may have")
-
-
 def load_subgoals(path: Path) -> tuple[Subgoal, ...]:
     """Read a subgoal file (format: module docstring)."""
-    path = Path(path)
-    check_small_file(path, "subgoal file", MAX_SUBGOAL_FILE_BYTES)
-    try:
-        with path.open("rb") as f:  # bounded even if the file grew after the check
-            data = f.read(MAX_SUBGOAL_FILE_BYTES + 1)
-        if len(data) > MAX_SUBGOAL_FILE_BYTES:
-            raise ConfigError(f"{path}: more than the {MAX_SUBGOAL_FILE_BYTES >> 20} MB a subgoal file "
-                              "may have")
-        text = data.decode("utf-8-sig")  # a BOM from a Windows editor is fine
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: subgoal file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ConfigError(f"{path}: cannot read the subgoal file: {' '.join(str(e).split())}") from None
+    text = read_text(Path(path), "subgoal file", MAX_SUBGOAL_FILE_BYTES)
     out = []
     for n, line in enumerate(text.splitlines(), start=1):
         fields = line.split("#", 1)[0].split()

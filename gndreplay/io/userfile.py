@@ -6,7 +6,9 @@ relations and a run folder's own files.
 - Bytes are decoded as UTF-8 (a BOM allowed); an undecodable file is named with the byte where it fails.
 - TOML, YAML and JSON are parsed with their nesting bounded (``MAX_NESTING``). A parser's recursion error
   becomes a one-line error. YAML aliases may expand to at most ``MAX_NODES`` values, which stops a
-  "billion laughs" document.
+  "billion laughs" document; merge keys (``<<``) may copy at most as many entries, and an integer scalar
+  longer than ``MAX_INT_CHARS`` is refused before it is built (its digits, or the parts of a base-60
+  ``1:2:3``, cost time growing with their square).
 - Numbers go through :func:`check_number`: a bool or a string is refused, an integer too large for a float
   is refused before any conversion, and the value must be finite and within its physical range.
 - Every error is a :class:`ConfigError` of one line naming the file. A value is quoted through
@@ -15,10 +17,13 @@ relations and a run folder's own files.
 
 from __future__ import annotations
 
+import difflib
+import functools
 import json
 import math
 import reprlib
 import tomllib
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -26,8 +31,8 @@ from ..errors import ConfigError
 from .base import special_file_kind
 
 __all__ = [
-    "MAX_NESTING", "MAX_NODES", "brief", "check_number", "check_regular_file", "load_json", "load_toml",
-    "load_yaml", "parse_yaml", "read_bytes", "read_text",
+    "MAX_NESTING", "MAX_NODES", "brief", "check_number", "check_regular_file", "did_you_mean", "load_json",
+    "load_toml", "load_yaml", "parse_yaml", "read_bytes", "read_text",
 ]
 
 MAX_NESTING = 64
@@ -36,6 +41,10 @@ MAX_NODES = 1_000_000
 """Most values a parsed document may hold, each alias counted as often as it is used."""
 MAX_INT_DIGITS = 30
 """An integer with more decimal digits is refused before any conversion (no physical value needs them)."""
+_INT_LIMIT = int("1" + "0" * MAX_INT_DIGITS)  # 10**MAX_INT_DIGITS (the package allows only literal powers)
+_LOG10_2 = 0.30102999566398120  # digits per bit
+MAX_INT_CHARS = 1000
+"""Longest integer scalar a YAML document may hold (far above MAX_INT_DIGITS, so its error names the key)."""
 
 _BRIEF = reprlib.Repr()
 _BRIEF.maxlevel, _BRIEF.maxdict, _BRIEF.maxlist, _BRIEF.maxtuple = 2, 4, 4, 4
@@ -45,12 +54,29 @@ _BRIEF.maxstring, _BRIEF.maxother, _BRIEF.maxlong = 40, 40, 40
 def brief(value: Any) -> str:
     """A short repr for an error message: containers cut after a few items and two levels, long strings
     and integers cut in the middle (an alias bomb or a 10,000-digit integer prints in a line)."""
-    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**MAX_INT_DIGITS:
-        return f"an integer of about {int(value.bit_length() * math.log10(2)) + 1} digits"
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= _INT_LIMIT:
+        return f"an integer of {_digits(abs(value))} digits"
     try:
         return _BRIEF.repr(value)
     except (ValueError, RecursionError):  # an int beyond Python's str() limit deep inside a container
         return f"a {type(value).__name__}"
+
+
+def _digits(n: int) -> int:
+    """Decimal digits of n > 0 without str() (which refuses more than 4,300 digits)."""
+    d = int(n.bit_length() * _LOG10_2) + 1  # right, or one too many
+    return d - 1 if n < pow(10, d - 1) else d
+
+
+def did_you_mean(value: Any, choices: Iterable[str]) -> str:
+    """`` (did you mean 'x'?)`` when ``value`` is a string close to one of ``choices``, else ``""``: the
+    tail of a message refusing a misspelt name."""
+    if not isinstance(value, str) or not value or len(value) > 100:
+        return ""
+    names = list(choices)
+    within = [c for c in names if value.lower() in c]  # "icp" is kiss-icp more than idc
+    close = within if len(within) == 1 else difflib.get_close_matches(value.lower(), names, n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 def _one_line(err: BaseException) -> str:
@@ -106,7 +132,8 @@ def read_text(path: Path, what: str, max_bytes: int) -> str:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
         line = data.count(b"\n", 0, e.start) + 1
-        raise ConfigError(f"{path}: line {line}: not UTF-8 text (byte {e.start}: {data[e.start]:#04x})") from None
+        raise ConfigError(f"{path}: line {line}: not UTF-8 text (byte {e.start}: "
+                          f"{data[e.start]:#04x})") from None
 
 
 def _check_shape(doc: Any, where: str) -> None:
@@ -145,17 +172,54 @@ def _check_shape(doc: Any, where: str) -> None:
             raise ConfigError(f"{where}: nested more than {MAX_NESTING} levels deep")
 
 
-def load_toml(path: Path, what: str, max_bytes: int) -> dict[str, Any]:
-    """A TOML file as a dict (see the module docstring for the bounds)."""
+def _load(path: Path, what: str, max_bytes: int, parse: Callable[[str], Any], kind: str) -> Any:
+    """Read ``path`` as text and ``parse`` it; a parse error (the decoders' errors and an integer beyond
+    Python's str() limit are ValueErrors) or a parser's recursion error is one line naming the file."""
     text = read_text(path, what, max_bytes)
     try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: not a valid TOML file: {_one_line(e)}") from None
+        doc = parse(text)
     except RecursionError:
         raise ConfigError(f"{path}: nested more than {MAX_NESTING} levels deep") from None
+    except ValueError as e:
+        raise ConfigError(f"{path}: not {kind}: {_one_line(e)}") from None
     _check_shape(doc, str(path))
     return doc
+
+
+def load_toml(path: Path, what: str, max_bytes: int) -> dict[str, Any]:
+    """A TOML file as a dict (see the module docstring for the bounds)."""
+    doc: dict[str, Any] = _load(path, what, max_bytes, tomllib.loads, "a valid TOML file")
+    return doc
+
+
+@functools.cache
+def _yaml_loader() -> type:
+    """yaml.SafeLoader bounding what a short document can make it build: integer scalars of at most
+    MAX_INT_CHARS characters, and merge keys copying at most MAX_NODES entries in all (a chain of mappings
+    each merging the previous one grows with the square of its length)."""
+    import yaml
+    from yaml.constructor import ConstructorError
+
+    class Loader(yaml.SafeLoader):
+        merged = 0
+
+        def construct_yaml_int(self, node: Any) -> int:
+            if len(node.value) > MAX_INT_CHARS:
+                raise ConstructorError(None, None, f"an integer of {len(node.value)} characters (at most "
+                                       f"{MAX_INT_CHARS})", node.start_mark)
+            return int(super().construct_yaml_int(node))
+
+        def flatten_mapping(self, node: Any) -> None:
+            merges = any(k.tag == "tag:yaml.org,2002:merge" for k, _ in node.value)
+            super().flatten_mapping(node)
+            if merges:
+                self.merged += len(node.value)
+                if self.merged > MAX_NODES:
+                    raise ConstructorError(None, None, f"merge keys (<<) copy more than {MAX_NODES:,} "
+                                           "entries", node.start_mark)
+
+    Loader.add_constructor("tag:yaml.org,2002:int", Loader.construct_yaml_int)
+    return Loader
 
 
 def parse_yaml(text: str, where: str) -> Any:
@@ -163,11 +227,13 @@ def parse_yaml(text: str, where: str) -> Any:
     import yaml
 
     try:
-        doc = yaml.safe_load(text)
+        doc = yaml.load(text, Loader=_yaml_loader())
     except yaml.YAMLError as e:
         raise ConfigError(f"{where}: not valid YAML: {_one_line(e)}") from None
     except RecursionError:
         raise ConfigError(f"{where}: nested more than {MAX_NESTING} levels deep") from None
+    except (ValueError, OverflowError) as e:  # a date out of range (2024-13-01), a number beyond str()
+        raise ConfigError(f"{where}: not valid YAML: {_one_line(e)}") from None
     _check_shape(doc, where)
     return doc
 
@@ -179,17 +245,7 @@ def load_yaml(path: Path, what: str, max_bytes: int) -> Any:
 
 def load_json(path: Path, what: str, max_bytes: int) -> Any:
     """A JSON file (see the module docstring for the bounds)."""
-    text = read_text(path, what, max_bytes)
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as e:
-        raise ConfigError(f"{path}: not valid JSON: {_one_line(e)}") from None
-    except RecursionError:
-        raise ConfigError(f"{path}: nested more than {MAX_NESTING} levels deep") from None
-    except ValueError as e:  # an integer beyond Python's str() limit
-        raise ConfigError(f"{path}: not valid JSON: {_one_line(e)}") from None
-    _check_shape(doc, str(path))
-    return doc
+    return _load(path, what, max_bytes, json.loads, "valid JSON")
 
 
 def check_number(value: Any, where: str, lo: float = -math.inf, hi: float = math.inf) -> float:
@@ -203,7 +259,7 @@ def check_number(value: Any, where: str, lo: float = -math.inf, hi: float = math
     """
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise ConfigError(f"{where}: must be a number, got {brief(value)}")
-    if isinstance(value, int) and abs(value) >= 10**MAX_INT_DIGITS:
+    if isinstance(value, int) and abs(value) >= _INT_LIMIT:
         raise ConfigError(f"{where}: must be a number from {lo:g} to {hi:g}, got {brief(value)}")
     x = float(value)
     if not math.isfinite(x):

@@ -6,7 +6,15 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from ..fsutil import add_to_marker, atomic_write_text, check_may_write
+from ..errors import OutputError
+from ..fsutil import (
+    RUN_MARKER,
+    add_to_marker,
+    atomic_write_text,
+    check_may_write,
+    is_output_dir,
+    write_errors,
+)
 from ..pipeline.model import RobotCentredGrid
 from ..pipeline.stack import TickResult
 from ..types import Pose2D, Tick
@@ -19,29 +27,37 @@ __all__ = ["REPORT_FILE", "ReportSink", "build_report"]
 REPORT_FILE = "report.md"
 
 
-def build_report(run_dir: Path, *, name: str | None = None) -> list[Path]:
+def build_report(run_dir: Path, *, name: str | None = None, require_marker: bool = False) -> list[Path]:
     """Read ``run_dir`` (commands.csv, timing.csv, the TUM trajectories, summary.json and maps.npz when
     present) and write fig_model.png, fig_raw.png, fig_commands.png, fig_timing.png, fig_modes.png and
     report.md into it, replacing only files gndreplay wrote there (listed in its ``.gndreplay`` marker).
     Deterministic: the same files give the same bytes. ``name`` titles report.md (default: the directory's
-    name).
+    name). Each file is written beside its place and renamed there, so a failure leaves the earlier one.
+
+    Args:
+        require_marker: refuse a folder without the marker (``gndreplay report``: a folder gndreplay did
+            not write gets no figures added).
 
     Returns:
         The paths written (the figures of ``FIGURE_MAKERS``, then report.md).
 
     Raises:
         RunDirError: a required file is missing or malformed.
-        OutputError: a figure or report.md exists there and gndreplay did not write it (checked before
-            anything is drawn).
+        OutputError: a figure or report.md exists there and gndreplay did not write it, the marker is a
+            symbolic link or not a regular file, or (``require_marker``) there is no marker (all checked
+            before anything is drawn); the disk is full, the quota exceeded or the file system read-only.
     """
     run_dir = Path(run_dir)
+    if require_marker and not is_output_dir(run_dir):
+        raise OutputError(f"{run_dir}: not a gndreplay run folder (no {RUN_MARKER} marker); nothing written")
     data = load_run(run_dir)
     check_may_write(run_dir, [*FIGURE_MAKERS, REPORT_FILE])
-    written = build_figures(data, run_dir)
-    text = render_report(data, [p.name for p in written], name=name)
-    report = run_dir / REPORT_FILE
-    atomic_write_text(report, text)
-    add_to_marker(run_dir, [p.name for p in (*written, report)])  # a later --overwrite may replace them
+    with write_errors(run_dir):  # inside a staging directory, the staging names the output instead
+        written = build_figures(data, run_dir)
+        text = render_report(data, [p.name for p in written], name=name)
+        report = run_dir / REPORT_FILE
+        atomic_write_text(report, text)
+        add_to_marker(run_dir, [p.name for p in (*written, report)])  # a later --overwrite may replace them
     return [*written, report]
 
 

@@ -15,14 +15,22 @@ maps.npz keys (all numpy arrays; scalars are 0-d):
         grid_origin_xy (2,), grid_cell_m, grid_t_s (tick time [s]), grid_elapsed_s (from the first scan),
         grid_tick (tick index), grid_pose (3,) corrected robot pose, grid_goal_xy (2,), grid_path_xy (K, 2)
         planned path, grid_mode / grid_situation / grid_flags (str). Absent when the stack never ran.
+
+Reading it back (``load_maps``) checks the header of every member first: its type and number of
+dimensions, and that all of them together declare at most ``MAX_MAPS_BYTES``, so a damaged or hostile
+file is refused before anything is allocated from it.
 """
 
 from __future__ import annotations
 
 import math
+import os
+import zipfile
+import zlib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,6 +43,7 @@ from ..types import Pose2D, Tick
 
 __all__ = [
     "MAPS_FILE",
+    "MAX_MAPS_BYTES",
     "GridSnapshot",
     "HitRaster",
     "MapSink",
@@ -44,6 +53,9 @@ __all__ = [
 
 MAPS_FILE = "maps.npz"
 FORMAT_VERSION = 1
+MAX_MAPS_BYTES = 1 << 30
+"""Most bytes the arrays of a maps.npz may declare together, and the largest file read (1 GB: the two
+rasters of 5 cm cells over 1 km x 500 m)."""
 _U16_MAX = np.iinfo(np.uint16).max
 _KEY_OFF, _KEY_MUL = 2**20, 2**21
 
@@ -364,38 +376,175 @@ def _xy(a: NDArray[np.float64]) -> tuple[float, float]:
     return float(a[0]), float(a[1])
 
 
+#: member -> (accepted dtype kinds, shape with None for any length), as ``save_maps`` writes them.
+_MEMBERS: Mapping[str, tuple[str, tuple[int | None, ...]]] = {
+    "format_version": ("iu", ()),
+    "cell_m": ("f", ()),
+    "scans": ("iu", ()),
+    "corrected_hits": ("u", (None, None)),
+    "corrected_origin_xy": ("f", (2,)),
+    "raw_hits": ("u", (None, None)),
+    "raw_origin_xy": ("f", (2,)),
+    "grid_cells": ("u", (None, None)),
+    "grid_origin_xy": ("f", (2,)),
+    "grid_cell_m": ("f", ()),
+    "grid_t_s": ("f", ()),
+    "grid_elapsed_s": ("f", ()),
+    "grid_tick": ("iu", ()),
+    "grid_pose": ("f", (3,)),
+    "grid_goal_xy": ("f", (2,)),
+    "grid_path_xy": ("f", (None, 2)),
+    "grid_mode": ("U", ()),
+    "grid_situation": ("U", ()),
+    "grid_flags": ("U", ()),
+}
+_RASTER_MEMBERS = ("format_version", "cell_m", "scans", "corrected_hits", "corrected_origin_xy", "raw_hits",
+                   "raw_origin_xy")
+_GRID_MEMBERS = tuple(name for name in _MEMBERS if name.startswith("grid_"))
+_KIND_WORDS = {"iu": "integers", "u": "unsigned integers", "f": "floats", "U": "text"}
+#: What reading a damaged archive or .npy member raises (zipfile, zlib, numpy's header parser).
+_MALFORMED: tuple[type[Exception], ...] = (
+    zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError, TypeError, OverflowError,
+    NotImplementedError, RuntimeError,
+)
+
+
+def _why(err: BaseException) -> str:
+    text = " ".join(str(err).split())[:200]
+    return f"{type(err).__name__}: {text}" if text else type(err).__name__
+
+
+def _npy_header(f: IO[bytes]) -> tuple[tuple[int, ...], np.dtype[Any]]:
+    """(shape, dtype) declared by the header of a .npy stream, without reading its data."""
+    version = np.lib.format.read_magic(f)
+    if version == (1, 0):
+        shape, _, dtype = np.lib.format.read_array_header_1_0(f)
+    elif version == (2, 0):
+        shape, _, dtype = np.lib.format.read_array_header_2_0(f)
+    else:
+        raise ValueError(f".npy format version {version[0]}.{version[1]} is not one numpy writes for maps")
+    return shape, dtype
+
+
+def _check_member(name: str, shape: tuple[int, ...], dtype: np.dtype[Any]) -> int:
+    """The bytes member ``name`` declares, if its dtype and shape are the ones ``save_maps`` writes.
+
+    Raises:
+        ValueError: another type or shape (named).
+    """
+    kinds, want = _MEMBERS[name]
+    if dtype.kind not in kinds or len(shape) != len(want) or any(
+        n < 0 or (w is not None and n != w) for n, w in zip(shape, want, strict=True)
+    ):
+        dims = ", ".join("N" if w is None else str(w) for w in want)
+        expected = f"shape ({dims}{',' if len(want) == 1 else ''})" if want else "a scalar"
+        raise ValueError(f"member {name!r}: a {dtype} array of shape {shape}, expected {expected} of "
+                         f"{_KIND_WORDS[kinds]}")
+    return math.prod(shape) * dtype.itemsize
+
+
+def _check_archive(path: Path) -> set[str]:
+    """The known members of maps.npz at ``path`` after checking every header and the declared total.
+
+    Raises:
+        ValueError: a file larger than MAX_MAPS_BYTES, not a zip of .npy members, a member of the wrong
+            type or shape, more than MAX_MAPS_BYTES declared, or a required member missing (each named).
+    """
+    try:
+        size = os.stat(path).st_size
+    except OSError as err:
+        raise ValueError(f"cannot read it: {_why(err)}") from err
+    if size > MAX_MAPS_BYTES:
+        raise ValueError(f"{size} bytes, more than the {MAX_MAPS_BYTES >> 20} MB maps may have")
+    try:
+        zf = zipfile.ZipFile(path)
+    except _MALFORMED as err:
+        raise ValueError(f"not a maps archive (a zip of .npy arrays): {_why(err)}") from err
+    declared, present = 0, set()
+    with zf:
+        for info in zf.infolist():
+            name = info.filename.removesuffix(".npy")
+            if name not in _MEMBERS:
+                continue
+            try:
+                with zf.open(info) as f:
+                    shape, dtype = _npy_header(f)
+            except _MALFORMED as err:
+                raise ValueError(f"member {name!r}: {_why(err)}") from err
+            declared += _check_member(name, shape, dtype)
+            if declared > MAX_MAPS_BYTES:
+                raise ValueError(f"member {name!r}: a {dtype} array of shape {shape} brings the arrays past "
+                                 f"the {MAX_MAPS_BYTES >> 20} MB maps may declare")
+            present.add(name)
+    required = _RASTER_MEMBERS + (_GRID_MEMBERS if "grid_cells" in present else ())
+    missing = [m for m in required if m not in present]
+    if missing:
+        raise ValueError(f"member {missing[0]!r} missing")
+    return present
+
+
+def _cell(z: Any, name: str) -> float:
+    """A cell side [m]: finite and positive (the figures' extents are drawn from it)."""
+    x = float(_member(z, name))
+    if not (math.isfinite(x) and x > 0.0):
+        raise ValueError(f"member {name!r}: a cell side must be finite and > 0, got {x!r}")
+    return x
+
+
+def _origin(z: Any, name: str) -> tuple[float, float]:
+    """A raster origin [m]: two finite numbers."""
+    xy = _xy(_member(z, name))
+    if not all(map(math.isfinite, xy)):
+        raise ValueError(f"member {name!r}: an origin must be finite, got {xy!r}")
+    return xy
+
+
+def _member(z: Any, name: str) -> Any:
+    """Member ``name`` of the open archive; ValueError naming it when its data is damaged."""
+    try:
+        return z[name]
+    except _MALFORMED as err:
+        raise ValueError(f"member {name!r}: {_why(err)}") from err
+
+
 def load_maps(path: Path) -> MapsData:
     """Read ``maps.npz`` (see the module docstring).
 
     Raises:
-        ValueError: unknown format version or missing keys (the caller names the file).
+        ValueError: not a maps archive, unknown format version, a member missing, of the wrong type or shape,
+            too large or damaged; one line naming the member (the caller names the file).
     """
-    with np.load(path, allow_pickle=False) as z:
-        version = int(z["format_version"])
+    present = _check_archive(path)
+    try:
+        z = np.load(path, allow_pickle=False)
+    except _MALFORMED as err:
+        raise ValueError(f"not a maps archive (a zip of .npy arrays): {_why(err)}") from err
+    with z:
+        version = int(_member(z, "format_version"))
         if version != FORMAT_VERSION:
             raise ValueError(f"maps format_version {version} is not supported (expected {FORMAT_VERSION})")
         snap = None
-        if "grid_cells" in z.files:
+        if "grid_cells" in present:
             snap = GridSnapshot(
-                cells=z["grid_cells"],
-                origin_xy=_xy(z["grid_origin_xy"]),
-                cell_m=float(z["grid_cell_m"]),
-                t_s=float(z["grid_t_s"]),
-                elapsed_s=float(z["grid_elapsed_s"]),
-                tick=int(z["grid_tick"]),
-                pose=z["grid_pose"],
-                goal_xy=z["grid_goal_xy"],
-                path_xy=z["grid_path_xy"].reshape(-1, 2),
-                mode=str(z["grid_mode"]),
-                situation=str(z["grid_situation"]),
-                flags=str(z["grid_flags"]),
+                cells=_member(z, "grid_cells"),
+                origin_xy=_origin(z, "grid_origin_xy"),
+                cell_m=_cell(z, "grid_cell_m"),
+                t_s=float(_member(z, "grid_t_s")),
+                elapsed_s=float(_member(z, "grid_elapsed_s")),
+                tick=int(_member(z, "grid_tick")),
+                pose=_member(z, "grid_pose"),
+                goal_xy=_member(z, "grid_goal_xy"),
+                path_xy=_member(z, "grid_path_xy").reshape(-1, 2),
+                mode=str(_member(z, "grid_mode")),
+                situation=str(_member(z, "grid_situation")),
+                flags=str(_member(z, "grid_flags")),
             )
         return MapsData(
-            cell_m=float(z["cell_m"]),
-            scans=int(z["scans"]),
-            corrected_hits=z["corrected_hits"],
-            corrected_origin_xy=_xy(z["corrected_origin_xy"]),
-            raw_hits=z["raw_hits"],
-            raw_origin_xy=_xy(z["raw_origin_xy"]),
+            cell_m=_cell(z, "cell_m"),
+            scans=int(_member(z, "scans")),
+            corrected_hits=_member(z, "corrected_hits"),
+            corrected_origin_xy=_origin(z, "corrected_origin_xy"),
+            raw_hits=_member(z, "raw_hits"),
+            raw_origin_xy=_origin(z, "raw_origin_xy"),
             snapshot=snap,
         )

@@ -1,11 +1,16 @@
 """Read a run directory back (commands.csv, timing.csv, the TUM trajectories, summary.json, maps.npz).
 
-Only the files are used: ``gndreplay report RUN_DIR`` redraws everything without the log.
+Only the files are used: ``gndreplay report RUN_DIR`` redraws everything without the log. The folder may
+have been damaged since the run wrote it: each file is read through :mod:`gndreplay.io.userfile` (a regular
+file of bounded size, UTF-8, JSON nesting bounded) and maps.npz's members are checked before they are
+loaded (:func:`~gndreplay.report.maps.load_maps`); anything malformed is a one-line RunDirError naming the
+file and the line, key or member.
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -15,8 +20,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import GndReplayError
+from ..errors import ConfigError, GndReplayError
+from ..evaluation import MAX_TUM_BYTES
 from ..evaluation import read_tum as read_tum_ns
+from ..io.userfile import load_json, read_text
 from .maps import MAPS_FILE, MapsData, load_maps
 
 __all__ = ["Commands", "RunData", "RunDirError", "Timing", "check_summary", "load_run", "read_commands",
@@ -24,6 +31,10 @@ __all__ = ["Commands", "RunData", "RunDirError", "Timing", "check_summary", "loa
 
 F64 = NDArray[np.float64]
 TIMING_MODULES = ("match", "model", "planner", "reactor")
+MAX_TABLE_BYTES = MAX_TUM_BYTES
+"""Largest commands.csv / timing.csv read back (256 MB: millions of ticks, days of a long run)."""
+MAX_SUMMARY_BYTES = 16 << 20
+"""Largest summary.json read back (16 MB; a run writes a few KB)."""
 
 
 class RunDirError(GndReplayError):
@@ -96,6 +107,15 @@ def _need(path: Path) -> Path:
     return path
 
 
+def _rows(path: Path) -> list[list[str]]:
+    """The rows of a CSV file of the run (bounded: see ``MAX_TABLE_BYTES``)."""
+    try:
+        text = read_text(_need(path), "run table", MAX_TABLE_BYTES)
+    except ConfigError as err:
+        raise RunDirError(str(err)) from None
+    return list(csv.reader(io.StringIO(text, newline="")))
+
+
 #: commands.csv's header before the assisted-navigation audit (still read: desired = active = "gnd").
 _COMMAND_HEADER_V1 = ["t", "v", "vy", "w", "mode", "situation", "flags"]
 
@@ -109,8 +129,7 @@ def read_commands(path: Path) -> Commands:
     """
     from ..replay import COMMAND_COLUMNS
 
-    with open(_need(path), newline="") as f:
-        rows = list(csv.reader(f))
+    rows = _rows(path)
     expected = list(COMMAND_COLUMNS)
     if not rows or rows[0] not in (expected, _COMMAND_HEADER_V1):
         raise RunDirError(f"{path}: expected header {','.join(expected)}")
@@ -157,8 +176,7 @@ def read_timing(path: Path) -> Timing:
     Raises:
         RunDirError: missing file, missing column or a malformed row (named by line).
     """
-    with open(_need(path), newline="") as f:
-        rows = list(csv.reader(f))
+    rows = _rows(path)
     header = rows[0] if rows else []
     if not header or header[0] != "t":
         raise RunDirError(f"{path}: expected a header starting with t")
@@ -278,14 +296,14 @@ def load_run(run_dir: Path) -> RunData:
         raise RunDirError(f"{run_dir}: not a directory")
     summary_path = _need(run_dir / "summary.json")
     try:
-        summary = check_summary(summary_path, json.loads(summary_path.read_text(encoding="utf-8")))
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise RunDirError(f"{summary_path}: not valid JSON: {err}") from err
+        summary = check_summary(summary_path, load_json(summary_path, "summary", MAX_SUMMARY_BYTES))
+    except ConfigError as err:
+        raise RunDirError(str(err)) from None
     maps = None
     if (run_dir / MAPS_FILE).is_file():
         try:
             maps = load_maps(run_dir / MAPS_FILE)
-        except (ValueError, KeyError, OSError) as err:
+        except ValueError as err:
             raise RunDirError(f"{run_dir / MAPS_FILE}: {err}") from err
     return RunData(
         run_dir=run_dir,

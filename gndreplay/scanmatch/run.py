@@ -186,11 +186,11 @@ def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence
             of NaN would hide a wrong relations file or a wrong ``tol_s``).
         OutputError: ``out_dir`` is unsafe to write.
     """
+    out = None if out_dir is None else Path(out_dir)
     target = None
-    if out_dir is not None:
-        check_output_dir(Path(out_dir), inputs=[Path(p) for p in inputs if Path(p).exists()],
-                         overwrite=overwrite)
-        target = resolve_output_dir(Path(out_dir), overwrite=overwrite)
+    if out is not None:
+        check_output_dir(out, inputs=[Path(p) for p in inputs if Path(p).exists()], overwrite=overwrite)
+        target = resolve_output_dir(out, overwrite=overwrite)
     rows: list[MatcherReport] = []
     trajs: list[CorrectedTrajectory] = []
     for method in methods:
@@ -201,10 +201,11 @@ def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence
                                  f"stamps of the log within {tol_s:g} s")
         rows.append(row)
         trajs.append(traj)
-    if target is None:
+    if out is None or target is None:
         return rows
-    with staging_dir(target, overwrite=overwrite) as tmp:
+    stage = staging_dir(target, overwrite=overwrite, base=out)
+    with stage as tmp:
         for method, traj in zip(methods, trajs, strict=True):
             write_tum(tmp / f"{method}.tum", traj.t_ns, traj.poses)
-    return [dataclasses.replace(row, tum_path=str(target / f"{method}.tum"))
+    return [dataclasses.replace(row, tum_path=str(stage.out / f"{method}.tum"))
             for method, row in zip(methods, rows, strict=True)]

@@ -34,6 +34,7 @@ config, seed).
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
 import time
@@ -49,6 +50,7 @@ from .. import detmath as dm
 from ..config import Config, apply_overrides
 from ..errors import ConfigError
 from ..geometry import compose, relative
+from ..io.userfile import brief, check_number, did_you_mean
 from ..pipeline.stack import TickResult
 from ..replay import recorded_flags
 from ..types import Command, Flag, Pose2D, Scan, Subgoal, Tick
@@ -60,8 +62,8 @@ from .geometry import (
     footprint_vertices,
     max_point_speed,
 )
-from .scenario import DEFAULT_T0_NS, OdometryNoise
-from .scenario_file import DEFAULT_YIELD_M, ScenarioSpec
+from .scenario import DEFAULT_T0_NS, OdometryNoise, check_seed
+from .scenario_file import DEFAULT_YIELD_M, MAX_TIME_S, MIN_TIME_LIMIT_S, ScenarioSpec
 from .teleop import TeleopDriver
 from .world import LaserModel, add_laser_noise
 
@@ -72,6 +74,8 @@ __all__ = [
 
 F64 = NDArray[np.float64]
 NS = 1_000_000_000
+#: Longest command latency [s] (``runner.parse_latency`` takes less than 10 s).
+MAX_LATENCY_S = 10.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -186,7 +190,8 @@ def navigation_choices(mode: str | None, local: str | None) -> tuple[str | None,
 
     for option, value, choices in (("--mode", mode, NAV_MODES), ("--local", local, LOCAL_STRATEGIES)):
         if value is not None and value.lower() not in choices:
-            raise ConfigError(f"{option}: expected one of {', '.join(choices)}, got {value!r}")
+            raise ConfigError(f"{option}: expected one of {', '.join(choices)}, got {brief(value)}"
+                              f"{did_you_mean(value, choices)}")
     return (None if mode is None else mode.lower()), (None if local is None else local.lower())
 
 
@@ -263,10 +268,9 @@ class _World:
         self.door_delay = np.zeros(self.n)  # how long each door leaf's mover has waited so far [s]
 
     def next_break(self, t_ns: int) -> int | None:
-        for b in self.breaks_ns:
-            if b > t_ns:
-                return b
-        return None
+        """The first break time after ``t_ns`` (a bisection: a scenario may have thousands of events)."""
+        k = bisect.bisect_right(self.breaks_ns, t_ns)
+        return self.breaks_ns[k] if k < len(self.breaks_ns) else None
 
     def _static(self, t_s: float) -> Shapes:
         key = (tuple(e.present(t_s) for e in self.elements),
@@ -324,12 +328,22 @@ class ClosedLoop:
             measured time of that tick (then the run is not deterministic).
         perfect_odometry: odometry = ground truth.
         time_limit_s: overrides the scenario's time limit.
+
+    Raises:
+        ConfigError: a seed out of ``check_seed``'s range, a latency above MAX_LATENCY_S or a time limit
+            outside MIN_TIME_LIMIT_S..MAX_TIME_S (beyond them the clock's nanoseconds overflow, below it
+            the run has no step to take), in one line.
     """
 
     def __init__(self, spec: ScenarioSpec, cfg: Config, *, seed: int, latency_s: float | None = 0.0,
                  perfect_odometry: bool = False, time_limit_s: float | None = None,
                  params: SimParams = SimParams()) -> None:
         cfg = navigation_config(spec, cfg)
+        check_seed(seed)
+        if latency_s is not None:
+            check_number(latency_s, "latency [s]", 0.0, MAX_LATENCY_S)
+        if time_limit_s is not None:
+            check_number(time_limit_s, "time limit [s]", MIN_TIME_LIMIT_S, MAX_TIME_S)
         self.spec, self.cfg, self.seed, self.params = spec, cfg, seed, params
         self.nav_mode = cfg.navigation.mode
         self.latency_s, self.perfect_odometry = latency_s, perfect_odometry

@@ -26,6 +26,7 @@ import numpy as np
 from .. import detmath as dm
 from ..config import Config, apply_overrides, load_config, preset
 from ..errors import ConfigError
+from ..io.userfile import brief
 from .closedloop import ClosedLoop, SimParams
 from .geometry import footprint_vertices
 from .geometry import warm_up as warm_up_geometry
@@ -191,9 +192,9 @@ def parse_latency(text: str) -> float | None:
     try:
         value = float(text)
     except ValueError:
-        raise ConfigError(f"--latency must be seconds or 'measured', got {text!r}") from None
+        raise ConfigError(f"--latency must be seconds or 'measured', got {brief(text)}") from None
     if not (math.isfinite(value) and 0.0 <= value < 10.0):
-        raise ConfigError(f"--latency must be in [0, 10) s, got {text!r}")
+        raise ConfigError(f"--latency must be in [0, 10) s, got {brief(text)}")
     return value
 
 

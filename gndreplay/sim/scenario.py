@@ -42,6 +42,7 @@ from .world import (
 
 __all__ = [
     "DEFAULT_T0_NS",
+    "MAX_SEED",
     "RECORD_STEP",
     "SCENARIOS",
     "DriveParams",
@@ -51,6 +52,7 @@ __all__ = [
     "Trajectory",
     "carmen_params",
     "check_log_output",
+    "check_seed",
     "corrupt_odometry",
     "follow_route",
     "is_own_carmen",
@@ -70,6 +72,21 @@ DEFAULT_T0_NS = 1_700_000_000 * NS_PER_S
 CARMEN_SUFFIXES = (".clf", ".log", ".carmen")
 #: Records carry poses [m, rad] and velocities rounded to this step, like a logger printing 6 decimals.
 RECORD_STEP = 1e-6
+#: Largest seed: numpy's SeedSequence takes any integer >= 0; one within int64 prints and stores everywhere.
+MAX_SEED = 2**63 - 1
+
+
+def check_seed(seed: int, where: str = "seed") -> int:
+    """``seed`` when it is an integer from 0 to MAX_SEED; ``where`` names it in the error.
+
+    Raises:
+        ConfigError: a bool, a non-integer, a negative or a larger seed (one line).
+    """
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or not 0 <= seed <= MAX_SEED:
+        from ..io.userfile import brief
+
+        raise ConfigError(f"{where}: must be an integer from 0 to 2**63 - 1, got {brief(seed)}")
+    return int(seed)
 
 
 # --------------------------------------------------------------------------------------------- motion
@@ -453,7 +470,9 @@ class SimulatedRun:
 
 
 def run_scenario(scenario: Scenario, *, seed: int) -> SimulatedRun:
-    """Motion and odometry of ``scenario``; ``seed`` fixes the odometry errors and the laser noise."""
+    """Motion and odometry of ``scenario``; ``seed`` (0 to MAX_SEED) fixes the odometry errors and the laser
+    noise."""
+    check_seed(seed)
     traj = follow_route(scenario.route, scenario.start, scenario.drive)
     odom_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[0])
     odom = corrupt_odometry(traj.poses, scenario.drive.dt_s, scenario.odometry_noise, rng=odom_rng)
@@ -574,12 +593,15 @@ def simulate(scenario: str, *, seed: int, out: Path, t0_ns: int = DEFAULT_T0_NS,
         ``out``.
 
     Raises:
-        ConfigError: unknown scenario, or ``out`` not named like a CARMEN log (``.clf``/``.log``/``.carmen``,
-            optionally ``.gz``/``.bz2``).
+        ConfigError: unknown scenario, a seed out of range (:func:`check_seed`), or ``out`` not named like a
+            CARMEN log (``.clf``/``.log``/``.carmen``, optionally ``.gz``/``.bz2``).
         OutputError: ``out`` is a folder, exists (without ``overwrite``) or is not gndreplay's.
     """
     if scenario not in SCENARIOS:
-        raise ConfigError(f"unknown scenario {scenario!r}; expected one of {sorted(SCENARIOS)}")
+        from ..io.userfile import brief
+
+        raise ConfigError(f"unknown scenario {brief(scenario)}; expected one of {sorted(SCENARIOS)}")
+    check_seed(seed)
     out = Path(out)
     suffixes = [x.lower() for x in out.suffixes[-2:]]
     inner = suffixes[-2] if len(suffixes) == 2 and suffixes[-1] in (".gz", ".bz2") else (suffixes or [""])[-1]

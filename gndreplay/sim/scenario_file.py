@@ -37,6 +37,12 @@ the robot (``DEFAULT_YIELD_M``). A mover stands at its first waypoint until ``st
 path at ``speed`` (back to the start and again if ``loop``), and stays at its last waypoint. ``name`` is a
 plain name (letters, digits, ``_ . -``, not starting with ``.`` or ``-``): it names the run directory.
 
+A scenario file is read like every user file (:mod:`gndreplay.io.userfile`): a regular file of at most
+``MAX_SCENARIO_BYTES``, its YAML bounded in nesting and in what aliases expand to. Every number goes through
+``userfile.check_number`` with its physical range (``MAX_TIME_S``, ``MAX_SIZE_M``, ...), every list holds
+at most ``MAX_ELEMENTS`` / ``MAX_MOVERS`` / ``MAX_EVENTS`` / ``MAX_POINTS`` / ``MAX_TELEOP_ROWS`` items, and
+a value quoted in an error is cut short (``userfile.brief``).
+
 Navigation mode (issue 14): ``mode`` (when given) overrides the configuration's ``navigation.mode`` and
 ``local`` its ``navigation.local.strategy``. Poses (start, goal, subgoals, track) are in the scenario's
 world frame; the simulated odometry starts at ``start`` with that frame, so they are the robot's odometry
@@ -53,7 +59,7 @@ import re
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 import numpy as np
 from numpy.typing import NDArray
@@ -61,17 +67,29 @@ from numpy.typing import NDArray
 from .. import detmath as dm
 from ..errors import FOLLOW_NEEDS_SUBGOALS, ConfigError
 from ..io.subgoals import MAX_ABS_SUBGOAL_M, MAX_ABS_THETA_RAD
+from ..io.userfile import brief, check_number, did_you_mean, load_yaml, parse_yaml
 from ..pipeline.local import LOCAL_STRATEGIES
 from ..pipeline.stack import NAV_MODES
-from ..types import Subgoal
+from ..types import Subgoal, SubgoalKind
 from .geometry import box_vertices, wall_vertices
 from .teleop import DEFAULT_LOOKAHEAD_M, TeleopSpec
 
 __all__ = [
     "DEFAULT_WALL_THICKNESS_M",
+    "MAX_ELEMENTS",
+    "MAX_EVENTS",
+    "MAX_ID_CHARS",
+    "MAX_MOVERS",
+    "MAX_POINTS",
+    "MAX_SCENARIO_BYTES",
     "MAX_SCRIPT_TIME_S",
+    "MAX_SIZE_M",
+    "MAX_SWING_DEG",
+    "MAX_TELEOP_ROWS",
     "MAX_TELEOP_SPEED",
+    "MAX_TIME_S",
     "MAX_TRACK_LENGTH_M",
+    "MIN_TIME_LIMIT_S",
     "MIN_TRACK_SEGMENT_M",
     "DoorAction",
     "Element",
@@ -86,19 +104,46 @@ __all__ = [
 
 F64 = NDArray[np.float64]
 DEFAULT_WALL_THICKNESS_M = 0.1
-#: Bounds of the navigation keys (a value beyond them is a typo, and 1e300 would overflow the arithmetic):
-#: |speed| of teleop commands and the track driver [m/s, rad/s]; track look-ahead / tolerance [m]; times of
-#: a command script [s]; positions (start, goal, track points) as subgoals' [m]; headings [rad].
+#: Bounds of a scenario's numbers (a value beyond them is a typo, and 1e300 would overflow the arithmetic):
+#: positions (start, goal, geometry, waypoints, track points) as subgoals' [m], headings [rad], sizes
+#: (radius, length, width, thickness, yield distance) [m], times (time limit, events, start_at, command
+#: script) [s], |speed| of movers, teleop commands and the track driver [m/s, rad/s], track look-ahead /
+#: tolerance [m], a door's swing [deg].
+MAX_TIME_S = 1e6
+MAX_SCRIPT_TIME_S = MAX_TIME_S
+#: Shortest time limit [s]: a run shorter than the control period would have no step to take.
+MIN_TIME_LIMIT_S = 0.1
+MAX_SIZE_M = MAX_ABS_SUBGOAL_M
 MAX_TELEOP_SPEED = 100.0
 MAX_TRACK_LENGTH_M = 100.0
-MAX_SCRIPT_TIME_S = 1e6
+MAX_SWING_DEG = 360.0
+#: Largest scenario file read, and most items of each list (a world beyond them is a mistake, and would
+#: take gigabytes): elements (walls, boxes, circles, polygons, with those events add), movers, events,
+#: points of one list (polygon vertices, a mover's waypoints, track points, subgoals), teleop script rows;
+#: characters of an element's or a mover's id.
+MAX_SCENARIO_BYTES = 1 << 20
+MAX_ELEMENTS = 10_000
+MAX_MOVERS = 1_000
+MAX_EVENTS = 10_000
+MAX_POINTS = 10_000
+MAX_TELEOP_ROWS = 100_000
+MAX_ID_CHARS = 100
 #: Shortest segment of a teleop track [m] (a shorter one has no usable direction).
 MIN_TRACK_SEGMENT_M = 1e-3
-_POSE_LIMITS = (MAX_ABS_SUBGOAL_M, MAX_ABS_SUBGOAL_M, MAX_ABS_THETA_RAD)
-_COMMAND_LIMITS = (MAX_SCRIPT_TIME_S, MAX_TELEOP_SPEED, MAX_TELEOP_SPEED)
 DEFAULT_YIELD_M = 0.3
 _KINDS = ("walls", "boxes", "circles", "polygons")
-_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
+_PRESETS = ("wheelchair", "xr4000")
+_NAME = re.compile(rf"[A-Za-z0-9][A-Za-z0-9_.-]{{0,{MAX_ID_CHARS - 1}}}")
+_Bounds = tuple[float, float]
+_POS: _Bounds = (-MAX_ABS_SUBGOAL_M, MAX_ABS_SUBGOAL_M)
+_HEADING: _Bounds = (-MAX_ABS_THETA_RAD, MAX_ABS_THETA_RAD)
+_SIZE: _Bounds = (0.0, MAX_SIZE_M)
+_TIME: _Bounds = (0.0, MAX_TIME_S)
+_TIME_LIMIT: _Bounds = (MIN_TIME_LIMIT_S, MAX_TIME_S)
+_SPEED: _Bounds = (0.0, MAX_TELEOP_SPEED)
+_VELOCITY: _Bounds = (-MAX_TELEOP_SPEED, MAX_TELEOP_SPEED)
+_TRACK: _Bounds = (0.0, MAX_TRACK_LENGTH_M)
+_SWING: _Bounds = (-MAX_SWING_DEG, MAX_SWING_DEG)
 
 
 @dataclass(frozen=True, slots=True)
@@ -262,101 +307,134 @@ class _Err:
         return ConfigError(f"{self.source}: {key}: {message}")
 
 
-def _num(v: Any, key: str, err: _Err, *, positive: bool = False, nonneg: bool = False,
-         limit: float | None = None) -> float:
-    """A finite number (> 0 / >= 0 when asked; |x| <= ``limit`` when given)."""
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(float(v)):
-        raise err(key, f"expected a number, got {v!r}")
-    x = float(v)
-    if limit is not None and abs(x) > limit:
-        raise err(key, f"|value| must be <= {limit:g}, got {v!r}")
+def _label(k: Any) -> str:
+    """A mapping key as a part of a key path: itself when a short plain string, else quoted and cut."""
+    return k if isinstance(k, str) and len(k) <= MAX_ID_CHARS and k.isprintable() else brief(k)
+
+
+def _ident(raw: Any, key: str, err: _Err) -> str:
+    """An element's or a mover's id as text: a scalar of at most MAX_ID_CHARS characters (it names the
+    object in errors and in result.json)."""
+    if isinstance(raw, list | dict | set | tuple):
+        raise err(key, f"expected a name, got {brief(raw)}")
+    if isinstance(raw, int) and raw.bit_length() > 4 * MAX_ID_CHARS:  # ~120 digits; str() fails from 4,300
+        raise err(key, f"a name of more than {MAX_ID_CHARS} characters, got {brief(raw)}")
+    name = str(raw)
+    if len(name) > MAX_ID_CHARS:
+        raise err(key, f"a name of {len(name):,} characters (at most {MAX_ID_CHARS}), got {brief(name)}")
+    return name
+
+
+def _num(v: Any, key: str, err: _Err, bounds: _Bounds, *, positive: bool = False) -> float:
+    """The one check of a scenario's numbers: ``v`` within ``bounds`` (and > 0 when ``positive``) through
+    :func:`~gndreplay.io.userfile.check_number` (no bool, string, huge integer or non-finite value)."""
+    x = check_number(v, f"{err.source}: {key}", *bounds)
     if positive and x <= 0.0:
-        raise err(key, f"must be > 0, got {v!r}")
-    if nonneg and x < 0.0:
-        raise err(key, f"must be >= 0, got {v!r}")
+        raise err(key, f"must be > 0, got {x:g}")
     return x
 
 
-def _nums(v: Any, key: str, err: _Err, sizes: tuple[int, ...],
-          limits: tuple[float, ...] | None = None) -> list[float]:
-    """A list of ``sizes`` finite numbers; ``limits``: |bound| of each (the last repeats)."""
+def _nums(v: Any, key: str, err: _Err, sizes: tuple[int, ...], bounds: tuple[_Bounds, ...]) -> list[float]:
+    """A list of ``sizes`` numbers, item i within ``bounds[i]`` (the last repeats); an error names the
+    item (``key[i]``)."""
     if not isinstance(v, list) or len(v) not in sizes:
         want = " or ".join(str(n) for n in sizes)
-        raise err(key, f"expected a list of {want} numbers, got {v!r}")
-    lim = (None,) * len(v) if limits is None else limits + (limits[-1],) * (len(v) - len(limits))
-    return [_num(x, key, err, limit=b) for x, b in zip(v, lim, strict=False)]
+        raise err(key, f"expected a list of {want} numbers, got {brief(v)}")
+    return [_num(x, f"{key}[{i}]", err, bounds[min(i, len(bounds) - 1)]) for i, x in enumerate(v)]
+
+
+def _list(v: Any, key: str, err: _Err, what: str, least: int, most: int) -> list[Any]:
+    """``v`` as a list of ``least`` to ``most`` ``what`` (the bound keeps a document's size in check)."""
+    if not isinstance(v, list) or len(v) < least:
+        at_least = f">= {least} " if least > 1 else ""
+        raise err(key, f"expected a list of {at_least}{what}, got {brief(v)}")
+    if len(v) > most:
+        raise err(key, f"{len(v):,} {what}, more than the {most:,} a scenario may have")
+    return v
+
+
+def _choice(v: Any, key: str, err: _Err, choices: tuple[str, ...]) -> str:
+    """``v`` when it is one of ``choices``, else an error listing them (and the closest)."""
+    if v not in choices:
+        raise err(key, f"expected one of {', '.join(choices)}, got {brief(v)}{did_you_mean(v, choices)}")
+    return str(v)
 
 
 def _table(v: Any, key: str, err: _Err, allowed: tuple[str, ...],
            required: tuple[str, ...] = ()) -> dict[str, Any]:
     if not isinstance(v, dict):
-        raise err(key, f"expected a mapping, got {v!r}")
+        raise err(key, f"expected a mapping, got {brief(v)}")
     for k in v:
         if k not in allowed:
-            raise err(f"{key}.{k}" if key else str(k), f"unknown key (known: {', '.join(allowed)})")
+            where = f"{key}.{_label(k)}" if key else _label(k)
+            raise err(where, f"unknown key (known: {', '.join(allowed)})")
     for k in required:
         if k not in v:
             raise err(f"{key}.{k}" if key else k, "missing")
     return v
 
 
-def _elements(world: Any, key: str, err: _Err, appear_s: float | None) -> list[Element]:
-    out: list[Element] = []
+def _elements(world: Any, key: str, err: _Err, appear_s: float | None, room: int) -> list[Element]:
+    """The elements of a ``world`` mapping (or an event's ``add``); at most ``room`` of them."""
+    table = _table(world, key, err, _KINDS)
+    groups: list[tuple[str, dict[Any, Any]]] = []
     for kind in _KINDS:
-        items = _table(world, key, err, _KINDS).get(kind) or {}
+        items = table.get(kind) or {}
         if not isinstance(items, dict):
-            raise err(f"{key}.{kind}", f"expected a mapping of id: geometry, got {items!r}")
-        for name, geom in items.items():
+            raise err(f"{key}.{kind}", f"expected a mapping of id: geometry, got {brief(items)}")
+        groups.append((kind, items))
+    if sum(len(items) for _, items in groups) > room:
+        raise err(key, f"more than the {MAX_ELEMENTS:,} elements (walls, boxes, circles, polygons) a "
+                       "scenario may have")
+    out: list[Element] = []
+    for kind, items in groups:
+        for raw, geom in items.items():
+            name = _ident(raw, f"{key}.{kind}", err)
             k = f"{key}.{kind}.{name}"
             if kind == "walls":
-                g = _nums(geom, k, err, (4, 5))
+                g = _nums(geom, k, err, (4, 5), (_POS, _POS, _POS, _POS, _SIZE))
                 th = g[4] if len(g) == 5 else DEFAULT_WALL_THICKNESS_M
-                if th < 0.0:
-                    raise err(k, f"thickness must be >= 0, got {th}")
                 if math.hypot(g[2] - g[0], g[3] - g[1]) <= 0.0:
                     raise err(k, "the wall has zero length")
-                out.append(Element(str(name), "wall", wall_vertices(g[0], g[1], g[2], g[3], th),
+                out.append(Element(name, "wall", wall_vertices(g[0], g[1], g[2], g[3], th),
                                    segment=(g[0], g[1], g[2], g[3], th), appear_s=appear_s))
             elif kind == "boxes":
-                g = _nums(geom, k, err, (5,))
+                g = _nums(geom, k, err, (5,), (_POS, _POS, _SIZE, _SIZE, _HEADING))
                 if g[2] <= 0.0 or g[3] <= 0.0:
                     raise err(k, "length and width must be > 0")
-                out.append(Element(str(name), "box", box_vertices(*g), appear_s=appear_s))
+                out.append(Element(name, "box", box_vertices(*g), appear_s=appear_s))
             elif kind == "circles":
-                g = _nums(geom, k, err, (3,))
+                g = _nums(geom, k, err, (3,), (_POS, _POS, _SIZE))
                 if g[2] <= 0.0:
                     raise err(k, f"radius must be > 0, got {g[2]}")
-                out.append(Element(str(name), "circle", None, circle=(g[0], g[1], g[2]), appear_s=appear_s))
+                out.append(Element(name, "circle", None, circle=(g[0], g[1], g[2]), appear_s=appear_s))
             else:
-                if not isinstance(geom, list) or len(geom) < 3:
-                    raise err(k, f"expected a list of >= 3 [x, y] vertices, got {geom!r}")
-                v = np.array([_nums(p, k, err, (2,)) for p in geom], dtype=np.float64)
-                out.append(Element(str(name), "polygon", v, appear_s=appear_s))
+                rows = _list(geom, k, err, "[x, y] vertices", 3, MAX_POINTS)
+                v = np.array([_nums(q, f"{k}[{i}]", err, (2,), (_POS,)) for i, q in enumerate(rows)],
+                             dtype=np.float64)
+                out.append(Element(name, "polygon", v, appear_s=appear_s))
     return out
 
 
 def _movers(raw: Any, err: _Err) -> list[Mover]:
-    if not isinstance(raw, list):
-        raise err("movers", f"expected a list, got {raw!r}")
     allowed = ("id", "radius", "speed", "path", "loop", "start_at", "yield_m")
     out = []
-    for i, m in enumerate(raw):
+    for i, m in enumerate(_list(raw, "movers", err, "movers", 0, MAX_MOVERS)):
         key = f"movers[{i}]"
         _table(m, key, err, allowed, ("id", "radius", "speed", "path"))
-        path = m["path"]
-        if not isinstance(path, list) or len(path) < 1:
-            raise err(f"{key}.path", f"expected a list of [x, y] waypoints, got {path!r}")
+        path = _list(m["path"], f"{key}.path", err, "[x, y] waypoints", 1, MAX_POINTS)
         loop = m.get("loop", False)
         if not isinstance(loop, bool):
-            raise err(f"{key}.loop", f"expected true or false, got {loop!r}")
+            raise err(f"{key}.loop", f"expected true or false, got {brief(loop)}")
         out.append(Mover(
-            id=str(m["id"]),
-            radius_m=_num(m["radius"], f"{key}.radius", err, positive=True),
-            speed_mps=_num(m["speed"], f"{key}.speed", err, nonneg=True),
-            path=np.array([_nums(p, f"{key}.path", err, (2,)) for p in path], dtype=np.float64),
+            id=_ident(m["id"], f"{key}.id", err),
+            radius_m=_num(m["radius"], f"{key}.radius", err, _SIZE, positive=True),
+            speed_mps=_num(m["speed"], f"{key}.speed", err, _SPEED),
+            path=np.array([_nums(p, f"{key}.path[{j}]", err, (2,), (_POS,)) for j, p in enumerate(path)],
+                          dtype=np.float64),
             loop=loop,
-            start_at_s=_num(m.get("start_at", 0.0), f"{key}.start_at", err, nonneg=True),
-            yield_m=_num(m.get("yield_m", DEFAULT_YIELD_M), f"{key}.yield_m", err, nonneg=True),
+            start_at_s=_num(m.get("start_at", 0.0), f"{key}.start_at", err, _TIME),
+            yield_m=_num(m.get("yield_m", DEFAULT_YIELD_M), f"{key}.yield_m", err, _SIZE),
         ))
     return out
 
@@ -369,44 +447,39 @@ def parse_scenario(doc: Any, source: str) -> ScenarioSpec:
     d = _table(doc, "", err, top, ("name", "start", "time_limit", "world"))
     name = d["name"]
     if not isinstance(name, str) or not _NAME.fullmatch(name):
-        raise err("name", f"expected a plain name (letters, digits, _ . -, not starting with . or -), "
-                          f"got {name!r}")
+        raise err("name", f"expected a plain name (letters, digits, _ . -, not starting with . or -; at most "
+                          f"{MAX_ID_CHARS} characters), got {brief(name)}")
     description = d.get("description", "")
     if not isinstance(description, str):
-        raise err("description", f"expected a string, got {description!r}")
-    preset = d.get("preset", "wheelchair")
-    if preset not in ("wheelchair", "xr4000"):
-        raise err("preset", f"expected wheelchair or xr4000, got {preset!r}")
-    sx, sy, st = _nums(d["start"], "start", err, (3,), _POSE_LIMITS)
+        raise err("description", f"expected a string, got {brief(description)}")
+    preset = _choice(d.get("preset", "wheelchair"), "preset", err, _PRESETS)
+    sx, sy, st = _nums(d["start"], "start", err, (3,), (_POS, _POS, _HEADING))
     mode, local, subgoals, teleop = _navigation(d, err)
     if "goal" in d:
-        gx, gy = _nums(d["goal"], "goal", err, (2,), _POSE_LIMITS[:2])
+        gx, gy = _nums(d["goal"], "goal", err, (2,), (_POS,))
     elif subgoals:
         gx, gy = subgoals[-1].x, subgoals[-1].y
     elif teleop is not None and teleop.track is not None:
         gx, gy = float(teleop.track[-1, 0]), float(teleop.track[-1, 1])
     else:
         raise err("goal", "missing (only mode follow and a teleop track imply one)")
-    time_limit = _num(d["time_limit"], "time_limit", err, positive=True)
-    elements = _elements(d["world"], "world", err, None)
+    time_limit = _num(d["time_limit"], "time_limit", err, _TIME_LIMIT)
+    elements = _elements(d["world"], "world", err, None, MAX_ELEMENTS)
     by_id: dict[str, Element] = {}
     actions: dict[str, list[tuple[str, DoorAction, float | None]]] = {}
     removes: dict[str, float] = {}
 
     def register(e: Element, key: str) -> None:
         if e.id in by_id:
-            raise err(key, f"duplicate id {e.id!r}")
+            raise err(key, f"duplicate id {brief(e.id)}")
         by_id[e.id] = e
 
     for e in elements:
         register(e, f"world.{e.kind}s.{e.id}" if e.kind != "box" else f"world.boxes.{e.id}")
-    events = d.get("events") or []
-    if not isinstance(events, list):
-        raise err("events", f"expected a list, got {events!r}")
-    for i, ev in enumerate(events):
+    for i, ev in enumerate(_list(d.get("events") or [], "events", err, "events", 0, MAX_EVENTS)):
         key = f"events[{i}]"
         _table(ev, key, err, ("at", "add", "remove", "close", "open", "over", "swing"), ("at",))
-        at = _num(ev["at"], f"{key}.at", err, nonneg=True)
+        at = _num(ev["at"], f"{key}.at", err, _TIME)
         what = [k for k in ("add", "remove", "close", "open") if k in ev]
         if len(what) != 1:
             raise err(key, "expected exactly one of add, remove, close, open")
@@ -414,32 +487,33 @@ def parse_scenario(doc: Any, source: str) -> ScenarioSpec:
         if op != "close" and op != "open" and ("over" in ev or "swing" in ev):
             raise err(f"{key}.over", "only close / open events take over and swing")
         if op == "add":
-            for e in _elements(ev["add"], f"{key}.add", err, at):
+            for e in _elements(ev["add"], f"{key}.add", err, at, MAX_ELEMENTS - len(elements)):
                 register(e, f"{key}.add.{e.id}")
                 elements.append(e)
             continue
         target = ev[op]
         if not isinstance(target, str) or target not in by_id:
-            raise err(f"{key}.{op}", f"unknown element {target!r}")
+            raise err(f"{key}.{op}", f"unknown element {brief(target)}")
         if op == "remove":
             removes[target] = at
             continue
         if by_id[target].kind != "wall":
-            raise err(f"{key}.{op}", f"only walls can open or close; {target!r} is a {by_id[target].kind}")
-        over = _num(ev.get("over", 0.0), f"{key}.over", err, nonneg=True)
-        swing = math.radians(_num(ev["swing"], f"{key}.swing", err)) if "swing" in ev else None
+            raise err(f"{key}.{op}", f"only walls can open or close; {brief(target)} is a "
+                                     f"{by_id[target].kind}")
+        over = _num(ev.get("over", 0.0), f"{key}.over", err, _TIME)
+        swing = math.radians(_num(ev["swing"], f"{key}.swing", err, _SWING)) if "swing" in ev else None
         actions.setdefault(target, []).append((key, DoorAction(at, at + over, 1.0 if op == "close" else 0.0),
                                                swing))
     movers = _movers(d.get("movers") or [], err)
     for m in movers:
         if m.id in by_id:
-            raise err(f"movers.{m.id}", f"duplicate id {m.id!r}")
+            raise err(f"movers.{m.id}", f"duplicate id {brief(m.id)}")
     final: list[Element] = []
     for e in elements:
         acts = sorted(actions.get(e.id, []), key=lambda a: a[1].t0_s)
         swings = {s for _, _, s in acts if s is not None}
         if len(swings) > 1:
-            raise err(f"{acts[0][0]}.swing", f"door {e.id!r} has different swing angles")
+            raise err(f"{acts[0][0]}.swing", f"door {brief(e.id)} has different swing angles")
         final.append(Element(e.id, e.kind, e.vertices, e.circle, e.segment, e.appear_s, removes.get(e.id),
                              tuple(a for _, a, _ in acts), swings.pop() if swings else 0.0))
     return ScenarioSpec(name, description.strip(), preset, (sx, sy, st), (gx, gy), time_limit, tuple(final),
@@ -450,11 +524,11 @@ def _navigation(d: dict[str, Any], err: _Err) -> tuple[str | None, str | None, t
                                                        TeleopSpec | None]:
     """The keys of the multi-loop architecture: mode, local, subgoals, teleop (see the module docstring)."""
     mode = d.get("mode")
-    if mode is not None and mode not in NAV_MODES:
-        raise err("mode", f"expected one of {', '.join(NAV_MODES)}, got {mode!r}")
+    if mode is not None:
+        mode = _choice(mode, "mode", err, NAV_MODES)
     local = d.get("local")
-    if local is not None and local not in LOCAL_STRATEGIES:
-        raise err("local", f"expected one of {', '.join(LOCAL_STRATEGIES)}, got {local!r}")
+    if local is not None:
+        local = _choice(local, "local", err, LOCAL_STRATEGIES)
     subgoals: tuple[Subgoal, ...] = ()
     if "subgoals" in d:
         if mode != "follow":
@@ -485,9 +559,22 @@ def check_subgoals_used(spec: ScenarioSpec, option: str = "--subgoals") -> None:
 
 
 def _subgoals(raw: Any, err: _Err) -> tuple[Subgoal, ...]:
-    """``[[x, y, theta, kind], ...]`` -> subgoals (validated as the rows of a subgoal file)."""
+    """``[[x, y, theta, kind], ...]`` -> subgoals, validated as the rows of a subgoal file after the
+    scenario's own checks: the list's length, each number through :func:`_num` (a number written as text
+    is left to the row check, which reads it), the kind with the closest one."""
     from ..io.subgoals import subgoals_from_rows
 
+    kinds = get_args(SubgoalKind)
+    for i, row in enumerate(_list(raw, "subgoals", err, "[x, y, theta, kind] rows", 1, MAX_POINTS)):
+        key = f"subgoals[{i}]"
+        if not isinstance(row, list) or len(row) not in (3, 4):
+            raise err(key, f"expected a list [x, y, theta] or [x, y, theta, kind], got {brief(row)}")
+        for j, (v, bounds) in enumerate(zip(row, (_POS, _POS, _HEADING), strict=False)):
+            if not (isinstance(v, str) and len(v) <= MAX_ID_CHARS):  # the row check reads "1.5" as 1.5
+                _num(v, f"{key}[{j}]", err, bounds)
+        if len(row) == 4 and row[3] not in kinds:
+            raise err(key, f"kind must be one of {', '.join(kinds)}, got {brief(row[3])}"
+                           f"{did_you_mean(row[3], kinds)}")
     return subgoals_from_rows(raw, f"{err.source}: subgoals")
 
 
@@ -496,77 +583,75 @@ def _teleop(raw: Any, err: _Err) -> TeleopSpec:
     if len(t) != 1:
         raise err("teleop", "expected exactly one of commands, track")
     if "commands" in t:
-        rows = t["commands"]
-        if not isinstance(rows, list) or len(rows) < 2:
-            raise err("teleop.commands", f"expected a list of >= 2 [t_s, v, w] rows, got {rows!r}")
-        cmds = np.array([_nums(r, f"teleop.commands[{i}]", err, (3,), _COMMAND_LIMITS)
+        rows = _list(t["commands"], "teleop.commands", err, "[t_s, v, w] rows", 2, MAX_TELEOP_ROWS)
+        cmds = np.array([_nums(r, f"teleop.commands[{i}]", err, (3,), (_TIME, _VELOCITY))
                          for i, r in enumerate(rows)], dtype=np.float64)
-        if cmds[0, 0] < 0.0 or np.any(np.diff(cmds[:, 0]) <= 0.0):
+        if np.any(np.diff(cmds[:, 0]) <= 0.0):
             raise err("teleop.commands", "times must be >= 0 and increasing")
         if cmds[-1, 1] != 0.0 or cmds[-1, 2] != 0.0:
             raise err(f"teleop.commands[{len(rows) - 1}]", "the last entry ends the script: [t_end, 0, 0]")
         return TeleopSpec(commands=cmds)
     tr = _table(t["track"], "teleop.track", err, ("points", "speed", "lookahead", "tolerance"),
                 ("points", "speed"))
-    pts = tr["points"]
-    if not isinstance(pts, list) or len(pts) < 2:
-        raise err("teleop.track.points", f"expected a list of >= 2 [x, y] points, got {pts!r}")
-    xy = np.array([_nums(q, f"teleop.track.points[{i}]", err, (2,), _POSE_LIMITS[:2])
-                   for i, q in enumerate(pts)], dtype=np.float64)
+    pts = _list(tr["points"], "teleop.track.points", err, "[x, y] points", 2, MAX_POINTS)
+    xy = np.array([_nums(q, f"teleop.track.points[{i}]", err, (2,), (_POS,)) for i, q in enumerate(pts)],
+                  dtype=np.float64)
     if np.any(np.hypot(*np.diff(xy, axis=0).T) < MIN_TRACK_SEGMENT_M):
         raise err("teleop.track.points", f"two consecutive points are closer than {MIN_TRACK_SEGMENT_M:g} m")
     tol = tr.get("tolerance")
     return TeleopSpec(
         track=xy,
-        speed_mps=_num(tr["speed"], "teleop.track.speed", err, positive=True, limit=MAX_TELEOP_SPEED),
-        lookahead_m=_num(tr.get("lookahead", DEFAULT_LOOKAHEAD_M), "teleop.track.lookahead", err,
-                         positive=True, limit=MAX_TRACK_LENGTH_M),
-        tolerance_m=None if tol is None else _num(tol, "teleop.track.tolerance", err, positive=True,
-                                                  limit=MAX_TRACK_LENGTH_M),
+        speed_mps=_num(tr["speed"], "teleop.track.speed", err, _SPEED, positive=True),
+        lookahead_m=_num(tr.get("lookahead", DEFAULT_LOOKAHEAD_M), "teleop.track.lookahead", err, _TRACK,
+                         positive=True),
+        tolerance_m=None if tol is None else _num(tol, "teleop.track.tolerance", err, _TRACK, positive=True),
     )
 
 
 def load_scenario(path: Path) -> ScenarioSpec:
-    """Read and validate a scenario file."""
-    import yaml
-
+    """Read and validate a scenario file: a regular file of at most MAX_SCENARIO_BYTES, its YAML bounded
+    (:func:`~gndreplay.io.userfile.load_yaml`)."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: scenario file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ConfigError(f"{path}: cannot read the scenario: {e}") from None
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        raise ConfigError(f"{path}: not valid YAML: {' '.join(str(e).split())}") from None
-    return parse_scenario(doc, str(path))
+    return parse_scenario(load_yaml(path, "scenario file", MAX_SCENARIO_BYTES), str(path))
+
+
+def _shipped(name: str) -> ScenarioSpec:
+    """The shipped scenario ``name`` (a file of the package, parsed with the same bounds as a user's)."""
+    f = resources.files(__package__).joinpath("scenarios", f"{name}.yaml")
+    where = f"scenarios/{name}.yaml"
+    return parse_scenario(parse_yaml(f.read_text(encoding="utf-8"), where), where)
+
+
+def _shipped_names() -> list[str]:
+    files = resources.files(__package__).joinpath("scenarios").iterdir()
+    return sorted(f.name.removesuffix(".yaml") for f in files if f.name.endswith(".yaml"))
 
 
 def shipped_scenarios() -> dict[str, str]:
     """Name -> description of the scenarios shipped with gndreplay."""
     out = {}
-    for f in sorted(resources.files(__package__).joinpath("scenarios").iterdir(), key=lambda p: p.name):
-        if f.name.endswith(".yaml"):
-            spec = parse_scenario(_yaml(f.read_text()), f"scenarios/{f.name}")
-            out[spec.name] = spec.description.split("\n")[0]
+    for name in _shipped_names():
+        spec = _shipped(name)
+        out[spec.name] = spec.description.split("\n")[0]
     return out
-
-
-def _yaml(text: str) -> Any:
-    import yaml
-
-    return yaml.safe_load(text)
 
 
 def resolve_scenario(name_or_path: str | Path) -> ScenarioSpec:
     """A shipped scenario by name, or a scenario file by path."""
     p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml") or p.is_file():
+    if p.suffix in (".yaml", ".yml") or _is_file(p):
         return load_scenario(p)
-    f = resources.files(__package__).joinpath("scenarios", f"{name_or_path}.yaml")
-    if not f.is_file():
+    name = str(name_or_path)
+    if name not in _shipped_names():
         known = ", ".join(shipped_scenarios())
-        raise ConfigError(f"{name_or_path}: no such scenario file or shipped scenario (shipped: {known})")
-    return parse_scenario(_yaml(f.read_text()), f"scenarios/{p.name}.yaml")
+        raise ConfigError(f"{_label(name)}: no such scenario file or shipped scenario (shipped: {known})"
+                          f"{did_you_mean(name, _shipped_names())}")
+    return _shipped(name)
+
+
+def _is_file(p: Path) -> bool:
+    """``p`` names an existing file (a name too long for the system is none)."""
+    try:
+        return p.is_file()
+    except OSError:
+        return False
