@@ -206,9 +206,7 @@ def cli_errors(fn: Callable[P, R]) -> Callable[P, R]:
             typer.echo("gndreplay: interrupted", err=True)
             raise typer.Exit(EXIT_INTERRUPTED) from None
         except SystemError as err:
-            # Ctrl-C / SIGTERM arriving inside a numba kernel call surfaces as "returned a result with an
-            # exception set", caused by the KeyboardInterrupt / SystemExit: report that, not a traceback
-            cause = err.__cause__
+            cause = _interruption(err)
             if isinstance(cause, KeyboardInterrupt):
                 typer.echo("gndreplay: interrupted", err=True)
                 raise typer.Exit(EXIT_INTERRUPTED) from None
@@ -220,6 +218,19 @@ def cli_errors(fn: Callable[P, R]) -> Callable[P, R]:
             warnings.showwarning = shown
 
     return wrapper
+
+
+def _interruption(err: BaseException) -> BaseException | None:
+    """The KeyboardInterrupt or SystemExit (SIGTERM, see ``fsutil.terminate_raises``) behind ``err``, if any.
+
+    Ctrl-C or SIGTERM arriving inside a numba kernel call surfaces as a SystemError "returned a result with an
+    exception set", often several deep (a kernel called from a kernel's dispatch): follow the chain."""
+    x: BaseException | None = err
+    for _ in range(16):
+        if x is None or isinstance(x, KeyboardInterrupt | SystemExit):
+            return x
+        x = x.__cause__ or x.__context__
+    return None
 
 
 def _show_warning(

@@ -588,3 +588,30 @@ def test_a_batch_folder_taken_while_staged_goes_to_the_next_free_one(tmp_path: P
     assert res.out_dir == out.with_name("batch-2") and (out / "summary.csv").read_text() == "theirs\n"
     assert res.summary_csv == res.out_dir / "summary.csv" and res.summary_csv.is_file()
     assert not staging_dirs(tmp_path)
+
+
+def test_a_signal_inside_nested_kernel_calls_is_reported_as_the_signal() -> None:
+    """SIGTERM or Ctrl-C arriving inside a numba call surfaces as SystemErrors "returned a result with an
+    exception set", up to several deep: still exit 143 / 130 with the staging folder gone, no traceback."""
+    import typer
+
+    from gndreplay.cli import cli_errors
+    from gndreplay.fsutil import _Terminated
+
+    def chained(first: BaseException, depth: int) -> BaseException:
+        err = first
+        for _ in range(depth):
+            outer = SystemError("CPUDispatcher(<function f>) returned a result with an exception set")
+            outer.__cause__ = err
+            err = outer
+        return err
+
+    @cli_errors
+    def command(err: BaseException) -> None:
+        raise err
+
+    for first, code in ((_Terminated(143), 143), (KeyboardInterrupt(), 130)):
+        for depth in (1, 3):
+            with pytest.raises(typer.Exit) as exit_info:
+                command(chained(first, depth))
+            assert exit_info.value.exit_code == code
