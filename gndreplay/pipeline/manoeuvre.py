@@ -1,7 +1,7 @@
 """Trap escape by manoeuvre: a short sequence of arcs and turns that points a rectangular robot where it must
 go when it cannot turn where it stands.
 
-The class (issue 10): a robot whose corners sweep a circle wider than the free space around it (the
+The class: a robot whose corners sweep a circle wider than the free space around it (the
 1.2 x 0.7 m chair, corners 0.87 m from its axle, in a 1.4 m passage or a T-junction of two) cannot turn in
 place. ND+ takes one reactive step at a time: it turns a little, reverses a little, and turns again, and a
 turn that needs a reverse arc first, or two, is never found; the chair rocks at the junction until the run

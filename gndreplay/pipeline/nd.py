@@ -57,7 +57,7 @@ Differences from ALGORITHMS.md / the released code, and why
       tangent, and in front the circle of radius ``|front corner| + Ds`` about the rotation centre (what
       the front corners sweep when the vehicle turns, plus Ds). So ``ds`` is ``Ds/4`` behind and
       ``Ds + |front corner| - front`` straight ahead. A circle has ``ds = Ds`` all round (code).
-    * Commitment (issue 10 item 3): given the previous tick's choice (``NdMemory``, held by the caller), the
+    * Commitment: given the previous tick's choice (``NdMemory``, held by the caller), the
       region through the discontinuity whose sub-goal is within ``commit_rad / 2`` of last tick's is kept
       while navigable and at most ``commit_rad`` farther from the goal than the search's pick. Choosing
       afresh, a robot facing the middle of a wide obstacle with its goal behind it swapped the two ways
@@ -65,7 +65,7 @@ Differences from ALGORITHMS.md / the released code, and why
     * Not ported (the supervisor owns them): the code's front emergency stop, and the rectangular robot's
       rear "cutting" correction, which needs the previous velocities.
 
-Rectangular differential chair (issue 10 item 2; a simple stand-in for the shape / kinematics abstraction
+Rectangular differential chair (a simple stand-in for the shape / kinematics abstraction
 of the wheelchair paper's reference [18]; the circle and the holonomic base are unchanged)
     * Passages: while the region direction is ahead, when a left / right pair of obstacle points narrower
       than W + 2 Ds lies on the way (the region direction crosses it) or around the body, the direction
@@ -177,7 +177,7 @@ class NdParams:
         gap_m: width [m] a discontinuity must open and the navigability tunnel must keep free; ``None``
             uses the robot's width (rectangle) or diameter (circle), as the code does.
         contact_m: a point inside the robot boundary is moved out to ``E_i + contact_m`` [m] (code: 1 cm).
-        commit_rad: commitment (issue 10 item 3, **choice**): with the previous tick's choice given
+        commit_rad: commitment (**choice**): with the previous tick's choice given
             (``NdMemory``), the region through the discontinuity whose sub-goal lies within
             ``commit_rad / 2`` of the previous sub-goal is kept while navigable, unless the region the
             search would pick is nearer the goal by more than ``commit_rad`` (angular distance from the goal

@@ -126,20 +126,20 @@ class SupervisorParams:
             escape only.
         manoeuvre_after_s: ... and searched already when the reflexive check has replaced every command
             for this long without progress (see ``trap_progress_m``; **choice**: 2 s, a quarter of the
-            wheelchair's trap window: the trap's dithering rule needs a full window, and the stall limit
-            of issue 10 is 10 s).
+            wheelchair's trap window: the trap's dithering rule needs a full window, and the closed-loop
+            scenarios' stall bound is 10 s).
         blind_memory_s: how long a cell outside the laser's current field of view stays trusted as free
             after the laser last saw it, for translation towards it (``safe_command``'s blind side rule).
             **Choice**: 1.0 s, five to seven scans of the presets: a person walking at 1 m/s covers 1 m
             in it, so a cell seen free that recently can only hold someone who was then within about a
             metre of it; a holonomic base that turns to look where it goes (turn first) refreshes the
-            cells in a fraction of that. Older FREE cells out of view are old news (issue 10: the XR4000
+            cells in a fraction of that. Older FREE cells out of view are old news (in a scenario the XR4000
             backed at 0.45 m/s into a person who had walked in behind it since the laser last looked).
-            0 trusts no cell out of view; a huge value restores the old rule (only UNKNOWN counts).
+            0 trusts no cell out of view; a huge value counts only UNKNOWN cells.
         doubt_window_s, doubt_tol_m, doubt_tol_frac: the pose doubt (``doubted_cells``). The grid is
             built at the matcher's corrected poses; where the corrected motion since a cell was last seen
             disagrees with the odometry's by more than doubt_tol_m + doubt_tol_frac of the odometry's
-            displacement, the cell is also checked where it lies if the odometry is right (issue 10:
+            displacement, the cell is also checked where it lies if the odometry is right (the case:
             backing out of gnd_exp1_three_traps' side passage, the matcher held its pose while the chair
             reversed 0.5 m, and the chair's blind rear met a wall its grid put 0.5 m further). The poses
             are tracked over doubt_window_s, one per 0.25 s. **Choice**: 300 s, 0.05 m and 10 %:
@@ -481,8 +481,8 @@ def safe_command(
     ``doubted_cells``; computed only if needed): a command whose direction of travel lies outside the
     laser's view must not touch them either (grown by half a cell, as the grid's). Only there: in view
     the scan is exact and refutes what it sees through, and a turn in place is how the robot looks; the
-    class is a front laser's robot backing into what it remembers behind it while its matcher is stuck
-    (issue 10), and testing every command against the moved cells made a robot with poor odometry (the
+    class is a front laser's robot backing into what it remembers behind it while its matcher is stuck,
+    and testing every command against the moved cells made a robot with poor odometry (the
     Intel log) stop and turn aside for walls that were where the matcher had them.
 
     The blind side (``blind_xy()``: centres of the cells out of the laser's view not seen within

@@ -50,7 +50,7 @@ Choices:
   it. Why: off the axis no straight tunnel threads a one-cell waist, the front node was refused, and the
   search backed out to a node behind to line up: the course reversed, and with one-cell changes of the
   grid flipped between forwards and backwards from tick to tick; the chair rocked in the door for the
-  rest of the run (wheelchair_office_exit, 18 of 20 seeds timed out at HEAD b409ad7).
+  rest of the run (wheelchair_office_exit: 18 of 20 seeds timed out without this rule).
 * **Rays march** in unit steps of their parameter (the samples t = 0, 1, 2, ... cells, each rounded to its
   cell), the C-space ray from the node, the workspace ray on from where the C-space one stopped. Each ray
   reads a per-ray table of flat index offsets (built once per ray count and row length, cached, built by
@@ -100,9 +100,9 @@ Choices:
   (``TunnelResult.fallback``). Why: the failing class is a chain of one-cell waists not in line, e.g. two
   tight doors 1 m apart and 0.3 m aside of each other (tests/test_tunnel.py): a node must stand exactly
   where a straight tunnel threads both, which neither the passage nodes (one waist each) nor the rays
-  find, and the search exhausted its 338-357 nodes (11 ms, the planner benchmark's p99 at HEAD 5103a06)
-  to answer PLANNER_NO_PATH wrongly. The budget (150 expansions, about 5 ms) also caps the few long
-  searches that do succeed (the synthetic offices' successes needed at most 251, p95 66). ``complete``
+  find, and the search exhausted its 338-357 nodes (11 ms) to answer PLANNER_NO_PATH wrongly. The budget
+  (150 expansions, about 5 ms) also caps the few long searches that do succeed (the synthetic offices'
+  successes needed at most 251, p95 66). ``complete``
   False: the paper's node search alone (PLANNER_NO_PATH / PLANNER_TIMEOUT as above).
 * **Route hysteresis** (``hold_route``, on by default; ``TunnelPlanner``): the planner keeps the tunnel it
   returned last (its cells, moved with the grid) while it stays free and is at most 10 % + 0.3 m longer

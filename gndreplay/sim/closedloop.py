@@ -15,7 +15,7 @@ command takes effect (scan time + latency):
   to the footprint; door leaves wait likewise (0.3 m), as the people moving them would;
 - wheel odometry drifts (``OdometryNoise``), the laser is ray cast (exact circles, thick walls) with noise.
 
-Navigation modes (issue 14): the scenario's ``mode`` / ``local`` override the configuration's
+Navigation modes: the scenario's ``mode`` / ``local`` override the configuration's
 (:func:`navigation_config`). In teleop mode the operator of :mod:`.teleop` gives the command of each scan
 (``Tick.cmd``, what a log's recorded command would be; otherwise ``Tick.cmd`` is the robot's true velocity,
 as wheel odometry reports it). A teleop run succeeds when the script's time is over or the track's end is

@@ -43,7 +43,7 @@ A scenario file is read like every user file (:mod:`gndreplay.io.userfile`): a r
 at most ``MAX_ELEMENTS`` / ``MAX_MOVERS`` / ``MAX_EVENTS`` / ``MAX_POINTS`` / ``MAX_TELEOP_ROWS`` items, and
 a value quoted in an error is cut short (``userfile.brief``).
 
-Navigation mode (issue 14): ``mode`` (when given) overrides the configuration's ``navigation.mode`` and
+Navigation mode: ``mode`` (when given) overrides the configuration's ``navigation.mode`` and
 ``local`` its ``navigation.local.strategy``. Poses (start, goal, subgoals, track) are in the scenario's
 world frame; the simulated odometry starts at ``start`` with that frame, so they are the robot's odometry
 frame too. ``mode: follow`` needs ``subgoals`` (the goal defaults to the last one's position) and succeeds
