@@ -25,7 +25,7 @@ import typer
 from typer.core import TyperGroup
 
 from . import __version__
-from .errors import ConfigError, GndReplayError
+from .errors import ConfigError, GndReplayError, find_cause, one_line
 
 if TYPE_CHECKING:  # the CLI imports its heavy modules lazily, inside the commands, to start fast
     from rich.console import Console
@@ -91,12 +91,12 @@ def _command_line_message(err: Exception, args: Sequence[str]) -> str:
     if isinstance(err, _click.NoSuchOption) and (name := _dash_file(err.option_name, args)) is not None:
         return (f"{name}: a name starting with '-' reads as an option; write ./{name} to give that file "
                 f"(or put -- before it)")
-    text = " ".join((err.format_message() if isinstance(err, _click.ClickException) else str(err)).split())
+    text = one_line(err.format_message() if isinstance(err, _click.ClickException) else err)
     ctx = getattr(err, "ctx", None)
     if isinstance(err, _click.UsageError) and not isinstance(err, _click.BadParameter) and ctx is not None:
         command = " ".join(["gndreplay", *ctx.command_path.split()[1:]])  # not a value: the usage is wrong
         text = f"{text.rstrip('.')} (see {command} --help)"
-    return text if len(text) <= _MAX_MESSAGE else f"{text[:_MAX_MESSAGE - 25]} ... {text[-20:]}"
+    return one_line(text, _MAX_MESSAGE)
 
 
 def _dash_file(option: str, args: Sequence[str]) -> str | None:
@@ -199,7 +199,7 @@ def cli_errors(fn: Callable[P, R]) -> Callable[P, R]:
         try:
             return fn(*args, **kwargs)
         except GndReplayError as err:
-            message = " ".join(str(err).split()) or type(err).__name__
+            message = one_line(err) or type(err).__name__
             typer.echo(f"gndreplay: error: {message}", err=True)
             raise typer.Exit(EXIT_ERROR) from None
         except KeyboardInterrupt:
@@ -225,12 +225,7 @@ def _interruption(err: BaseException) -> BaseException | None:
 
     Ctrl-C or SIGTERM arriving inside a numba kernel call surfaces as a SystemError "returned a result with an
     exception set", often several deep (a kernel called from a kernel's dispatch): follow the chain."""
-    x: BaseException | None = err
-    for _ in range(16):
-        if x is None or isinstance(x, KeyboardInterrupt | SystemExit):
-            return x
-        x = x.__cause__ or x.__context__
-    return None
+    return find_cause(err, lambda e: isinstance(e, KeyboardInterrupt | SystemExit))
 
 
 def _show_warning(

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 __all__ = [
     "FOLLOW_NEEDS_SUBGOALS", "ConfigError", "GndReplayError", "LogFormatError", "OutputError",
-    "ScanMatchError",
+    "ScanMatchError", "find_cause", "one_line",
 ]
 
 FOLLOW_NEEDS_SUBGOALS = "navigation mode follow needs subgoals"
@@ -34,3 +36,26 @@ class ScanMatchError(GndReplayError):
 class OutputError(GndReplayError):
     """An output path is unsafe to write (a file, the current folder, a folder holding inputs or files
     gndreplay did not write); the message names the path. Raised before any work is done."""
+
+
+def one_line(err: BaseException | str, limit: int | None = None) -> str:
+    """``err``'s text with its white space folded into single spaces and, past ``limit`` characters, its
+    middle elided: a library's message may span lines or quote a whole input."""
+    text = " ".join(str(err).split())
+    if limit is None or len(text) <= limit:
+        return text
+    return f"{text[:limit - 20]}...{text[-17:]}"
+
+
+def find_cause(err: BaseException, match: Callable[[BaseException], bool]) -> BaseException | None:
+    """``err`` or the first exception along its chain of causes (``__cause__``, else the context unless
+    suppressed) that ``match`` accepts, else None: a signal or a full disk met inside a library call may
+    reach the caller wrapped, several deep."""
+    seen: set[int] = set()
+    e: BaseException | None = err
+    while e is not None and id(e) not in seen:
+        if match(e):
+            return e
+        seen.add(id(e))
+        e = e.__cause__ if e.__cause__ is not None else (None if e.__suppress_context__ else e.__context__)
+    return None

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import detmath as dm
-from .errors import GndReplayError
+from .errors import GndReplayError, one_line
 from .fsutil import atomic_write_text, format_stamp
 from .geometry import relative, wrap_angle
 from .io.base import MAX_ABS_TIME_NS
@@ -96,12 +96,6 @@ def _seconds_to_ns(text: str) -> int:
     return ns
 
 
-def _why(err: ValueError) -> str:
-    """A parse error's text on one line of at most 120 characters (float() quotes the whole token)."""
-    text = " ".join(str(err).split())
-    return text if len(text) <= 120 else f"{text[:100]}...{text[-17:]}"
-
-
 def load_relations(path: str | os.PathLike[str]) -> Relations:
     """Read a SLAM-benchmark relations file: one ``t1 t2 x y z roll pitch yaw`` line per relation.
 
@@ -129,7 +123,7 @@ def load_relations(path: str | os.PathLike[str]) -> Relations:
             t2.append(_seconds_to_ns(tok[1]))
             vals.append((float(tok[2]), float(tok[3]), float(tok[7])))
         except ValueError as err:
-            raise GndReplayError(f"{p} line {lineno}: not a number ({_why(err)})") from err
+            raise GndReplayError(f"{p} line {lineno}: not a number ({one_line(err, 120)})") from err
     v = np.array(vals, dtype=np.float64).reshape(-1, 3)
     return Relations(np.array(t1, dtype=np.int64), np.array(t2, dtype=np.int64), v[:, 0].copy(),
                      v[:, 1].copy(), v[:, 2].copy())
@@ -307,7 +301,7 @@ def read_tum(path: str | os.PathLike[str]) -> tuple[NDArray[np.int64], NDArray[n
             t_ns.append(_seconds_to_ns(tok[0]))
         except ValueError as err:
             raise GndReplayError(
-                f"{p} line {lineno}: not a TUM pose 't x y z qx qy qz qw' ({_why(err)})"
+                f"{p} line {lineno}: not a TUM pose 't x y z qx qy qz qw' ({one_line(err, 120)})"
             ) from err
         poses.append((x, y, 2.0 * dm.atan2(qz, qw)))
     return np.asarray(t_ns, dtype=np.int64), np.asarray(poses, dtype=np.float64).reshape(len(poses), 3)

@@ -33,7 +33,7 @@ from contextlib import AbstractContextManager, contextmanager, suppress
 from pathlib import Path
 from types import FrameType, TracebackType
 
-from .errors import OutputError
+from .errors import OutputError, find_cause
 
 __all__ = [
     "RUN_MARKER",
@@ -86,17 +86,9 @@ def umask_mode(base: int) -> int:
     return base & ~mask
 
 
-def _no_room(err: BaseException) -> OSError | None:
-    """The full-disk, quota or read-only ``OSError`` behind ``err`` (itself, or along its chain of causes, as
-    when a library wraps it), else None."""
-    seen: set[int] = set()
-    e: BaseException | None = err
-    while e is not None and id(e) not in seen:
-        if isinstance(e, OSError) and e.errno in _NO_ROOM:
-            return e
-        seen.add(id(e))
-        e = e.__cause__ or (None if e.__suppress_context__ else e.__context__)
-    return None
+def _no_room(err: BaseException) -> bool:
+    """``err`` is a full-disk, quota or read-only ``OSError``."""
+    return isinstance(err, OSError) and err.errno in _NO_ROOM
 
 
 @contextmanager
@@ -107,8 +99,8 @@ def write_errors(where: Path, note: str = "") -> Iterator[None]:
     try:
         yield
     except Exception as err:
-        cause = _no_room(err)
-        if cause is None:
+        cause = find_cause(err, _no_room)  # itself, or wrapped by a library
+        if not isinstance(cause, OSError):
             raise
         raise OutputError(f"{where}: cannot write ({cause.strerror or cause}){note}") from err
 

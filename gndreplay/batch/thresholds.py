@@ -39,7 +39,6 @@ file of at most 1 MB, nesting bounded).
 
 from __future__ import annotations
 
-import difflib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -49,7 +48,7 @@ from typing import Any
 
 from ..errors import ConfigError
 from ..io.base import MAX_ABS_POSITION_M
-from ..io.userfile import brief, check_number, check_regular_file, load_toml
+from ..io.userfile import brief, check_number, check_regular_file, did_you_mean, load_toml
 from .jobs import Job
 from .metrics import COUNT_METRICS, LATENCY_METRICS, RELATION_METRICS, SCENARIO_METRICS
 
@@ -233,8 +232,7 @@ def check_limits(
 
 
 def _unknown(path: Path, where: str, key: str, known: tuple[str, ...]) -> ConfigError:
-    close = difflib.get_close_matches(key, known, n=1)
-    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    hint = did_you_mean(key, known)
     return ConfigError(f"{path}: {where} unknown key {brief(key)}{hint}; known keys: {', '.join(known)}")
 
 

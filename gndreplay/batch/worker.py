@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
-from ..errors import ConfigError, GndReplayError
+from ..errors import ConfigError, GndReplayError, one_line
 from .jobs import Job
 from .metrics import metrics_from_summary, relation_metrics
 from .scenarios import SimOptions, scenario_scores
@@ -159,13 +159,9 @@ class InputResult:
     outcome: str = ""
 
 
-def _one_line(err: BaseException) -> str:
-    return " ".join(str(err).split())
-
-
 def crash_message(err: BaseException) -> str:
     """``"crashed: <type>: <message on one line>"`` for an unexpected exception."""
-    message = _one_line(err)
+    message = one_line(err)
     return f"crashed: {type(err).__name__}: {message}" if message else f"crashed: {type(err).__name__}"
 
 
@@ -216,7 +212,7 @@ def execute(task: Task, runner: Runner = run_input) -> InputResult:
     except GndReplayError as err:
         return error_result(
             job,
-            _one_line(err) or type(err).__name__,
+            one_line(err) or type(err).__name__,
             error_type=type(err).__name__,
             wall_s=time.perf_counter() - t0,
         )

@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-from ..errors import ConfigError
+from ..errors import ConfigError, one_line
 from .base import special_file_kind
 
 __all__ = [
@@ -79,10 +79,6 @@ def did_you_mean(value: Any, choices: Iterable[str]) -> str:
     return f" (did you mean {close[0]!r}?)" if close else ""
 
 
-def _one_line(err: BaseException) -> str:
-    return " ".join(str(err).split())[:300]
-
-
 def check_regular_file(path: Path, what: str, max_bytes: int) -> int:
     """The size of ``path`` if it is a regular file of at most ``max_bytes``, without opening it.
 
@@ -97,7 +93,7 @@ def check_regular_file(path: Path, what: str, max_bytes: int) -> int:
     except FileNotFoundError:
         raise ConfigError(f"{path}: {what} not found") from None
     except OSError as e:
-        raise ConfigError(f"{path}: cannot read the {what}: {_one_line(e)}") from None
+        raise ConfigError(f"{path}: cannot read the {what}: {one_line(e, 300)}") from None
     if path.is_dir():
         raise ConfigError(f"{path}: is a folder, not a {what}")
     if st.st_size > max_bytes:
@@ -119,7 +115,7 @@ def read_bytes(path: Path, what: str, max_bytes: int) -> bytes:
     except FileNotFoundError:
         raise ConfigError(f"{path}: {what} not found") from None
     except OSError as e:
-        raise ConfigError(f"{path}: cannot read the {what}: {_one_line(e)}") from None
+        raise ConfigError(f"{path}: cannot read the {what}: {one_line(e, 300)}") from None
     if len(data) > max_bytes:
         raise ConfigError(f"{path}: more than the {_size(max_bytes)} a {what} may have (it grew while read)")
     return data
@@ -181,7 +177,7 @@ def _load(path: Path, what: str, max_bytes: int, parse: Callable[[str], Any], ki
     except RecursionError:
         raise ConfigError(f"{path}: nested more than {MAX_NESTING} levels deep") from None
     except ValueError as e:
-        raise ConfigError(f"{path}: not {kind}: {_one_line(e)}") from None
+        raise ConfigError(f"{path}: not {kind}: {one_line(e, 300)}") from None
     _check_shape(doc, str(path))
     return doc
 
@@ -229,11 +225,11 @@ def parse_yaml(text: str, where: str) -> Any:
     try:
         doc = yaml.load(text, Loader=_yaml_loader())
     except yaml.YAMLError as e:
-        raise ConfigError(f"{where}: not valid YAML: {_one_line(e)}") from None
+        raise ConfigError(f"{where}: not valid YAML: {one_line(e, 300)}") from None
     except RecursionError:
         raise ConfigError(f"{where}: nested more than {MAX_NESTING} levels deep") from None
     except (ValueError, OverflowError) as e:  # a date out of range (2024-13-01), a number beyond str()
-        raise ConfigError(f"{where}: not valid YAML: {_one_line(e)}") from None
+        raise ConfigError(f"{where}: not valid YAML: {one_line(e, 300)}") from None
     _check_shape(doc, where)
     return doc
 

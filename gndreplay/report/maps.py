@@ -35,6 +35,7 @@ from typing import IO, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import one_line
 from ..geometry import compose, transform_points
 from ..pipeline.model import RobotCentredGrid
 from ..pipeline.stack import TickResult
@@ -410,7 +411,7 @@ _MALFORMED: tuple[type[Exception], ...] = (
 
 
 def _why(err: BaseException) -> str:
-    text = " ".join(str(err).split())[:200]
+    text = one_line(err, 200)
     return f"{type(err).__name__}: {text}" if text else type(err).__name__
 
 
