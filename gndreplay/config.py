@@ -224,7 +224,7 @@ class Range:
 
 
 def _num(x: float) -> str:
-    """A range end as written in a config file: ``1000000``, ``0.001``, ``6.28319``."""
+    """A range end as written in a config file: ``250``, ``0.001``, ``6.28319``."""
     return str(int(x)) if x == int(x) and abs(x) < 1e15 else f"{x:g}"
 
 

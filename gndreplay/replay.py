@@ -40,9 +40,8 @@ from .fsutil import check_output_dir, format_stamp, resolve_output_dir, staging_
 from .geometry import relative, wrap_angle
 from .pipeline.model import RobotCentredGrid
 from .pipeline.stack import MODULES, NavigationStack, TickResult, warm_up
-from .pipeline.supervisor import Mode
 from .scanmatch import Matcher, make_matcher
-from .types import Flag, Pose2D, Scan, Subgoal, Tick
+from .types import BUDGET_FLAGS, REFLEXIVE_MODES, Flag, Pose2D, Scan, Subgoal, Tick
 
 if TYPE_CHECKING:
     from .io import LogReader
@@ -74,15 +73,6 @@ __all__ = [
     "tick_edges",
     "warm_up_all",
 ]
-
-#: Flags that depend on wall-clock time: recorded in timing.csv, not in commands.csv (unless enforced).
-BUDGET_FLAGS = (
-    Flag.MATCH_OVER_BUDGET | Flag.MODEL_OVER_BUDGET | Flag.PLANNER_OVER_BUDGET | Flag.REACTOR_OVER_BUDGET
-)
-#: The reflexive loop's overrides (the audit's "emergencies"): the rule that replaced or stopped a command.
-REFLEXIVE_MODES: tuple[str, ...] = tuple(m.value for m in (
-    Mode.EMERGENCY, Mode.SAFE_SLOW, Mode.SAFE_TURN, Mode.SAFE_REVERSE, Mode.STALE, Mode.ESCAPE))
-
 
 class RunSink(Protocol):
     """Something that consumes the replay as it streams and writes its own files into the run directory

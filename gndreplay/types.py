@@ -1,4 +1,5 @@
-"""The records that flow between stages: Pose2D, Scan, Odometry, Command, Subgoal, Tick.
+"""The records that flow between stages: Pose2D, Scan, Odometry, Command, Subgoal, Tick; the tick's
+exception ``Flag`` and the ``Mode`` that produced its command, with their groups.
 
 Times are int nanoseconds (``t_ns``) everywhere inside; ``t_s`` properties convert at the edges. Every
 record is a frozen dataclass; arrays inside are not copied, treat them as read-only.
@@ -16,7 +17,19 @@ from numpy.typing import NDArray
 from . import detmath as dm
 from .geometry import compose, inverse, wrap_angle
 
-__all__ = ["Command", "Flag", "Odometry", "Pose2D", "Scan", "Subgoal", "SubgoalKind", "Tick"]
+__all__ = [
+    "BUDGET_FLAGS",
+    "REFLEXIVE_MODES",
+    "Command",
+    "Flag",
+    "Mode",
+    "Odometry",
+    "Pose2D",
+    "Scan",
+    "Subgoal",
+    "SubgoalKind",
+    "Tick",
+]
 
 NS_PER_S = 1_000_000_000
 
@@ -43,6 +56,36 @@ class Flag(enum.IntFlag):
     def names(self) -> list[str]:
         """Member names set in this value, in declaration order (stable for CSV output)."""
         return [m.name for m in Flag if m.value and (self & m) == m and m.name]
+
+
+#: Flags that depend on wall-clock time: recorded in timing.csv, not in commands.csv (unless enforced).
+BUDGET_FLAGS = (
+    Flag.MATCH_OVER_BUDGET | Flag.MODEL_OVER_BUDGET | Flag.PLANNER_OVER_BUDGET | Flag.REACTOR_OVER_BUDGET
+)
+
+
+class Mode(enum.Enum):
+    """What produced the tick's command (GND modes, then reflexive overrides)."""
+
+    MPND = "mpND"  # planner OK, reactor follows the instantaneous path direction
+    MND = "mND"  # planner failed, reactor goes to the goal itself
+    ROTATE = "ROTATE"  # reactor found no free walking area: stop and rotate
+    EMERGENCY = "EMERGENCY"  # reflexive: every admissible command would touch an obstacle, stop
+    SAFE_SLOW = "SAFE_SLOW"  # reflexive: the command would touch; a slower motion along the same arc
+    SAFE_TURN = "SAFE_TURN"  # reflexive: the command would touch; straight on, or the other turn direction
+    # (or, travelling into stale blind space, a turn in place towards it: turn first)
+    SAFE_REVERSE = "SAFE_REVERSE"  # reflexive: the command would touch; a short reverse through known free
+    STALE = "STALE"  # reflexive: sensor data too old, stop
+    ESCAPE = "ESCAPE"  # reflexive: trap escape, a manoeuvre of arcs and turns (rectangle) or slow straight
+    GOAL = "GOAL"  # goal reached, stop
+    TELEOP = "TELEOP"  # multi-loop: the driver's command, unchanged
+    FOLLOW = "FOLLOW"  # multi-loop: the path follower's command, unchanged
+    LOCAL = "LOCAL"  # multi-loop: a local navigation strategy's command (ND+ itself reports mND / ROTATE)
+
+
+#: The reflexive loop's overrides (the audit's "emergencies"): the rule that replaced or stopped a command.
+REFLEXIVE_MODES: tuple[str, ...] = tuple(m.value for m in (
+    Mode.EMERGENCY, Mode.SAFE_SLOW, Mode.SAFE_TURN, Mode.SAFE_REVERSE, Mode.STALE, Mode.ESCAPE))
 
 
 @dataclass(frozen=True, slots=True)

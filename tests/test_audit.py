@@ -13,7 +13,6 @@ import pytest
 from gndreplay.config import PRESETS
 from gndreplay.pipeline.nd import Situation
 from gndreplay.pipeline.stack import TickResult
-from gndreplay.pipeline.supervisor import Mode
 from gndreplay.replay import (
     COMMAND_COLUMNS,
     REFLEXIVE_MODES,
@@ -28,7 +27,7 @@ from gndreplay.replay import (
 )
 from gndreplay.report.markdown import MAX_EPISODE_ROWS, interventions_section
 from gndreplay.report.rundir import RunDirError, read_commands
-from gndreplay.types import Flag, Pose2D
+from gndreplay.types import Flag, Mode, Pose2D
 
 T0 = 1_000_000_000_000
 DT = 200_000_000  # 5 Hz

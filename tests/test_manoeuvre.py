@@ -16,12 +16,12 @@ from gndreplay.config import apply_overrides, preset
 from gndreplay.geometry import compose, inverse, relative, transform_points
 from gndreplay.pipeline.manoeuvre import ManoeuvreParams, Primitive, Speeds, end_poses, plan_manoeuvre
 from gndreplay.pipeline.model import FREE, OCCUPIED, GridParams, RobotCentredGrid
-from gndreplay.pipeline.supervisor import Mode, arc_touches, footprint_signed_distance, safe_command
+from gndreplay.pipeline.supervisor import arc_touches, footprint_signed_distance, safe_command
 from gndreplay.robot import WHEELCHAIR_ROBOT
 from gndreplay.sim import simulate_scenario
 from gndreplay.sim.runner import SimOutcome
 from gndreplay.sim.scenario_file import parse_scenario
-from gndreplay.types import Pose2D
+from gndreplay.types import Mode, Pose2D
 
 CHAIR = WHEELCHAIR_ROBOT
 MARGIN = 0.045  # the reflexive loop's for a grid cell: emergency margin + half a 5 cm cell

@@ -16,9 +16,8 @@ from gndreplay.io.mcap import read_mcap_summary
 from gndreplay.pipeline.model import FREE, OCCUPIED, UNKNOWN, GridParams, RobotCentredGrid
 from gndreplay.pipeline.nd import Situation
 from gndreplay.pipeline.stack import TickResult
-from gndreplay.pipeline.supervisor import Mode
 from gndreplay.report import McapSink, grid_to_occupancy
-from gndreplay.types import Flag, Pose2D, Scan, Tick
+from gndreplay.types import Flag, Mode, Pose2D, Scan, Tick
 
 PERIOD_NS = 200_000_000  # 5 Hz
 T0_NS = 1_700_000_000_123_456_789

@@ -17,7 +17,6 @@ from gndreplay.geometry import compose, transform_points
 from gndreplay.pipeline.model import FREE, OCCUPIED, UNKNOWN, GridParams, RobotCentredGrid
 from gndreplay.pipeline.nd import Situation
 from gndreplay.pipeline.stack import TickResult
-from gndreplay.pipeline.supervisor import Mode
 from gndreplay.report import (
     FIGURES,
     HitRaster,
@@ -29,7 +28,7 @@ from gndreplay.report import (
 )
 from gndreplay.report.markdown import trajectory_gap
 from gndreplay.report.plots import hit_image, plot_bands, runs
-from gndreplay.types import Flag, Pose2D, Scan, Tick
+from gndreplay.types import Flag, Mode, Pose2D, Scan, Tick
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 ROOM = (-2.0, 8.0, -3.0, 3.0)  # x0, x1, y0, y1 of a rectangular room [m]

@@ -23,10 +23,10 @@ from gndreplay.pipeline.selector import (
     turned_first,
 )
 from gndreplay.pipeline.stack import NavigationStack, StackParams, TickResult, teleop_command
-from gndreplay.pipeline.supervisor import Mode, braking_time_s, footprint_signed_distance
+from gndreplay.pipeline.supervisor import braking_time_s, footprint_signed_distance
 from gndreplay.sim.closedloop import arc_step
 from gndreplay.sim.world import box, cast_rays, polygon, wall
-from gndreplay.types import Command, Flag, Pose2D, Scan, Subgoal, Tick
+from gndreplay.types import Command, Flag, Mode, Pose2D, Scan, Subgoal, Tick
 
 FRONT = np.linspace(-math.pi / 2, math.pi / 2, 361)  # the papers' SICK: 180 deg, 0.5 deg
 ROOM = polygon([(-6, -6), (14, -6), (14, 6), (-6, 6)])

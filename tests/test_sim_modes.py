@@ -16,12 +16,11 @@ from gndreplay.config import apply_overrides, preset
 from gndreplay.errors import ConfigError
 from gndreplay.pipeline.nd import Situation
 from gndreplay.pipeline.stack import TickResult
-from gndreplay.pipeline.supervisor import Mode
 from gndreplay.sim import ClosedLoop, resolve_scenario, simulate_scenario
 from gndreplay.sim.closedloop import navigation_config
 from gndreplay.sim.scenario_file import parse_scenario
 from gndreplay.sim.teleop import TeleopDriver, TeleopSpec
-from gndreplay.types import Flag, Tick
+from gndreplay.types import Flag, Mode, Tick
 
 WHEELCHAIR = preset("wheelchair")
 HALL = {"walls": {"n": [-2.0, 3.0, 13.0, 3.0], "s": [-2.0, -3.0, 13.0, -3.0]}}

@@ -19,9 +19,8 @@ from gndreplay.pipeline.stack import (
     _intention_changed,
     make_planner,
 )
-from gndreplay.pipeline.supervisor import Mode
 from gndreplay.sim.world import box, cast_rays, polygon, regular_polygon, wall
-from gndreplay.types import Flag, Pose2D, Scan, Tick
+from gndreplay.types import Flag, Mode, Pose2D, Scan, Tick
 
 FRONT = np.linspace(-math.pi / 2, math.pi / 2, 361)  # a SICK-like 180 deg laser
 AROUND = np.linspace(-math.pi, math.pi, 720, endpoint=False)  # 360 deg: the robot sees it is enclosed

@@ -23,7 +23,7 @@ from .. import detmath as dm
 from ..errors import FOLLOW_NEEDS_SUBGOALS, ConfigError
 from ..geometry import compose, relative, transform_points, wrap_angle
 from ..robot import RobotConfig
-from ..types import Command, Flag, Pose2D, Scan, Subgoal, Tick
+from ..types import Command, Flag, Mode, Pose2D, Scan, Subgoal, Tick
 from .cspace import free_cspace
 from .follow import FollowParams, PathFollower, first_free_point
 from .local import LocalParams, local_command, polar_map, warm_up_local
@@ -33,7 +33,6 @@ from .nd import NdMemory, NdParams, NdResult, Situation, nd_step
 from .nf1 import Nf1Params, Nf1Planner, Planner, PlanResult, reaches_border
 from .selector import Takeover, arbitrate, intention_xy, look_hold, swept_area_occupied, turned_first
 from .supervisor import (
-    Mode,
     SafeCommand,
     SupervisorParams,
     TrapDetector,

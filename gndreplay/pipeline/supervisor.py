@@ -26,7 +26,6 @@ the reflexive loop refusing to move where the sensor has no recent word.
 
 from __future__ import annotations
 
-import enum
 import math
 from collections import deque
 from collections.abc import Callable
@@ -38,10 +37,9 @@ from numpy.typing import NDArray
 from .. import detmath as dm
 from ..geometry import compose, inverse, relative, wrap_angle
 from ..robot import RobotConfig
-from ..types import Flag
+from ..types import Flag, Mode
 
 __all__ = [
-    "Mode",
     "SafeCommand",
     "SupervisorParams",
     "TrapDetector",
@@ -65,25 +63,6 @@ __all__ = [
     "swept_touch",
     "unconfirmed_cells",
 ]
-
-
-class Mode(enum.Enum):
-    """What produced the tick's command (GND modes, then reflexive overrides)."""
-
-    MPND = "mpND"  # planner OK, reactor follows the instantaneous path direction
-    MND = "mND"  # planner failed, reactor goes to the goal itself
-    ROTATE = "ROTATE"  # reactor found no free walking area: stop and rotate
-    EMERGENCY = "EMERGENCY"  # reflexive: every admissible command would touch an obstacle, stop
-    SAFE_SLOW = "SAFE_SLOW"  # reflexive: the command would touch; a slower motion along the same arc
-    SAFE_TURN = "SAFE_TURN"  # reflexive: the command would touch; straight on, or the other turn direction
-    # (or, travelling into stale blind space, a turn in place towards it: turn first)
-    SAFE_REVERSE = "SAFE_REVERSE"  # reflexive: the command would touch; a short reverse through known free
-    STALE = "STALE"  # reflexive: sensor data too old, stop
-    ESCAPE = "ESCAPE"  # reflexive: trap escape, a manoeuvre of arcs and turns (rectangle) or slow straight
-    GOAL = "GOAL"  # goal reached, stop
-    TELEOP = "TELEOP"  # multi-loop: the driver's command, unchanged
-    FOLLOW = "FOLLOW"  # multi-loop: the path follower's command, unchanged
-    LOCAL = "LOCAL"  # multi-loop: a local navigation strategy's command (ND+ itself reports mND / ROTATE)
 
 
 @dataclass(frozen=True, slots=True)
