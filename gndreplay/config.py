@@ -15,8 +15,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import tomllib
 import types
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
@@ -25,20 +26,22 @@ from .errors import ConfigError
 from .io.base import MAX_BEAMS
 from .io.userfile import brief, check_number, did_you_mean, load_toml
 from .pipeline.follow import FollowParams
-from .pipeline.local import LocalParams
+from .pipeline.local import LOCAL_STRATEGIES, LocalParams
 from .pipeline.model import GRID_400, GridParams
 from .pipeline.nd import NdParams
 from .pipeline.nf1 import Nf1Params
-from .pipeline.stack import StackParams
+from .pipeline.stack import NAV_MODES, PLANNERS, StackParams
 from .pipeline.supervisor import SupervisorParams
 from .pipeline.tunnel import TunnelParams
 from .robot import WHEELCHAIR_LASER, WHEELCHAIR_ROBOT, XR4000_LASER, XR4000_ROBOT, LaserConfig, RobotConfig
+from .scanmatch import METHODS as MATCHER_METHODS
 from .scanmatch import IdcParams, KissParams
 
 __all__ = [
     "CROSS_CHECKS",
     "PRESETS",
     "RANGES",
+    "CliOverrides",
     "Config",
     "CspaceConfig",
     "LaserConfig",
@@ -47,11 +50,18 @@ __all__ = [
     "Range",
     "RobotConfig",
     "ScanMatchConfig",
+    "apply_cli",
     "apply_overrides",
+    "check_local_option",
+    "choose",
     "config_to_dict",
     "config_to_toml",
+    "configure",
     "load_config",
+    "local_strategy_used",
+    "navigation_choices",
     "numeric_fields",
+    "parse_set",
     "preset",
     "range_of",
     "validate_config",
@@ -592,7 +602,8 @@ def _override(obj: Any, table: dict[str, Any], prefix: str) -> Any:
         where = f"{prefix}.{key}" if prefix else key
         if key not in names:
             known = ", ".join(sorted(names))
-            raise ConfigError(f"unknown key {brief(where)} (known in [{prefix or 'top level'}]: {known})")
+            raise ConfigError(f"unknown key {brief(where)}{did_you_mean(key, sorted(names))} "
+                              f"(known in [{prefix or 'top level'}]: {known})")
         tp = hints[key]
         checked = _check_value(value, tp, where, range_of(type(obj), key))
         if dataclasses.is_dataclass(tp):
@@ -609,6 +620,156 @@ def apply_overrides(base: Config, table: dict[str, Any]) -> Config:
     table = dict(table)
     table.pop("preset", None)
     return validate_config(_override(base, table, ""))
+
+
+# --------------------------------------------------------------------------------------------------
+# Command-line overrides: the named options and ``--set section.key=value``, through the same validator
+
+
+@dataclass(frozen=True, slots=True)
+class CliOverrides:
+    """What a command line changes in the configuration, applied over the preset and ``--config`` file.
+
+    Attributes:
+        planner: ``--planner`` ([planner] kind).
+        matcher: ``--matcher`` ([scanmatch] method).
+        enforce_budgets: ``--enforce-budgets`` ([supervisor] enforce_budgets = true).
+        mode: ``--mode`` ([navigation] mode).
+        local: ``--local`` ([navigation.local] strategy; refused for a navigation that runs no local
+            strategy).
+        no_selector: ``--no-selector`` ([navigation] selector = false).
+        sets: ``--set section.key=value`` pairs, applied after the named options, in order (a later pair
+            wins).
+    """
+
+    planner: str | None = None
+    matcher: str | None = None
+    enforce_budgets: bool = False
+    mode: str | None = None
+    local: str | None = None
+    no_selector: bool = False
+    sets: tuple[str, ...] = ()
+
+
+def choose(option: str, value: str | None, choices: Sequence[str]) -> str | None:
+    """``value`` stripped and lower-cased when it is one of ``choices`` (None passes).
+
+    Raises:
+        ConfigError: "<option>: expected one of ..., got '...'" with the closest choice.
+    """
+    if value is None:
+        return None
+    if value.strip().lower() not in choices:
+        raise ConfigError(f"{option}: expected one of {', '.join(choices)}, got {brief(value)}"
+                          f"{did_you_mean(value.strip(), choices)}")
+    return value.strip().lower()
+
+
+def navigation_choices(mode: str | None, local: str | None) -> tuple[str | None, str | None]:
+    """``--mode`` and ``--local`` checked against the navigation modes and local strategies."""
+    return choose("--mode", mode, NAV_MODES), choose("--local", local, LOCAL_STRATEGIES)
+
+
+def parse_set(text: str) -> dict[str, Any]:
+    """One ``--set section.key=value`` as a nested table (``{"section": {"key": value}}``).
+
+    The value is read as a TOML value (``0.4``, ``8``, ``true``, ``"nf1"``, ``[1, 2]``); a bare word that is
+    not one (``tunnel``) is a string.
+
+    Raises:
+        ConfigError: no ``=``, an empty or malformed key path (one line quoting the pair).
+    """
+    key, sep, raw = text.partition("=")
+    path = [part.strip() for part in key.split(".")]
+    if not sep or not all(part.replace("_", "").replace("-", "").isalnum() for part in path):
+        raise ConfigError(f"--set: expected section.key=value (e.g. reactor.security_m=0.4), "
+                          f"got {brief(text)}")
+    value: Any
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()
+    table: dict[str, Any] = {path[-1]: value}
+    for part in reversed(path[:-1]):
+        table = {part: table}
+    return table
+
+
+def _merge(into: dict[str, Any], table: dict[str, Any]) -> dict[str, Any]:
+    """``into`` with ``table`` merged in, recursively (``table`` wins)."""
+    out = dict(into)
+    for key, value in table.items():
+        old = out.get(key)
+        out[key] = _merge(old, value) if isinstance(old, dict) and isinstance(value, dict) else value
+    return out
+
+
+def _option_table(ov: CliOverrides) -> dict[str, Any]:
+    """The named options of ``ov`` as one nested table of overrides, each value checked by name first."""
+    table: dict[str, Any] = {}
+    if (kind := choose("--planner", ov.planner, PLANNERS)) is not None:
+        table["planner"] = {"kind": kind}
+    if (method := choose("--matcher", ov.matcher, MATCHER_METHODS)) is not None:
+        table["scanmatch"] = {"method": method}
+    if ov.enforce_budgets:
+        table["supervisor"] = {"enforce_budgets": True}
+    mode, local = navigation_choices(ov.mode, ov.local)
+    nav: dict[str, Any] = {}
+    if mode is not None:
+        nav["mode"] = mode
+    if local is not None:
+        nav["local"] = {"strategy": local}
+    if ov.no_selector:
+        nav["selector"] = False
+    if nav:
+        table["navigation"] = nav
+    return table
+
+
+def apply_cli(cfg: Config, ov: CliOverrides) -> Config:
+    """``cfg`` with the command line's named options, then its ``--set`` pairs, applied and validated as a
+    TOML file's keys are (``apply_overrides``).
+
+    Raises:
+        ConfigError: a bad option value or ``--set`` pair (naming the option or key), or ``--local`` for a
+            navigation that runs no local strategy.
+    """
+    out = apply_overrides(cfg, table) if (table := _option_table(ov)) else cfg
+    for text in ov.sets:
+        table = parse_set(text)
+        try:
+            out = apply_overrides(out, table)
+        except ConfigError as err:
+            raise ConfigError(f"--set {brief(text)}: {err}") from None
+    check_local_option(out, ov.local)
+    return out
+
+
+def configure(path: Path | None = None, *, preset_name: str | None = None,
+              overrides: CliOverrides = CliOverrides()) -> Config:
+    """The configuration of a command: the preset, the ``--config`` file over it, the command line over
+    both (``load_config`` then ``apply_cli``)."""
+    return apply_cli(load_config(path, preset_name=preset_name), overrides)
+
+
+def local_strategy_used(cfg: Config) -> bool:
+    """Whether ``cfg``'s navigation runs a local strategy: mode "local", or "teleop" / "follow" with the
+    mode selector (local navigation takes over); never "gnd" (GND's own ND+, no selector)."""
+    nav = cfg.navigation
+    return nav.mode == "local" or (nav.mode in ("teleop", "follow") and nav.selector)
+
+
+def check_local_option(cfg: Config, local: str | None) -> None:
+    """Refuse ``--local`` given (``local`` not None) for a navigation that runs no local strategy.
+
+    Raises:
+        ConfigError: one line naming the option and the mode.
+    """
+    if local is not None and not local_strategy_used(cfg):
+        nav = cfg.navigation
+        why = f"mode {nav.mode}" + (" without the mode selector" if nav.mode != "gnd" else "")
+        raise ConfigError(f"--local {local}: {why} runs no local strategy (mode local, or teleop / follow "
+                          "with the selector, do): drop --local")
 
 
 def load_config(path: Path | None = None, *, preset_name: str | None = None) -> Config:
