@@ -11,13 +11,16 @@ inside the commands so ``--help`` stays fast.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import importlib
+import inspect
 import logging
 import math
 import sys
 import warnings
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, NoReturn, ParamSpec, TextIO, TypeVar, cast
 
@@ -31,11 +34,11 @@ if TYPE_CHECKING:  # the CLI imports its heavy modules lazily, inside the comman
     from rich.console import Console
     from rich.progress import Progress, TaskID
 
-    from .config import Config
+    from .config import CliOverrides, Config
     from .replay import ReadOptions, RunSink
     from .scanmatch import MatcherReport
     from .scanmatch.run import Method
-    from .sim.scenario_file import ScenarioSpec
+    from .sim.runner import SimOutcome
     from .types import Subgoal, Tick
 
 __all__ = ["app", "cli_errors", "main"]
@@ -46,8 +49,21 @@ R = TypeVar("R")
 EXIT_ERROR = 2
 EXIT_INTERRUPTED = 130
 #: Suffixes of the files the commands read: an argument starting with "-" and ending so is a file's name.
-_FILE_SUFFIXES = (".clf", ".log", ".carmen", ".gz", ".bz2", ".bag", ".mcap", ".db3", ".yaml", ".yml", ".toml",
-                  ".txt", ".relations")
+_FILE_SUFFIXES = (
+    ".clf",
+    ".log",
+    ".carmen",
+    ".gz",
+    ".bz2",
+    ".bag",
+    ".mcap",
+    ".db3",
+    ".yaml",
+    ".yml",
+    ".toml",
+    ".txt",
+    ".relations",
+)
 #: Longest command-line error message printed (click quotes the value given, which may be any length).
 _MAX_MESSAGE = 400
 #: The exceptions of the click typer parses with (its own copy in recent versions, not the click package).
@@ -89,8 +105,10 @@ def _command_line_message(err: Exception, args: Sequence[str]) -> str:
     """The message of a refused command line in one line of at most ``_MAX_MESSAGE`` characters; an
     unknown option that is a file's name starting with "-" says how to give it."""
     if isinstance(err, _click.NoSuchOption) and (name := _dash_file(err.option_name, args)) is not None:
-        return (f"{name}: a name starting with '-' reads as an option; write ./{name} to give that file "
-                f"(or put -- before it)")
+        return (
+            f"{name}: a name starting with '-' reads as an option; write ./{name} to give that file "
+            f"(or put -- before it)"
+        )
     text = one_line(err.format_message() if isinstance(err, _click.ClickException) else err)
     ctx = getattr(err, "ctx", None)
     if isinstance(err, _click.UsageError) and not isinstance(err, _click.BadParameter) and ctx is not None:
@@ -103,8 +121,11 @@ def _dash_file(option: str, args: Sequence[str]) -> str | None:
     """The argument an unknown ``option`` was read from when it names a file: it starts with "-", holds the
     option's letters and exists or ends like the files gndreplay reads (``-dash.clf``)."""
     for a in args:
-        if a.startswith("-") and option.lstrip("-") in a and (
-                Path(a).suffix.lower() in _FILE_SUFFIXES or _exists(a)):
+        if (
+            a.startswith("-")
+            and option.lstrip("-") in a
+            and (Path(a).suffix.lower() in _FILE_SUFFIXES or _exists(a))
+        ):
             return a
     return None
 
@@ -137,29 +158,6 @@ def _seed(value: int) -> int:
     return check_seed(value, "--seed")
 
 
-def _choice(option: str, value: str | None, choices: Sequence[str]) -> str | None:
-    """``value`` lower-cased when it is one of ``choices`` (None passes).
-
-    Raises:
-        ConfigError: "<option>: expected one of ..., got '...'" with the closest choice.
-    """
-    if value is None:
-        return None
-    from .io.userfile import brief, did_you_mean
-
-    if value.strip().lower() not in choices:
-        raise ConfigError(f"{option}: expected one of {', '.join(choices)}, got {brief(value)}"
-                          f"{did_you_mean(value.strip(), choices)}")
-    return value.strip().lower()
-
-
-def _check_preset(name: str | None) -> None:
-    """Refuse an unknown ``--preset`` before any file is read (with the closest preset)."""
-    from .config import PRESETS
-
-    _choice("--preset", name, sorted(PRESETS))
-
-
 #: Bounds of the options' numbers, equal to the library's (not imported: the modules holding them are slow
 #: to import, and --help stays fast): |x|, |y| of --goal and --goal-ahead [m] (io.subgoals.MAX_ABS_SUBGOAL_M,
 #: the readers' bound on positions); --until, --timeout [s] (io.base.MAX_ABS_TIME_NS, the readers' bound on
@@ -179,7 +177,10 @@ app = typer.Typer(
 )
 
 _LOG_PANEL = "Log reading"
+_CONFIG_PANEL = "Configuration"
 _MODE_PANEL = "Navigation mode (multi-loop)"
+_RUN_PANEL = "Run"
+_SIM_PANEL = "Scenarios"
 
 
 def cli_errors(fn: Callable[P, R]) -> Callable[P, R]:
@@ -263,7 +264,9 @@ def _root(
     """Replay real robot logs (2D laser + odometry) through a GND / ND+ navigation stack."""
 
 
-# options shared by every command that reads a log
+# --------------------------------------------------------------------------------------------------
+# Options: each declared once, shared by the commands that take it
+
 FormatOpt = Annotated[
     str | None,
     typer.Option(
@@ -317,11 +320,32 @@ StrictOpt = Annotated[
         rich_help_panel=_LOG_PANEL,
     ),
 ]
-OverwriteOpt = Annotated[
-    bool,
+PresetOpt = Annotated[
+    str | None,
     typer.Option(
-        "--overwrite",
-        help="Replace an earlier gndreplay output at --out (never a folder gndreplay did not write).",
+        "--preset",
+        help="Robot and stack preset: wheelchair or xr4000 (default: wheelchair; for a scenario, its own).",
+        rich_help_panel=_CONFIG_PANEL,
+        show_default=False,
+    ),
+]
+ConfigOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--config",
+        help="TOML file overriding any key of the preset.",
+        rich_help_panel=_CONFIG_PANEL,
+        show_default=False,
+    ),
+]
+SetOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--set",
+        help="Override one configuration key, section.key=value (repeatable; applied last, checked like "
+        "the TOML file), e.g. --set reactor.security_m=0.4 --set planner.kind=tunnel.",
+        rich_help_panel=_CONFIG_PANEL,
+        show_default=False,
     ),
 ]
 PlannerOpt = Annotated[
@@ -329,17 +353,17 @@ PlannerOpt = Annotated[
     typer.Option(
         "--planner",
         help="Global planner: nf1 (GND) or tunnel (the wheelchair paper). Default: the config's, nf1.",
+        rich_help_panel=_CONFIG_PANEL,
         show_default=False,
     ),
 ]
-# the multi-loop architecture's options, shared by run, batch (logs) and simulate
 ModeOpt = Annotated[
     str | None,
     typer.Option(
         "--mode",
         help="Desired navigation mode: gnd (GND to the goal), teleop (the recorded velocity commands: a "
         "Twist topic, CARMEN ODOM tv/rv), follow (path following of --subgoals) or local (local navigation "
-        "alone). Default: the config's [navigation] mode, gnd.",
+        "alone). Default: the config's \\[navigation] mode, gnd.",
         rich_help_panel=_MODE_PANEL,
         show_default=False,
     ),
@@ -357,8 +381,8 @@ SubgoalsOpt = Annotated[
     Path | None,
     typer.Option(
         "--subgoals",
-        help="Subgoals for --mode follow: one 'x y theta [stop|forward|reverse]' per line, in the corrected "
-        "odometry frame.",
+        help="Subgoals for --mode follow: one 'x y theta \\[stop|forward|reverse]' per line, in the "
+        "corrected odometry frame.",
         rich_help_panel=_MODE_PANEL,
         show_default=False,
     ),
@@ -367,28 +391,83 @@ NoSelectorOpt = Annotated[
     bool,
     typer.Option(
         "--no-selector",
-        help="Disable the mode selector: the desired mode's command goes out unchanged (no takeover by "
-        "local navigation, no reflexive override), for comparison.",
+        help="Disable the mode selector: the desired mode's command goes out unchanged (no takeover "
+        "by local navigation, no reflexive override), for comparison.",
         rich_help_panel=_MODE_PANEL,
     ),
 ]
-# closed-loop options shared by simulate and batch (scenarios)
+GoalAheadOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--goal-ahead",
+        callback=_bounded("--goal-ahead", 0.1, _MAX_POSITION_M),
+        help="Goal = the pose this many metres further along the log's corrected trajectory.",
+        rich_help_panel=_RUN_PANEL,
+        show_default="5.0",
+    ),
+]
+UntilOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--until",
+        callback=_bounded("--until", 0.0, _MAX_SECONDS),
+        help="Replay only the first T seconds of log time.",
+        rich_help_panel=_RUN_PANEL,
+        show_default=False,
+    ),
+]
+EveryOpt = Annotated[
+    int,
+    typer.Option(
+        "--every",
+        callback=_bounded("--every", 1, _MAX_EVERY),
+        help="Run the stack on every N-th scan.",
+        rich_help_panel=_RUN_PANEL,
+    ),
+]
+FiguresOpt = Annotated[
+    bool,
+    typer.Option(
+        "--figures/--no-figures", help="Draw the figures (and report.md).", rich_help_panel=_RUN_PANEL
+    ),
+]
+OverwriteOpt = Annotated[
+    bool,
+    typer.Option(
+        "--overwrite",
+        help="Replace an earlier gndreplay output at --out (never a folder gndreplay did not write).",
+        rich_help_panel=_RUN_PANEL,
+    ),
+]
+QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")]
+JsonOpt = Annotated[
+    bool, typer.Option("--json", help="Print the result as JSON on stdout instead of tables.")
+]
 LatencyOpt = Annotated[
     str,
     typer.Option(
         "--latency",
-        help="Scenarios: seconds from a scan to its command taking effect, or 'measured' (the stack's own "
-        "time: not deterministic).",
+        help="Scenarios: seconds from a scan to its command taking effect, or 'measured' (the stack's "
+        "own time: not deterministic).",
+        rich_help_panel=_SIM_PANEL,
     ),
 ]
 PerfectOdometryOpt = Annotated[
-    bool, typer.Option("--perfect-odometry", help="Scenarios: no odometry drift (scan matching still runs).")
+    bool,
+    typer.Option(
+        "--perfect-odometry",
+        help="Scenarios: no odometry drift (scan matching still runs).",
+        rich_help_panel=_SIM_PANEL,
+    ),
 ]
 TimeLimitOpt = Annotated[
     float | None,
     typer.Option(
-        "--time-limit", callback=_bounded("--time-limit", 0.1, _MAX_SCENARIO_TIME_S),
-        help="Scenarios: override each scenario's time limit (seconds, 0.1 to 1e6).", show_default=False,
+        "--time-limit",
+        callback=_bounded("--time-limit", 0.1, _MAX_SCENARIO_TIME_S),
+        help="Scenarios: override each scenario's time limit (seconds, 0.1 to 1e6).",
+        rich_help_panel=_SIM_PANEL,
+        show_default=False,
     ),
 ]
 LogArg = Annotated[
@@ -400,20 +479,166 @@ LogArg = Annotated[
 ]
 
 
+@dataclass(frozen=True, slots=True)
+class Setup:
+    """The configuration a command line asks for: the preset, the ``--config`` file, the overrides (named
+    options and ``--set``) and the subgoals file's content."""
+
+    path: Path | None
+    preset: str | None
+    overrides: CliOverrides
+    subgoals: tuple[Subgoal, ...] = ()
+
+    def config(self, **more: Any) -> Config:
+        """The resolved configuration, with ``more`` overrides (``CliOverrides`` fields) on top."""
+        from .config import configure
+
+        return configure(
+            self.path, preset_name=self.preset, overrides=dataclasses.replace(self.overrides, **more)
+        )
+
+
+def _read_options(
+    fmt: str | None,
+    scan_topic: str | None,
+    odom_topic: str | None,
+    cmd_topic: str | None,
+    truth_topic: str | None,
+    strict: bool,
+) -> ReadOptions:
+    """The log-reading options as one value."""
+    from .replay import ReadOptions
+
+    return ReadOptions(
+        fmt=fmt,
+        scan_topic=scan_topic,
+        odom_topic=odom_topic,
+        cmd_topic=cmd_topic,
+        truth_topic=truth_topic,
+        strict=strict,
+    )
+
+
+def _setup(
+    preset_name: str | None,
+    config: Path | None,
+    sets: list[str] | None,
+    planner: str | None = None,
+    mode: str | None = None,
+    local: str | None = None,
+    subgoals: Path | None = None,
+    no_selector: bool = False,
+) -> Setup:
+    """The configuration options as one value; an unknown preset and a bad subgoals file are refused here,
+    before any log is read."""
+    from .config import PRESETS, CliOverrides, choose
+
+    choose("--preset", preset_name, sorted(PRESETS))
+    overrides = CliOverrides(
+        planner=planner, mode=mode, local=local, no_selector=no_selector, sets=tuple(sets or ())
+    )
+    return Setup(config, preset_name, overrides, _load_subgoals(subgoals))
+
+
+def _resolved(annotation: Any, namespace: dict[str, Any]) -> Any:
+    """A parameter's annotation evaluated as typer needs it (the module's annotations are strings); a name
+    imported for type checking only stays a string: it is the value of another option group, which that
+    group's decorator removes from the signature."""
+    if not isinstance(annotation, str):
+        return annotation
+    try:
+        return eval(annotation, namespace)
+    except NameError:
+        return annotation
+
+
+def _option_group(
+    into: str, options: dict[str, tuple[Any, Any]], build: Callable[..., Any]
+) -> Callable[[Callable[..., R]], Callable[..., R]]:
+    """A decorator giving a command the ``options`` (name -> (annotated type, default)) as typer options and
+    passing them to it as one keyword argument ``into`` = ``build(**options given)``: a group of options is
+    declared once and each command receives it as one value."""
+
+    def decorate(fn: Callable[..., R]) -> Callable[..., R]:
+        own = [
+            p.replace(annotation=_resolved(p.annotation, fn.__globals__))
+            for p in inspect.signature(fn).parameters.values()
+            if p.name != into
+        ]
+        added = [
+            inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, annotation=tp, default=default)
+            for name, (tp, default) in options.items()
+        ]
+
+        @functools.wraps(fn)
+        def command(*args: Any, **kwargs: Any) -> R:
+            group = {name: kwargs.pop(name) for name in options}
+            return fn(*args, **kwargs, **{into: build(**group)})
+
+        params = own + added
+        command.__signature__ = inspect.Signature(params, return_annotation=None)  # type: ignore[attr-defined]
+        command.__annotations__ = {p.name: p.annotation for p in params}
+        return command
+
+    return decorate
+
+
+_LOG_OPTIONS = {
+    "fmt": (FormatOpt, None),
+    "scan_topic": (ScanTopicOpt, None),
+    "odom_topic": (OdomTopicOpt, None),
+    "cmd_topic": (CmdTopicOpt, None),
+    "truth_topic": (TruthTopicOpt, None),
+    "strict": (StrictOpt, False),
+}
+_CONFIG_OPTIONS = {"preset_name": (PresetOpt, None), "config": (ConfigOpt, None), "sets": (SetOpt, None)}
+_NAV_OPTIONS = {
+    "planner": (PlannerOpt, None),
+    "mode": (ModeOpt, None),
+    "local": (LocalOpt, None),
+    "subgoals": (SubgoalsOpt, None),
+    "no_selector": (NoSelectorOpt, False),
+}
+#: The log-reading options (``--format``, the topics, ``--strict``), given to a command as ``read``.
+log_options = _option_group("read", _LOG_OPTIONS, _read_options)
+#: The configuration options (``--preset``, ``--config``, ``--set``), given to a command as ``setup``.
+config_options = _option_group("setup", _CONFIG_OPTIONS, _setup)
+#: The configuration options and the navigation ones (``--planner``, ``--mode``, ``--local``, ``--subgoals``,
+#: ``--no-selector``), given to a command as ``setup``.
+navigation_options = _option_group("setup", _CONFIG_OPTIONS | _NAV_OPTIONS, _setup)
+
+
+def _load_subgoals(path: Path | None) -> tuple[Subgoal, ...]:
+    """The subgoals of --subgoals FILE (none without it)."""
+    if path is None:
+        return ()
+    from .io.subgoals import load_subgoals
+
+    return tuple(load_subgoals(path))
+
+
+def _said_moved(asked: Path, written: Path, what: str = "run", *, silent: bool = False) -> None:
+    """Tell the user the output went beside an earlier one (``asked``-2, ...) rather than over it."""
+    if written != asked and not silent:
+        typer.echo(
+            f"gndreplay: {asked} holds an earlier {what}; wrote {written} (--overwrite replaces it)", err=True
+        )
+
+
+def _print_json(data: object) -> None:
+    import json
+
+    typer.echo(json.dumps(data, allow_nan=True))
+
+
+# --------------------------------------------------------------------------------------------------
+# Commands
+
+
 @app.command()
 @cli_errors
-def info(
-    log: LogArg,
-    fmt: FormatOpt = None,
-    scan_topic: ScanTopicOpt = None,
-    odom_topic: OdomTopicOpt = None,
-    cmd_topic: CmdTopicOpt = None,
-    truth_topic: TruthTopicOpt = None,
-    strict: StrictOpt = False,
-    json_out: Annotated[
-        bool, typer.Option("--json", help="Print one JSON object instead of tables.")
-    ] = False,
-) -> None:
+@log_options
+def info(log: LogArg, json_out: JsonOpt = False, *, read: ReadOptions) -> None:
     """Show what a log contains (streams, rates, beams, range limits, odometry, gaps, malformed records).
 
     Format, start/end and duration, per-topic or per-message-type counts and rates, beams per scan, field
@@ -430,12 +655,12 @@ def info(
 
     result = log_info(
         log,
-        fmt=fmt,
-        scan_topic=scan_topic,
-        odom_topic=odom_topic,
-        cmd_topic=cmd_topic,
-        truth_topic=truth_topic,
-        strict=strict,
+        fmt=read.fmt,
+        scan_topic=read.scan_topic,
+        odom_topic=read.odom_topic,
+        cmd_topic=read.cmd_topic,
+        truth_topic=read.truth_topic,
+        strict=read.strict,
     )
     if json_out:
         import json
@@ -460,32 +685,23 @@ def _print_info(result: object) -> None:
         summary.add_row(label, value)
     console.print(summary)
     streams = Table(title="streams", title_justify="left")
-    for col, justify in (
-        ("stream", "left"),
-        ("type", "left"),
-        ("used as", "left"),
-        ("count", "right"),
-        ("rate", "right"),
-    ):
-        streams.add_column(col, justify=justify)  # type: ignore[arg-type]
+    for col in ("stream", "type", "used as", "count", "rate"):
+        streams.add_column(col, justify="right" if col in ("count", "rate") else "left")
     for row in stream_rows(result):
         streams.add_row(*row)
     console.print(streams)
 
 
-_RUN_PANEL = "Run"
-_NAV_PANEL = "Navigation"
-SAMPLE_LOG = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
-
-
-def _parse_goal(value: str | None) -> tuple[float, float] | None:
-    """``--goal X,Y``: two numbers, each within the readers' bound on positions.
+def _parse_goal(value: str | None, goal_ahead: float | None) -> tuple[float, float] | None:
+    """``--goal X,Y``: two numbers, each within the readers' bound on positions; not with --goal-ahead.
 
     Raises:
-        ConfigError: not two numbers separated by a comma, or one not finite or out of range.
+        ConfigError: not two numbers separated by a comma, one not finite or out of range, or both options.
     """
     if value is None:
         return None
+    if goal_ahead is not None:
+        raise ConfigError("--goal and --goal-ahead exclude each other: give one")
     from .io.userfile import brief, check_number
 
     parts = value.replace(" ", "").split(",")
@@ -493,22 +709,10 @@ def _parse_goal(value: str | None) -> tuple[float, float] | None:
         x, y = (float(p) for p in parts)
     except ValueError:
         raise ConfigError(f"--goal: expected X,Y in metres (e.g. 3.5,-1.0), got {brief(value)}") from None
-    return (check_number(x, "--goal: X", -_MAX_POSITION_M, _MAX_POSITION_M),
-            check_number(y, "--goal: Y", -_MAX_POSITION_M, _MAX_POSITION_M))
-
-
-def _sample_log() -> Path:
-    """The bundled sample log; regenerated (deterministically, seed 0) into the user cache if this
-    installation has no source tree beside it."""
-    if SAMPLE_LOG.is_file():
-        return SAMPLE_LOG
-    from .sim.scenario import simulate
-
-    cache = Path.home() / ".cache" / "gndreplay" / SAMPLE_LOG.name
-    if not cache.is_file():
-        cache.parent.mkdir(parents=True, exist_ok=True)
-        simulate("office", seed=0, out=cache)
-    return cache
+    return (
+        check_number(x, "--goal: X", -_MAX_POSITION_M, _MAX_POSITION_M),
+        check_number(y, "--goal: Y", -_MAX_POSITION_M, _MAX_POSITION_M),
+    )
 
 
 def _log_stem(log: Path) -> str:
@@ -524,6 +728,8 @@ def _log_stem(log: Path) -> str:
 
 @app.command()
 @cli_errors
+@log_options
+@navigation_options
 def run(
     log: Annotated[
         Path | None,
@@ -532,49 +738,22 @@ def run(
             show_default=False,
         ),
     ] = None,
-    preset_name: Annotated[
-        str | None,
-        typer.Option(
-            "--preset",
-            help="Robot and stack preset: wheelchair (default) or xr4000.",
-            rich_help_panel=_NAV_PANEL,
-            show_default=False,
-        ),
-    ] = None,
-    config: Annotated[
-        Path | None,
-        typer.Option(
-            "--config",
-            help="TOML file overriding any field of the preset.",
-            rich_help_panel=_NAV_PANEL,
-        ),
-    ] = None,
     goal: Annotated[
         str | None,
         typer.Option(
             "--goal",
             help="Fixed goal X,Y (m) in the corrected odometry frame (instead of --goal-ahead).",
-            rich_help_panel=_NAV_PANEL,
+            rich_help_panel=_RUN_PANEL,
             show_default=False,
         ),
     ] = None,
-    goal_ahead: Annotated[
-        float | None,
-        typer.Option(
-            "--goal-ahead",
-            callback=_bounded("--goal-ahead", 0.1, _MAX_POSITION_M),
-            help="Goal = the pose this many metres further along the log's corrected trajectory.",
-            rich_help_panel=_NAV_PANEL,
-            show_default="5.0",
-        ),
-    ] = None,
-    planner: PlannerOpt = None,
+    goal_ahead: GoalAheadOpt = None,
     matcher: Annotated[
         str | None,
         typer.Option(
             "--matcher",
             help="Odometry correction before the model: idc, kiss-icp or odom (default: the config's, idc).",
-            rich_help_panel=_NAV_PANEL,
+            rich_help_panel=_CONFIG_PANEL,
             show_default=False,
         ),
     ] = None,
@@ -583,7 +762,7 @@ def run(
         typer.Option(
             "--enforce-budgets",
             help="Act on module time-outs as the papers do (planner over budget = planner failure).",
-            rich_help_panel=_NAV_PANEL,
+            rich_help_panel=_CONFIG_PANEL,
         ),
     ] = False,
     out: Annotated[
@@ -593,57 +772,26 @@ def run(
             help="Run directory (default: out/<log-stem>). An earlier run there is kept: the new one is "
             "written beside it (out/<log-stem>-2, ...) unless --overwrite.",
             rich_help_panel=_RUN_PANEL,
+            show_default=False,
         ),
     ] = None,
     overwrite: OverwriteOpt = False,
-    until: Annotated[
-        float | None,
-        typer.Option(
-            "--until",
-            callback=_bounded("--until", 0.0, _MAX_SECONDS),
-            help="Stop after T seconds of log time.",
-            rich_help_panel=_RUN_PANEL,
-        ),
-    ] = None,
-    every: Annotated[
-        int,
-        typer.Option(
-            "--every",
-            callback=_bounded("--every", 1, _MAX_EVERY),
-            help="Run the stack on every N-th scan.",
-            rich_help_panel=_RUN_PANEL,
-        ),
-    ] = 1,
+    until: UntilOpt = None,
+    every: EveryOpt = 1,
     mcap: Annotated[
         bool,
         typer.Option(
-            "--mcap",
-            help="Also write results.mcap (ROS 2, opens in Foxglove).",
-            rich_help_panel=_RUN_PANEL,
+            "--mcap", help="Also write results.mcap (ROS 2, opens in Foxglove).", rich_help_panel=_RUN_PANEL
         ),
     ] = False,
-    figures: Annotated[
-        bool,
-        typer.Option(
-            "--figures/--no-figures",
-            help="Draw the figures and report.md.",
-            rich_help_panel=_RUN_PANEL,
-        ),
-    ] = True,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
-    json_out: Annotated[bool, typer.Option("--json", help="Print summary.json to stdout.")] = False,
-    fmt: FormatOpt = None,
-    scan_topic: ScanTopicOpt = None,
-    odom_topic: OdomTopicOpt = None,
-    cmd_topic: CmdTopicOpt = None,
-    truth_topic: TruthTopicOpt = None,
-    strict: StrictOpt = False,
-    mode: ModeOpt = None,
-    local: LocalOpt = None,
-    subgoals: SubgoalsOpt = None,
-    no_selector: NoSelectorOpt = False,
+    figures: FiguresOpt = True,
+    quiet: QuietOpt = False,
+    json_out: JsonOpt = False,
+    *,
+    read: ReadOptions,
+    setup: Setup,
 ) -> None:
-    """Replay a log through scan matching -> model -> NF1 planner -> ND+ reactor -> GND supervisor.
+    """Replay a log through scan matching -> model -> planner -> ND+ reactor -> supervisor.
 
     Writes a run directory: commands.csv (one command per scan), timing.csv, the odometry and corrected
     trajectories (TUM), summary.json, the resolved config.toml, the figures and report.md.
@@ -658,62 +806,50 @@ def run(
 
       gndreplay run run.bag --mode teleop       # where would the stack have taken over from the driver?
     """
-    import dataclasses
-
-    from .config import load_config
     from .replay import RunOptions, command_gap_warning, run_log
+    from .sim.scenario import sample_log
 
-    goal_xy = _parse_goal(goal)
-    if goal_xy is not None and goal_ahead is not None:
-        raise ConfigError("--goal and --goal-ahead exclude each other: give one")
-    _check_preset(preset_name)
-    log_path = log if log is not None else _sample_log()
-    cfg = _with_planner(load_config(config, preset_name=preset_name), planner)
-    if matcher is not None:
-        cfg = _with_matcher(cfg, matcher)
-    if enforce_budgets:
-        cfg = dataclasses.replace(cfg, supervisor=dataclasses.replace(cfg.supervisor, enforce_budgets=True))
-    cfg = _with_navigation(cfg, mode, local, no_selector)
+    goal_xy = _parse_goal(goal, goal_ahead)
+    cfg = setup.config(matcher=matcher, enforce_budgets=enforce_budgets)
+    log_path = log if log is not None else sample_log()
     out_dir = out if out is not None else Path("out") / _log_stem(log_path)
     options = RunOptions(
-        goal_xy=goal_xy, goal_ahead_m=5.0 if goal_ahead is None else goal_ahead, until_s=until, every=every,
-        subgoals=_load_subgoals(subgoals),
+        goal_xy=goal_xy,
+        goal_ahead_m=5.0 if goal_ahead is None else goal_ahead,
+        until_s=until,
+        every=every,
+        subgoals=setup.subgoals,
     )
-    read = _read_options(fmt, scan_topic, odom_topic, cmd_topic, truth_topic, strict)
     with _RunProgress(enabled=not (quiet or json_out), label=log_path.name, until_s=until) as progress:
+        sinks = _run_sinks(
+            figures=figures,
+            mcap=mcap,
+            enforce_budgets=cfg.supervisor.enforce_budgets,
+            on_draw=progress.on_draw,
+        )
         summary = run_log(
             log_path,
             cfg,
             out_dir,
             options=options,
             read=read,
-            sinks=_run_sinks(
-                figures=figures,
-                mcap=mcap,
-                enforce_budgets=cfg.supervisor.enforce_budgets,
-                on_draw=progress.on_draw,
-            ),
+            sinks=sinks,
             overwrite=overwrite,
-            on_tick=progress.on_tick,
-            on_open=progress.on_open,
-            on_stage=progress.on_stage,
-            on_compile=progress.on_compile,
+            **progress.callbacks(),
         )
-    if summary.out_dir != out_dir and not (quiet or json_out):
-        typer.echo(f"gndreplay: {out_dir} holds an earlier run; wrote {summary.out_dir} "
-                   "(--overwrite replaces it)", err=True)
+    _said_moved(out_dir, summary.out_dir, silent=quiet or json_out)
     if (gap := command_gap_warning(summary.data)) is not None:
         typer.echo(f"gndreplay: warning: {gap}", err=True)
     if json_out:
-        import json
-
-        typer.echo(json.dumps(summary.data, allow_nan=True))
+        _print_json(summary.data)
     elif not quiet:
         _print_run(summary.data, summary.out_dir)
 
 
 @app.command()
 @cli_errors
+@log_options
+@config_options
 def scanmatch(
     log: LogArg,
     matcher: Annotated[
@@ -730,66 +866,63 @@ def scanmatch(
     out: Annotated[
         Path | None,
         typer.Option(
-            "--out", help="Folder for one TUM trajectory per matcher (default: out/<log-stem>-scanmatch)."
+            "--out",
+            help="Folder for one TUM trajectory per matcher (default: out/<log-stem>-scanmatch).",
+            rich_help_panel=_RUN_PANEL,
+            show_default=False,
         ),
     ] = None,
-    config: Annotated[
-        Path | None, typer.Option("--config", help="TOML with [scanmatch.idc] / [scanmatch.kiss].")
-    ] = None,
-    json_out: Annotated[bool, typer.Option("--json", help="Print the rows as JSON.")] = False,
     overwrite: OverwriteOpt = False,
-    fmt: FormatOpt = None,
-    scan_topic: ScanTopicOpt = None,
-    odom_topic: OdomTopicOpt = None,
-    strict: StrictOpt = False,
+    json_out: JsonOpt = False,
+    *,
+    read: ReadOptions,
+    setup: Setup,
 ) -> None:
     """Correct the log's odometry with each matcher and compare them side by side from the same run.
 
     Writes one TUM trajectory per matcher (full-precision stamps, readable by evo) and prints ms per scan
     (median, p99), match failures and, with --relations, the relation errors: for each relation (t1, t2) the
     pose of scan t2 in the frame of scan t1 against the reference; mean +- std and max of the translational
-    (m) and rotational (deg) errors, relations matched / unmatched.
+    (m) and rotational (deg) errors, relations matched / unmatched. The matchers' settings come from the
+    configuration's [scanmatch.idc] / [scanmatch.kiss] sections.
 
     [bold]Example[/]
 
       gndreplay scanmatch mit-csail.clf.bz2 --relations mit-csail.relations
     """
-    from .config import load_config
+    from .config import choose
     from .evaluation import load_relations
     from .io import open_log
     from .scanmatch import METHODS, run_scanmatch
 
-    if matcher != "all" and matcher not in METHODS:
-        from .io.userfile import brief, did_you_mean
-
-        raise ConfigError(f"--matcher must be one of {', '.join(METHODS)} or all, got {brief(matcher)}"
-                          f"{did_you_mean(matcher, (*METHODS, 'all'))}")
-    methods: list[Method] = list(METHODS) if matcher == "all" else [cast("Method", matcher)]
-    cfg = load_config(config)
+    chosen = choose("--matcher", matcher, (*METHODS, "all"))
+    methods: list[Method] = list(METHODS) if chosen == "all" else [cast("Method", chosen)]
+    cfg = setup.config()
     refs = load_relations(relations) if relations is not None else None
     out_dir = out if out is not None else Path("out") / f"{_log_stem(log)}-scanmatch"
 
     def ticks() -> Iterator[Tick]:
-        with open_log(log, fmt=fmt, scan_topic=scan_topic, odom_topic=odom_topic, strict=strict) as reader:
+        with open_log(
+            log, fmt=read.fmt, scan_topic=read.scan_topic, odom_topic=read.odom_topic, strict=read.strict
+        ) as reader:
             yield from reader.ticks()
 
-    with open_log(log, fmt=fmt, scan_topic=scan_topic, odom_topic=odom_topic, strict=strict):
-        pass  # fail fast, before any matcher runs, on an unreadable log or a bad topic
     rows = run_scanmatch(
-        ticks, methods, relations=refs, out_dir=out_dir, idc=cfg.scanmatch.idc, kiss=cfg.scanmatch.kiss,
-        relations_name=str(relations), overwrite=overwrite,
+        ticks,
+        methods,
+        relations=refs,
+        out_dir=out_dir,
+        idc=cfg.scanmatch.idc,
+        kiss=cfg.scanmatch.kiss,
+        relations_name=str(relations),
+        overwrite=overwrite,
         inputs=[Path(log)] + ([relations] if relations is not None else []),
     )
-    written = Path(rows[0].tum_path).parent if rows and rows[0].tum_path else out_dir
-    if written != out_dir:
-        typer.echo(f"gndreplay: {out_dir} holds an earlier run; wrote {written} (--overwrite replaces it)",
-                   err=True)
+    _said_moved(out_dir, Path(rows[0].tum_path).parent if rows and rows[0].tum_path else out_dir)
     if json_out:
-        import json
-
-        typer.echo(json.dumps([r.to_dict() for r in rows], allow_nan=True))
-        return
-    _print_scanmatch(rows, relations is not None)
+        _print_json([r.to_dict() for r in rows])
+    else:
+        _print_scanmatch(rows, relations is not None)
 
 
 def _print_scanmatch(rows: Sequence[MatcherReport], with_relations: bool) -> None:
@@ -798,8 +931,17 @@ def _print_scanmatch(rows: Sequence[MatcherReport], with_relations: bool) -> Non
     table = Table(title="scan matching, side by side in one run", title_justify="left")
     cols = ["matcher", "ms median", "ms p99", "failures"]
     if with_relations:
-        cols += ["trans err (m)", "trans max", "rot err (deg)", "rot max", "relations",
-                 "<1 s m", "1-10 s m", ">10 s m", "<1 s rot max"]
+        cols += [
+            "trans err (m)",
+            "trans max",
+            "rot err (deg)",
+            "rot max",
+            "relations",
+            "<1 s m",
+            "1-10 s m",
+            ">10 s m",
+            "<1 s rot max",
+        ]
     for c in cols:
         table.add_column(c, justify="left" if c == "matcher" else "right")
     for r in rows:
@@ -860,6 +1002,7 @@ def report(
 
 @app.command()
 @cli_errors
+@navigation_options
 def simulate(
     scenario: Annotated[
         str | None,
@@ -869,37 +1012,34 @@ def simulate(
             show_default=False,
         ),
     ] = None,
-    preset_name: Annotated[
-        str | None,
-        typer.Option("--preset", help="wheelchair or xr4000 (default: the scenario's).", show_default=False),
-    ] = None,
-    config: Annotated[Path | None, typer.Option("--config", help="TOML overriding the preset.")] = None,
-    planner: PlannerOpt = None,
     seed: Annotated[
         int,
-        typer.Option("--seed", callback=_seed,
-                     help="Seed of every random draw (the same seed gives the same bytes; 0 to 2^63 - 1)."),
+        typer.Option(
+            "--seed",
+            callback=_seed,
+            help="Seed of every random draw (the same seed gives the same bytes; 0 to 2^63 - 1).",
+            rich_help_panel=_SIM_PANEL,
+        ),
     ] = 0,
     out: Annotated[
         Path | None,
         typer.Option(
             "--out",
-            help="Run directory (default out/sim/<scenario>-<preset>-<seed>); for office: the CARMEN log to "
-            "write (.clf, .clf.gz, .clf.bz2; default office.clf.bz2).",
+            help="Run directory (default out/sim/<scenario>-<preset>-<seed>); for office: the CARMEN log "
+            "to write (.clf, .clf.gz, .clf.bz2; default office.clf.bz2).",
+            rich_help_panel=_RUN_PANEL,
             show_default=False,
         ),
     ] = None,
     latency: LatencyOpt = "0",
     perfect_odometry: PerfectOdometryOpt = False,
     time_limit: TimeLimitOpt = None,
-    figures: Annotated[bool, typer.Option("--figures/--no-figures", help="Draw the figures.")] = True,
+    figures: FiguresOpt = True,
     overwrite: OverwriteOpt = False,
     list_: Annotated[bool, typer.Option("--list", help="List the shipped scenarios and exit.")] = False,
-    json_out: Annotated[bool, typer.Option("--json", help="Print result.json to stdout.")] = False,
-    mode: ModeOpt = None,
-    local: LocalOpt = None,
-    subgoals: SubgoalsOpt = None,
-    no_selector: NoSelectorOpt = False,
+    json_out: JsonOpt = False,
+    *,
+    setup: Setup,
 ) -> None:
     """Drive the navigation stack in closed loop through a simulated world and score it.
 
@@ -909,56 +1049,64 @@ def simulate(
 
     `gndreplay simulate office --seed 0 --out sample_logs/office.clf.bz2` writes the bundled sample log.
     """
-    if list_:
-        from .sim.scenario_file import shipped_scenarios
-
-        for name, text in shipped_scenarios().items():
-            typer.echo(f"{name:24s} {text}")
-        return
-    if scenario is None:
-        raise ConfigError("simulate: give a scenario file or name (or --list)")
-    _check_preset(preset_name)
-    planner = _planner(planner)
     from .sim.scenario import SCENARIOS
 
-    if scenario in SCENARIOS:
-        from .sim.scenario import simulate as run_simulation
-
-        typer.echo(str(run_simulation(scenario, seed=seed, out=out or Path(f"{scenario}.clf.bz2"),
-                                      overwrite=overwrite)))
+    if list_ or scenario is None:
+        _list_scenarios(given=list_)
         return
-    import json
+    if scenario in SCENARIOS:
+        from .sim.scenario import simulate as simulate_log
 
+        log = simulate_log(scenario, seed=seed, out=out or Path(f"{scenario}.clf.bz2"), overwrite=overwrite)
+        typer.echo(str(log))
+        return
     from .fsutil import safe_name
     from .sim import resolve_scenario, simulate_scenario
-    from .sim.runner import parse_latency, scenario_config
+    from .sim.closedloop import configure_scenario
+    from .sim.runner import parse_latency
 
     latency_s = parse_latency(latency)
-    spec = _with_scenario_navigation(resolve_scenario(scenario), mode, local, _load_subgoals(subgoals))
-    cfg = _with_navigation(scenario_config(spec.preset, config=config, preset=preset_name, planner=planner),
-                           None, None, no_selector)
+    spec, cfg = configure_scenario(resolve_scenario(scenario), config=setup.path, preset=setup.preset,
+                                   overrides=setup.overrides, subgoals=setup.subgoals)
     run_name = safe_name(f"{spec.name}-{cfg.preset}-{seed}")  # a scenario's name never leaves out/sim
     out_dir = out if out is not None else Path("out") / "sim" / run_name
     result = simulate_scenario(spec, out_dir=out_dir, cfg=cfg, seed=seed, latency_s=latency_s,
                                perfect_odometry=perfect_odometry, time_limit_s=time_limit, figures=figures,
                                overwrite=overwrite)
-    if result.out_dir != out_dir and not json_out:
-        typer.echo(f"gndreplay: {out_dir} holds an earlier run; wrote {result.out_dir} "
-                   "(--overwrite replaces it)", err=True)
+    _said_moved(out_dir, result.out_dir, silent=json_out)
     if json_out:
-        typer.echo(json.dumps(result.result, allow_nan=True))
+        _print_json(result.result)
     else:
-        c = result.collision
-        what = (f"collision with {c['object']} at {c['t_s']:.2f} s" if c else
-                f"{result.outcome} at {result.end_time_s:.1f} s")
-        typer.echo(f"{spec.name} ({cfg.preset}, seed {seed}): {what}; path {result.path_length_m:.1f} m, "
-                   f"min clearance {_num(result.min_clearance_m, '{:.3f}')} m -> {result.out_dir}")
+        _print_simulation(result, f"{spec.name} ({cfg.preset}, seed {seed})")
     if not result.success:
         raise typer.Exit(1)
 
 
+def _print_simulation(result: SimOutcome, title: str) -> None:
+    """One line: how the scenario run ended, its path and clearance, and where it was written."""
+    c = result.collision
+    what = (f"collision with {c['object']} at {c['t_s']:.2f} s" if c else
+            f"{result.outcome} at {result.end_time_s:.1f} s")
+    typer.echo(
+        f"{title}: {what}; path {result.path_length_m:.1f} m, "
+        f"min clearance {_num(result.min_clearance_m, '{:.3f}')} m -> {result.out_dir}"
+    )
+
+
+def _list_scenarios(*, given: bool) -> None:
+    """``simulate --list``: the shipped scenarios, one per line (without it and a scenario: an error)."""
+    if not given:
+        raise ConfigError("simulate: give a scenario file or name (or --list)")
+    from .sim.scenario_file import shipped_scenarios
+
+    for name, text in shipped_scenarios().items():
+        typer.echo(f"{name:24s} {text}")
+
+
 @app.command()
 @cli_errors
+@log_options
+@navigation_options
 def batch(
     inputs: Annotated[
         list[Path] | None,
@@ -973,6 +1121,7 @@ def batch(
             "--scenarios",
             help="Shipped scenarios to run as well: all, or names (comma-separated or repeated; see "
             "`gndreplay simulate --list`).",
+            rich_help_panel=_SIM_PANEL,
             show_default=False,
         ),
     ] = None,
@@ -981,7 +1130,8 @@ def batch(
         typer.Option(
             "--seeds",
             help="Seeds of every scenario, e.g. 1-20, 1,3,5 or 0-4,10: one run per scenario and seed, "
-            "named <scenario>-s<seed> [default: 0].",
+            "named <scenario>-s<seed> (default 0).",
+            rich_help_panel=_SIM_PANEL,
             show_default=False,
         ),
     ] = None,
@@ -992,8 +1142,9 @@ def batch(
         Path | None,
         typer.Option(
             "--thresholds",
-            help="TOML of pass/fail limits and per-input settings (relations, goal); for scenarios also "
-            "per-scenario limits over seeds (min_success_rate, ...).",
+            help="TOML of pass/fail limits and per-input settings (relations, goal); for scenarios "
+            "also per-scenario limits over seeds (min_success_rate, ...).",
+            show_default=False,
         ),
     ] = None,
     out: Annotated[
@@ -1002,72 +1153,53 @@ def batch(
             "--out",
             help="Batch folder: one run directory per input. If it holds an earlier batch, the new one is "
             "written beside it (out/batch-2, ...) unless --overwrite.",
+            rich_help_panel=_RUN_PANEL,
         ),
     ] = Path("out/batch"),
     overwrite: OverwriteOpt = False,
     junit: Annotated[
         Path | None,
-        typer.Option("--junit", help="Also write JUnit XML (one test case per input, per scenario x seed)."),
+        typer.Option(
+            "--junit",
+            help="Also write JUnit XML (one test case per input, per scenario x seed).",
+            rich_help_panel=_RUN_PANEL,
+            show_default=False,
+        ),
     ] = None,
     dask: Annotated[
         str | None,
         typer.Option(
             "--dask",
-            help="Send the inputs to this dask.distributed scheduler (pip install 'gndreplay[dask]').",
+            help="Send the inputs to this dask.distributed scheduler (needs the dask extra: pip install "
+            "'gndreplay\\[dask]').",
             show_default=False,
         ),
     ] = None,
-    preset_name: Annotated[
-        str | None,
-        typer.Option(
-            "--preset",
-            help="wheelchair or xr4000 (default: wheelchair for logs, each scenario's own preset).",
-            show_default=False,
-        ),
-    ] = None,
-    config: Annotated[Path | None, typer.Option("--config", help="TOML overriding the preset.")] = None,
-    planner: PlannerOpt = None,
-    goal_ahead: Annotated[
-        float,
-        typer.Option("--goal-ahead", callback=_bounded("--goal-ahead", 0.1, _MAX_POSITION_M),
-                     help="Goal distance ahead (m; logs)."),
-    ] = 5.0,
-    until: Annotated[
-        float | None,
-        typer.Option("--until", callback=_bounded("--until", 0.0, _MAX_SECONDS),
-                     help="Replay only the first T seconds of each log."),
-    ] = None,
-    every: Annotated[
-        int,
-        typer.Option("--every", callback=_bounded("--every", 1, _MAX_EVERY),
-                     help="Run the stack on every N-th scan (logs)."),
-    ] = 1,
+    goal_ahead: GoalAheadOpt = None,
+    until: UntilOpt = None,
+    every: EveryOpt = 1,
     latency: LatencyOpt = "0",
     perfect_odometry: PerfectOdometryOpt = False,
     time_limit: TimeLimitOpt = None,
     figures: Annotated[
-        bool, typer.Option("--figures/--no-figures", help="Scenarios: draw each run's figures.")
+        bool,
+        typer.Option(
+            "--figures/--no-figures", help="Scenarios: draw each run's figures.", rich_help_panel=_RUN_PANEL
+        ),
     ] = True,
     timeout: Annotated[
         float,
         typer.Option(
             "--timeout",
             callback=_bounded("--timeout", 0.001, _MAX_SECONDS),
-            help="Per-input time limit (s): a longer input is stopped, its worker killed, and it is reported "
-            "as an error; the batch goes on.",
+            help="Per-input time limit (s): a "
+            "longer input is stopped, its worker killed, and it is reported as an error; the batch goes on.",
         ),
     ] = 3600.0,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")] = False,
-    fmt: FormatOpt = None,
-    scan_topic: ScanTopicOpt = None,
-    odom_topic: OdomTopicOpt = None,
-    cmd_topic: CmdTopicOpt = None,
-    truth_topic: TruthTopicOpt = None,
-    strict: StrictOpt = False,
-    mode: ModeOpt = None,
-    local: LocalOpt = None,
-    subgoals: SubgoalsOpt = None,
-    no_selector: NoSelectorOpt = False,
+    quiet: QuietOpt = False,
+    *,
+    read: ReadOptions,
+    setup: Setup,
 ) -> None:
     """Replay many logs and run closed-loop scenarios in parallel, check thresholds, write summary.csv /
     summary.md / JUnit.
@@ -1078,8 +1210,8 @@ def batch(
     robot reaches the goal (a collision, a goal missed or a time-out fails, with the reason); summary.md and
     scenarios.csv add each scenario's success rate, collisions, goals missed, time-outs, mean time and
     minimum clearance over seeds. Exit code: 0 all passed, 1 a threshold was exceeded, 2 an input could
-    not be read. The navigation mode options (--mode, --local, --subgoals, --no-selector) apply to the logs
-    and to the scenarios (in place of a scenario's own mode / local / subgoals, as `simulate`).
+    not be read. The configuration and navigation mode options apply to the logs and to the scenarios
+    (--mode, --local and --subgoals in place of a scenario's own, as `simulate`).
 
     [bold]Examples[/]
 
@@ -1096,41 +1228,36 @@ def batch(
     from .batch import expand_inputs, load_thresholds, parse_seeds, run_batch
     from .batch.scenarios import SimOptions
     from .batch.thresholds import Thresholds
-    from .config import load_config
     from .replay import RunOptions
     from .sim.runner import parse_latency
 
-    _check_preset(preset_name)
-    cfg = _with_navigation(_with_planner(load_config(config, preset_name=preset_name), planner), mode, local,
-                           no_selector)
-    goals = _load_subgoals(subgoals)  # read once, for the scenarios and the logs alike
+    cfg = setup.config()
     sim = SimOptions(latency_s=parse_latency(latency), perfect_odometry=perfect_odometry,
-                     time_limit_s=time_limit, figures=figures, config=config, preset=preset_name,
-                     planner=planner, mode=mode, local=local, subgoals=goals, no_selector=no_selector)
+                     time_limit_s=time_limit, figures=figures, config=setup.path, preset=setup.preset,
+                     overrides=setup.overrides, subgoals=setup.subgoals)
     job_list = expand_inputs(
         inputs or [], scenarios=scenarios or [], seeds=None if seeds is None else parse_seeds(seeds)
     )
     limits = load_thresholds(thresholds) if thresholds is not None else Thresholds()
-    options = RunOptions(goal_ahead_m=goal_ahead, until_s=until, every=every, subgoals=goals)
+    options = RunOptions(goal_ahead_m=5.0 if goal_ahead is None else goal_ahead, until_s=until, every=every,
+                         subgoals=setup.subgoals)
     with _progress(enabled=not quiet, label="batch", total=len(job_list), unit="inputs") as progress:
-        result = run_batch(
-            job_list,
-            cfg=cfg,
-            options=options,
-            thresholds=limits,
-            out_dir=out,
-            workers=jobs,
-            dask_address=dask,
-            progress=progress,
-            junit=junit,
-            read=_read_options(fmt, scan_topic, odom_topic, cmd_topic, truth_topic, strict),
-            timeout_s=timeout,
-            overwrite=overwrite,
-            sim=sim,
-        )
-    if result.out_dir != Path(os.path.abspath(out)):
-        typer.echo(f"gndreplay: {out} holds an earlier batch; wrote {result.out_dir} "
-                   "(--overwrite replaces it)", err=True)
+        result = run_batch(job_list, cfg=cfg, options=options, thresholds=limits, out_dir=out, workers=jobs,
+                           dask_address=dask, progress=progress, junit=junit, read=read, timeout_s=timeout,
+                           overwrite=overwrite, sim=sim)
+    _said_moved(Path(os.path.abspath(out)), result.out_dir, "batch")
+    _print_batch(result, quiet=quiet)
+    raise typer.Exit(result.exit_code)
+
+
+def _print_batch(result: object, *, quiet: bool) -> None:
+    """The errors and failures on stderr (failures only when ``quiet``: the table shows them), then the
+    table of inputs unless ``quiet``."""
+    from rich.table import Table
+
+    from .batch import BatchResult
+
+    assert isinstance(result, BatchResult)
     for r in result.results:
         if r.status == "error":
             typer.echo(f"gndreplay: error: {r.name}: {r.error}", err=True)
@@ -1138,19 +1265,11 @@ def batch(
             typer.echo(f"gndreplay: fail: {r.name}: {'; '.join(r.failures)}", err=True)
     for a in result.aggregates:
         if a.failures:
-            typer.echo(f"gndreplay: fail: {a.scenario} over {a.runs} seeds: {'; '.join(a.failures)}",
-                       err=True)
-    if not quiet:
-        _print_batch(result)
-    raise typer.Exit(result.exit_code)
-
-
-def _print_batch(result: object) -> None:
-    from rich.table import Table
-
-    from .batch import BatchResult
-
-    assert isinstance(result, BatchResult)
+            typer.echo(
+                f"gndreplay: fail: {a.scenario} over {a.runs} seeds: {'; '.join(a.failures)}", err=True
+            )
+    if quiet:
+        return
     table = Table(title=f"batch: {len(result.results)} inputs in {result.wall_s:.1f} s", title_justify="left")
     for col in ("input", "status", "ticks", "stack p99 ms", "reactor p99 ms", "match failures", "why"):
         table.add_column(
@@ -1178,74 +1297,6 @@ def _print_batch(result: object) -> None:
 def _num(value: object, fmt: str = "{:.2f}") -> str:
     """A number for a table cell; "-" when there is none (missing, or NaN: nothing to average)."""
     return fmt.format(value) if isinstance(value, int | float) and math.isfinite(value) else "-"
-
-
-def _read_options(
-    fmt: str | None,
-    scan_topic: str | None,
-    odom_topic: str | None,
-    cmd_topic: str | None,
-    truth_topic: str | None,
-    strict: bool,
-) -> ReadOptions:
-    """The shared log-reading options (``--format``, the topic overrides, ``--strict``) as one value."""
-    from .replay import ReadOptions
-
-    return ReadOptions(fmt=fmt, scan_topic=scan_topic, odom_topic=odom_topic, cmd_topic=cmd_topic,
-                       truth_topic=truth_topic, strict=strict)
-
-
-def _with_planner(cfg: Config, planner: str | None) -> Config:
-    """``cfg`` with ``[planner] kind`` set from ``--planner`` (None keeps the config's)."""
-    from .config import apply_overrides
-
-    kind = _planner(planner)
-    return cfg if kind is None else apply_overrides(cfg, {"planner": {"kind": kind}})
-
-
-def _planner(planner: str | None) -> str | None:
-    """``--planner`` lower-cased, or ConfigError naming the planners (and the closest)."""
-    return _choice("--planner", planner, ("nf1", "tunnel"))
-
-
-def _with_navigation(cfg: Config, mode: str | None, local: str | None, no_selector: bool) -> Config:
-    """``cfg`` with --mode, --local and --no-selector applied (``sim.closedloop.with_navigation``)."""
-    from .sim.closedloop import with_navigation
-
-    return with_navigation(cfg, mode, local, no_selector)
-
-
-def _load_subgoals(path: Path | None) -> tuple[Subgoal, ...]:
-    """The subgoals of --subgoals FILE (none without it).
-
-    Raises:
-        ConfigError: unreadable file or a bad line (named).
-    """
-    if path is None:
-        return ()
-    from .io.subgoals import load_subgoals
-
-    return tuple(load_subgoals(path))
-
-
-def _with_scenario_navigation(spec: ScenarioSpec, mode: str | None, local: str | None,
-                              subgoals: tuple[Subgoal, ...]) -> ScenarioSpec:
-    """The scenario with --mode, --local and --subgoals in place of its own (``sim.closedloop.
-    scenario_navigation``)."""
-    from .sim.closedloop import scenario_navigation
-
-    return scenario_navigation(spec, mode, local, subgoals)
-
-
-def _with_matcher(cfg: Config, matcher: str) -> Config:
-    from .config import apply_overrides
-    from .io.userfile import brief, did_you_mean
-
-    try:
-        return apply_overrides(cfg, {"scanmatch": {"method": matcher}})
-    except GndReplayError:
-        raise ConfigError(f"--matcher must be idc, kiss-icp or odom, got {brief(matcher)}"
-                          f"{did_you_mean(matcher, ('idc', 'kiss-icp', 'odom'))}") from None
 
 
 def _run_sinks(
@@ -1384,6 +1435,15 @@ class _RunProgress:
         if self._bar is not None:
             self._bar.stop()
 
+    def callbacks(self) -> dict[str, Callable[..., None]]:
+        """The callbacks ``replay.run_log`` takes: on_tick, on_open, on_stage, on_compile."""
+        return {
+            "on_tick": self.on_tick,
+            "on_open": self.on_open,
+            "on_stage": self.on_stage,
+            "on_compile": self.on_compile,
+        }
+
     def _show(self, **fields: object) -> None:
         if self._bar is not None and self._task is not None:
             self._bar.update(self._task, **fields)  # type: ignore[arg-type]
@@ -1418,8 +1478,10 @@ class _RunProgress:
         self.compiled += 1
         if self.compiled == 1 and self.enabled and not self.live:
             typer.echo("gndreplay: compiling (first run only)...", err=True)
-        self._show(description=f"{self.label}: compiling (first run only)…",
-                   detail=f"{self.compiled} kernels ({kernel})")
+        self._show(
+            description=f"{self.label}: compiling (first run only)…",
+            detail=f"{self.compiled} kernels ({kernel})",
+        )
 
     def on_tick(self, result: object) -> None:
         """One stack tick: advance by its log time (or by one scan)."""
@@ -1459,9 +1521,12 @@ def _print_run(data: dict[str, object], out_dir: Path) -> None:
     iv = data.get("interventions")
     if isinstance(iv, dict):
         takeovers, emergencies = iv.get("takeovers", []), iv.get("emergencies", [])
-        head.add_row("interventions", f"{len(takeovers)} takeovers ({iv.get('takeover_ticks', 0)} ticks), "
-                     f"{len(emergencies)} reflexive overrides ({iv.get('reflexive_ticks', 0)} ticks); "
-                     f"active modes {_counts(iv.get('active', {}))}")
+        head.add_row(
+            "interventions",
+            f"{len(takeovers)} takeovers ({iv.get('takeover_ticks', 0)} ticks), "
+            f"{len(emergencies)} reflexive overrides ({iv.get('reflexive_ticks', 0)} ticks); "
+            f"active modes {_counts(iv.get('active', {}))}",
+        )
     if agreement.get("heading_ticks"):
         head.add_row(
             "agreement with the log",

@@ -39,6 +39,7 @@ from .scanmatch import IdcParams, KissParams
 
 __all__ = [
     "CROSS_CHECKS",
+    "NO_OVERRIDES",
     "PRESETS",
     "RANGES",
     "CliOverrides",
@@ -593,6 +594,10 @@ def _check_value(value: Any, tp: Any, where: str, allowed: Range | None) -> Any:
     raise ConfigError(f"{where}: unsupported setting type {tp!r}")  # pragma: no cover
 
 
+#: Keys of a section an unknown-key error lists (the rest counted), so the error stays one readable line.
+MAX_KEYS_LISTED = 20
+
+
 def _override(obj: Any, table: dict[str, Any], prefix: str) -> Any:
     """A copy of dataclass ``obj`` with the keys of ``table`` replaced, validated recursively."""
     hints = get_type_hints(type(obj))
@@ -601,9 +606,11 @@ def _override(obj: Any, table: dict[str, Any], prefix: str) -> Any:
     for key, value in table.items():
         where = f"{prefix}.{key}" if prefix else key
         if key not in names:
-            known = ", ".join(sorted(names))
-            raise ConfigError(f"unknown key {brief(where)}{did_you_mean(key, sorted(names))} "
-                              f"(known in [{prefix or 'top level'}]: {known})")
+            known = sorted(names)
+            listed = ", ".join(known[:MAX_KEYS_LISTED]) + (
+                f", ... ({len(known) - MAX_KEYS_LISTED} more)" if len(known) > MAX_KEYS_LISTED else "")
+            raise ConfigError(f"unknown key {brief(where)}{did_you_mean(key, known)} "
+                              f"(known in [{prefix or 'top level'}]: {listed})")
         tp = hints[key]
         checked = _check_value(value, tp, where, range_of(type(obj), key))
         if dataclasses.is_dataclass(tp):
@@ -649,6 +656,10 @@ class CliOverrides:
     local: str | None = None
     no_selector: bool = False
     sets: tuple[str, ...] = ()
+
+
+#: No command-line override.
+NO_OVERRIDES = CliOverrides()
 
 
 def choose(option: str, value: str | None, choices: Sequence[str]) -> str | None:
@@ -746,7 +757,7 @@ def apply_cli(cfg: Config, ov: CliOverrides) -> Config:
 
 
 def configure(path: Path | None = None, *, preset_name: str | None = None,
-              overrides: CliOverrides = CliOverrides()) -> Config:
+              overrides: CliOverrides = NO_OVERRIDES) -> Config:
     """The configuration of a command: the preset, the ``--config`` file over it, the command line over
     both (``load_config`` then ``apply_cli``)."""
     return apply_cli(load_config(path, preset_name=preset_name), overrides)

@@ -33,6 +33,7 @@ from gndreplay.batch import (
     summary_md,
 )
 from gndreplay.batch.metrics import outcome_note
+from gndreplay.config import CliOverrides
 from gndreplay.errors import ConfigError
 from gndreplay.sim.runner import parse_latency, scenario_config
 
@@ -478,7 +479,7 @@ def test_cli_batch_passes_the_scenario_options(tmp_path: Path, monkeypatch: pyte
     assert CliRunner().invoke(app, args).exit_code == 0
     assert [j.name for j in seen["jobs"]] == ["enclosed-s0", "enclosed-s1"]
     assert seen["sim"] == SimOptions(latency_s=None, time_limit_s=3.0, figures=False, config=toml,
-                                     planner="tunnel")
+                                     overrides=CliOverrides(planner="tunnel"))
     for bad, message in ((["--seeds", "3-1"], "seeds: range '3-1' in '3-1' goes down"),
                          (["--latency", "soon"], "--latency must be seconds or 'measured'"),
                          (["--scenarios", "nope"], "scenarios: no shipped scenario 'nope'")):
@@ -506,18 +507,20 @@ def test_scenario_runs_take_the_navigation_options_as_simulate_does(tmp_path: Pa
     assert (res["navigation"]["mode"], res["navigation"]["selector"], res["navigation"]["local"]) == (
         "gnd", True, "nd")
     res, scores = nav("local", SimOptions(time_limit_s=1.0, figures=False, perfect_odometry=True,
-                                          mode="LOCAL", local="wall-left", no_selector=True))
+                                          overrides=CliOverrides(mode="LOCAL", local="wall-left",
+                                                                 no_selector=True)))
     assert (res["navigation"]["mode"], res["navigation"]["selector"], res["navigation"]["local"]) == (
         "local", False, "wall-left")
     assert scores["takeovers"] == res["takeovers"]
     assert res["active_modes"] == {"local": res["ticks"]} and scores["local_ticks_pct"] == 100.0
     stop = (Subgoal(2.0, 2.0, 0.0, "stop"),)
-    res, _ = nav("follow", SimOptions(time_limit_s=1.0, figures=False, mode="follow", subgoals=stop))
+    res, _ = nav("follow", SimOptions(time_limit_s=1.0, figures=False, overrides=CliOverrides(mode="follow"),
+                                      subgoals=stop))
     assert (res["navigation"]["mode"], res["navigation"]["subgoals"]) == ("follow", 1)
     with pytest.raises(ConfigError, match=r"room.yaml: teleop: missing"):
-        run_scenario(job, tmp_path / "teleop", SimOptions(mode="teleop"))
+        run_scenario(job, tmp_path / "teleop", SimOptions(overrides=CliOverrides(mode="teleop")))
     with pytest.raises(ConfigError, match=r"--mode: expected one of gnd, teleop, follow, local, got 'drive'"):
-        run_scenario(job, tmp_path / "drive", SimOptions(mode="drive"))
+        run_scenario(job, tmp_path / "drive", SimOptions(overrides=CliOverrides(mode="drive")))
 
 
 def test_goals_missed_have_their_own_thresholds_per_run_and_over_seeds(tmp_path: Path) -> None:

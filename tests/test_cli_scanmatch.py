@@ -51,7 +51,7 @@ def test_scanmatch_table_and_bad_inputs(tmp_path: Path) -> None:
     table = runner.invoke(app, ["scanmatch", str(SAMPLE), "--matcher", "odom", "--out", str(tmp_path / "o")])
     assert table.exit_code == 0 and "odom" in table.stdout and "ms median" in table.stdout
     bad = runner.invoke(app, ["scanmatch", str(SAMPLE), "--matcher", "icp"])
-    assert bad.exit_code == 2 and "--matcher must be one of" in bad.output
+    assert bad.exit_code == 2 and "--matcher: expected one of" in bad.output
     missing = runner.invoke(app, ["scanmatch", str(tmp_path / "none.clf")])
     assert missing.exit_code == 2 and "none.clf" in missing.stderr and "Traceback" not in missing.output
     garbage = tmp_path / "junk.clf"

@@ -82,7 +82,8 @@ def test_preset_from_file_and_from_option(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("[robot]\nvmaxx = 0.2\n", r"cfg.toml: unknown key 'robot.vmaxx' \(known in \[robot\]: "),
+        ("[robot]\nvmaxx = 0.2\n",
+         r"cfg.toml: unknown key 'robot.vmaxx' \(did you mean 'vmax_mps'\?\) \(known in \[robot\]: "),
         ("[robto]\nvmax_mps = 0.2\n", r"unknown key 'robto'"),
         ("[robot]\nvmax_mps = 'fast'\n", r"robot.vmax_mps: expected a number, got 'fast'"),
         ("[grid]\nsize_cells = 2.5\n", r"grid.size_cells: expected an integer, got 2.5"),

@@ -3,10 +3,9 @@ scores read back from its run directory.
 
 A scenario job runs ``gndreplay.sim.simulate_scenario`` (the same run directory as ``gndreplay simulate``:
 summary.json, result.json, sim_timing.json, log.mcap, ...). Its stack configuration is resolved in the
-worker, where the scenario file is read, by :func:`scenario_config`: ``--preset`` / ``--config`` apply as to
-logs, and without ``--preset`` the scenario's own ``preset:`` is used (as ``gndreplay simulate`` does);
-``--mode`` / ``--local`` / ``--subgoals`` replace the scenario's own keys and ``--no-selector`` disables the
-mode selector, through the same functions as ``gndreplay simulate`` (``gndreplay.sim.closedloop``).
+worker, where the scenario file is read, by ``sim.closedloop.configure_scenario`` as ``gndreplay simulate``
+does: ``--preset`` / ``--config`` / ``--set`` apply as to logs, and without ``--preset`` the scenario's own
+``preset:`` is used; ``--mode`` / ``--local`` / ``--subgoals`` replace the scenario's own keys.
 A bad scenario file is therefore that scenario's "error" row, never the batch's.
 
 Importing this module is cheap (no numpy / simulator code): the worker imports it before pinning threads.
@@ -26,6 +25,7 @@ from .metrics import metrics_from_result, outcome_note
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
+    from ..config import CliOverrides
     from ..types import Subgoal
 
 
@@ -49,12 +49,9 @@ class SimOptions:
         figures: draw each run's figures (fig_world.png and the run figures).
         config: TOML overriding the preset (``--config``), or None.
         preset: preset of every scenario (``--preset``); None: each scenario's own ``preset:``.
-        planner: planner kind (``--planner``), or None for the configuration's.
-        mode: navigation mode (``--mode``) in place of each scenario's own; None: the scenario's (then the
-            configuration's).
-        local: local navigation strategy (``--local``) in place of each scenario's; None: the scenario's.
+        overrides: the command line's configuration options (``--planner``, ``--set``, ``--no-selector``;
+            ``--mode`` and ``--local`` in place of each scenario's own keys); None: none.
         subgoals: subgoals (``--subgoals``, parsed) in place of each scenario's; empty: the scenario's.
-        no_selector: disable the mode selector (``--no-selector``): the desired mode's command goes out.
     """
 
     latency_s: float | None = 0.0
@@ -63,11 +60,8 @@ class SimOptions:
     figures: bool = True
     config: Path | None = None
     preset: str | None = None
-    planner: str | None = None
-    mode: str | None = None
-    local: str | None = None
+    overrides: CliOverrides | None = None
     subgoals: tuple[Subgoal, ...] = ()
-    no_selector: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,14 +80,13 @@ def run_scenario(job: Job, run_dir: Path, sim: SimOptions) -> ScenarioRun:
         ConfigError: a bad scenario file (one line naming the file and the key) or configuration, or a mode
             the scenario cannot run (teleop without an operator, follow without subgoals).
     """
+    from ..config import CliOverrides
     from ..sim import load_scenario, resolve_scenario, simulate_scenario
-    from ..sim.closedloop import scenario_navigation, with_navigation
-    from ..sim.runner import scenario_config
+    from ..sim.closedloop import configure_scenario
 
     spec = resolve_scenario(job.scenario) if job.scenario else load_scenario(job.path)
-    spec = scenario_navigation(spec, sim.mode, sim.local, sim.subgoals)
-    cfg = with_navigation(scenario_config(spec.preset, config=sim.config, preset=sim.preset,
-                                          planner=sim.planner), no_selector=sim.no_selector)
+    spec, cfg = configure_scenario(spec, config=sim.config, preset=sim.preset,
+                                   overrides=sim.overrides or CliOverrides(), subgoals=sim.subgoals)
     out = simulate_scenario(
         spec,
         out_dir=run_dir,

@@ -41,16 +41,17 @@ import time
 from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .. import detmath as dm
-from ..config import Config, apply_overrides
+from ..config import NO_OVERRIDES, CliOverrides, Config, apply_overrides, configure, navigation_choices
 from ..errors import ConfigError
 from ..geometry import compose, relative
-from ..io.userfile import brief, check_number, did_you_mean
+from ..io.userfile import check_number
 from ..pipeline.stack import TickResult
 from ..replay import recorded_flags
 from ..types import Command, Flag, Pose2D, Scan, Subgoal, Tick
@@ -68,8 +69,8 @@ from .teleop import TeleopDriver
 from .world import LaserModel, add_laser_noise
 
 __all__ = [
-    "ClosedLoop", "SimParams", "SimRecord", "arc_step", "navigation_choices", "navigation_config",
-    "scenario_navigation", "with_navigation",
+    "ClosedLoop", "SimParams", "SimRecord", "arc_step", "configure_scenario", "navigation_config",
+    "scenario_navigation",
 ]
 
 F64 = NDArray[np.float64]
@@ -179,46 +180,6 @@ def navigation_config(spec: ScenarioSpec, cfg: Config) -> Config:
     return out
 
 
-def navigation_choices(mode: str | None, local: str | None) -> tuple[str | None, str | None]:
-    """``--mode`` and ``--local``, lower-cased and checked (None stays None).
-
-    Raises:
-        ConfigError: an unknown mode or strategy (one line naming the option and the choices).
-    """
-    from ..pipeline.local import LOCAL_STRATEGIES
-    from ..pipeline.stack import NAV_MODES
-
-    for option, value, choices in (("--mode", mode, NAV_MODES), ("--local", local, LOCAL_STRATEGIES)):
-        if value is not None and value.lower() not in choices:
-            raise ConfigError(f"{option}: expected one of {', '.join(choices)}, got {brief(value)}"
-                              f"{did_you_mean(value, choices)}")
-    return (None if mode is None else mode.lower()), (None if local is None else local.lower())
-
-
-def with_navigation(cfg: Config, mode: str | None = None, local: str | None = None,
-                    no_selector: bool = False) -> Config:
-    """``cfg`` with ``[navigation]`` mode, local strategy and selector set from ``--mode``, ``--local`` and
-    ``--no-selector`` (None / False keep the config's).
-
-    Raises:
-        ConfigError: an unknown mode or strategy, or --local for a mode that runs no local strategy (one
-            line naming the option).
-    """
-    from ..replay import check_local_option
-
-    mode, local = navigation_choices(mode, local)
-    nav: dict[str, Any] = {}
-    if mode is not None:
-        nav["mode"] = mode
-    if local is not None:
-        nav["local"] = {"strategy": local}
-    if no_selector:
-        nav["selector"] = False
-    out = apply_overrides(cfg, {"navigation": nav}) if nav else cfg
-    check_local_option(out, local)
-    return out
-
-
 def scenario_navigation(spec: ScenarioSpec, mode: str | None = None, local: str | None = None,
                         subgoals: tuple[Subgoal, ...] = ()) -> ScenarioSpec:
     """The scenario with ``--mode``, ``--local`` and ``--subgoals`` in place of its own ``mode``, ``local``
@@ -242,6 +203,23 @@ def scenario_navigation(spec: ScenarioSpec, mode: str | None = None, local: str 
     if subgoals:
         check_subgoals_used(out)
     return out
+
+
+def configure_scenario(spec: ScenarioSpec, *, config: Path | None = None, preset: str | None = None,
+                       overrides: CliOverrides = NO_OVERRIDES,
+                       subgoals: tuple[Subgoal, ...] = ()) -> tuple[ScenarioSpec, Config]:
+    """A scenario run's scenario and stack configuration from the command line: ``--mode``, ``--local`` and
+    ``--subgoals`` replace the scenario's own keys (``scenario_navigation``); the preset (``preset``, else
+    the scenario's), the ``config`` file and the other overrides make the configuration
+    (``config.configure``), as for a log.
+
+    Raises:
+        ConfigError: a bad option, config file or key (one line naming it), or subgoals for a scenario that
+            does not run mode follow.
+    """
+    spec = scenario_navigation(spec, overrides.mode, overrides.local, subgoals)
+    own = dataclasses.replace(overrides, mode=None, local=None)
+    return spec, configure(config, preset_name=preset or spec.preset, overrides=own)
 
 
 class _World:

@@ -44,6 +44,7 @@ __all__ = [
     "DEFAULT_T0_NS",
     "MAX_SEED",
     "RECORD_STEP",
+    "SAMPLE_LOG",
     "SCENARIOS",
     "DriveParams",
     "OdometryNoise",
@@ -61,6 +62,7 @@ __all__ = [
     "office_scenario",
     "office_world",
     "run_scenario",
+    "sample_log",
     "simulate",
 ]
 
@@ -616,3 +618,19 @@ def simulate(scenario: str, *, seed: int, out: Path, t0_ns: int = DEFAULT_T0_NS,
     write_carmen(out, iter_ticks(run, t0_ns=t0_ns), odometry=iter_odometry(run, t0_ns=t0_ns),
                  params=carmen_params(scn, seed=seed))
     return out
+
+
+#: The bundled sample log of a source tree (``gndreplay simulate office --seed 0`` writes it).
+SAMPLE_LOG = Path(__file__).resolve().parents[2] / "sample_logs" / "office.clf.bz2"
+
+
+def sample_log() -> Path:
+    """The bundled sample log; on an installation without the source tree beside it, the same log
+    simulated (seed 0, byte-identical) into the user's cache once."""
+    if SAMPLE_LOG.is_file():
+        return SAMPLE_LOG
+    cache = Path.home() / ".cache" / "gndreplay" / SAMPLE_LOG.name
+    if not cache.is_file():
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        simulate("office", seed=0, out=cache)
+    return cache
