@@ -5,7 +5,8 @@ Two trees (or two machines) behave the same when their manifests are equal. The 
 scanmatch), and every shipped scenario x preset x planner for the seeds asked (a scenario in another
 navigation mode than GND runs once per preset). The manifest lists the SHA-256 of every behaviour file:
 commands.csv, the TUM trajectories, result.json, log.mcap, results.mcap, config.toml, maps.npz, and
-summary.json without its wall-clock sections (``latency_ms``, ``over_budget``). Timing files are left out.
+summary.json without its wall-clock sections (``latency_ms``, ``over_budget``), and results.mcap's messages
+without its wall-clock ``/gndreplay/timing`` topic. Timing files are left out.
 
 The CLI is driven as a user runs it (``gndreplay.cli:main``, the console script's entry), so the same
 script measures any tree:
@@ -32,6 +33,7 @@ PLANNERS = ("nf1", "tunnel")
 PRESETS = ("wheelchair", "xr4000")
 SKIP_FILES = {"timing.csv", "sim_timing.json", "report.md"}
 WALL_CLOCK_KEYS = ("latency_ms", "over_budget")
+WALL_CLOCK_TOPICS = ("/gndreplay/timing",)
 
 
 def gnd(*args: str) -> list[str]:
@@ -74,8 +76,22 @@ def jobs_for(out: Path, seeds: list[int], with_logs: bool) -> list[tuple[str, li
     return jobs
 
 
+def mcap_digest(path: Path) -> str:
+    """SHA-256 of an MCAP file's messages (topic, log time, payload) in file order, wall-clock topics out."""
+    from mcap.reader import make_reader
+
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for _, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            if channel.topic not in WALL_CLOCK_TOPICS:
+                h.update(channel.topic.encode() + message.log_time.to_bytes(8, "little") + message.data)
+    return h.hexdigest()
+
+
 def digest(path: Path) -> str:
-    """SHA-256 of a behaviour file; summary.json without its wall-clock sections."""
+    """SHA-256 of a behaviour file; summary.json and results.mcap without their wall-clock parts."""
+    if path.name == "results.mcap":
+        return mcap_digest(path)
     data = path.read_bytes()
     if path.name == "summary.json":
         doc = json.loads(data)
@@ -111,12 +127,15 @@ def main() -> int:
     ap.add_argument("--seeds", default="1,2,3")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--no-logs", action="store_true", help="skip the dev logs (sample and scenarios only)")
+    ap.add_argument("--manifest-only", action="store_true", help="hash the runs in --out, run nothing")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     seeds = [int(s) for s in args.seeds.split(",")]
     jobs = jobs_for(args.out, seeds, not args.no_logs)
-    with ThreadPoolExecutor(args.jobs) as pool:
-        errors = [e for e in pool.map(lambda j: run_one(args.out, j), jobs) if e]
+    errors: list[str] = []
+    if not args.manifest_only:
+        with ThreadPoolExecutor(args.jobs) as pool:
+            errors = [e for e in pool.map(lambda j: run_one(args.out, j), jobs) if e]
     lines = manifest(args.out)
     statuses = [f"exit {(args.out / f'{n}.status').read_text().strip()}  {n}"
                 for n, _ in jobs if (args.out / f"{n}.status").is_file()]
