@@ -17,7 +17,7 @@ import logging
 import math
 import sys
 import warnings
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, NoReturn, ParamSpec, TextIO, TypeVar, cast
 
@@ -32,11 +32,12 @@ if TYPE_CHECKING:  # the CLI imports its heavy modules lazily, inside the comman
     from rich.progress import Progress, TaskID
 
     from .config import Config
-    from .replay import ReadOptions, RunSink
+    from .io import ReadOptions
+    from .replay import RunSink
     from .scanmatch import MatcherReport
     from .scanmatch.run import Method
     from .sim.scenario_file import ScenarioSpec
-    from .types import Subgoal, Tick
+    from .types import Subgoal
 
 __all__ = ["app", "cli_errors", "main"]
 
@@ -45,9 +46,9 @@ R = TypeVar("R")
 
 EXIT_ERROR = 2
 EXIT_INTERRUPTED = 130
-#: Suffixes of the files the commands read: an argument starting with "-" and ending so is a file's name.
-_FILE_SUFFIXES = (".clf", ".log", ".carmen", ".gz", ".bz2", ".bag", ".mcap", ".db3", ".yaml", ".yml", ".toml",
-                  ".txt", ".relations")
+#: Suffixes of the files the commands read besides logs (``gndreplay.io.LOG_SUFFIXES``): an argument starting
+#: with "-" and ending so is a file's name.
+_OTHER_FILE_SUFFIXES = (".db3", ".yaml", ".yml", ".toml", ".txt", ".relations")
 #: Longest command-line error message printed (click quotes the value given, which may be any length).
 _MAX_MESSAGE = 400
 #: The exceptions of the click typer parses with (its own copy in recent versions, not the click package).
@@ -102,9 +103,12 @@ def _command_line_message(err: Exception, args: Sequence[str]) -> str:
 def _dash_file(option: str, args: Sequence[str]) -> str | None:
     """The argument an unknown ``option`` was read from when it names a file: it starts with "-", holds the
     option's letters and exists or ends like the files gndreplay reads (``-dash.clf``)."""
+    from .io import COMPRESSED_SUFFIXES, LOG_SUFFIXES
+
+    suffixes = (*LOG_SUFFIXES, *COMPRESSED_SUFFIXES, *_OTHER_FILE_SUFFIXES)
     for a in args:
         if a.startswith("-") and option.lstrip("-") in a and (
-                Path(a).suffix.lower() in _FILE_SUFFIXES or _exists(a)):
+                Path(a).suffix.lower() in suffixes or _exists(a)):
             return a
     return None
 
@@ -428,15 +432,7 @@ def info(
     """
     from .info import log_info
 
-    result = log_info(
-        log,
-        fmt=fmt,
-        scan_topic=scan_topic,
-        odom_topic=odom_topic,
-        cmd_topic=cmd_topic,
-        truth_topic=truth_topic,
-        strict=strict,
-    )
+    result = log_info(log, options=_read_options(fmt, scan_topic, odom_topic, cmd_topic, truth_topic, strict))
     if json_out:
         import json
 
@@ -514,12 +510,9 @@ def _sample_log() -> Path:
 def _log_stem(log: Path) -> str:
     """The default output name of a log: its name less the log suffixes, never ``.``/``..``/empty/hidden."""
     from .fsutil import safe_name
+    from .io import log_stem
 
-    name = log.name.rstrip("/")
-    for suffix in (".gz", ".bz2", ".clf", ".log", ".carmen", ".bag", ".mcap"):
-        if name.endswith(suffix):
-            name = name[: -len(suffix)]
-    return safe_name(name)
+    return safe_name(log_stem(log.name.rstrip("/")))
 
 
 @app.command()
@@ -756,8 +749,8 @@ def scanmatch(
     """
     from .config import load_config
     from .evaluation import load_relations
-    from .io import open_log
     from .scanmatch import METHODS, run_scanmatch
+    from .scanmatch.run import log_ticks
 
     if matcher != "all" and matcher not in METHODS:
         from .io.userfile import brief, did_you_mean
@@ -769,12 +762,7 @@ def scanmatch(
     refs = load_relations(relations) if relations is not None else None
     out_dir = out if out is not None else Path("out") / f"{_log_stem(log)}-scanmatch"
 
-    def ticks() -> Iterator[Tick]:
-        with open_log(log, fmt=fmt, scan_topic=scan_topic, odom_topic=odom_topic, strict=strict) as reader:
-            yield from reader.ticks()
-
-    with open_log(log, fmt=fmt, scan_topic=scan_topic, odom_topic=odom_topic, strict=strict):
-        pass  # fail fast, before any matcher runs, on an unreadable log or a bad topic
+    ticks = log_ticks(log, _read_options(fmt, scan_topic, odom_topic, None, None, strict))
     rows = run_scanmatch(
         ticks, methods, relations=refs, out_dir=out_dir, idc=cfg.scanmatch.idc, kiss=cfg.scanmatch.kiss,
         relations_name=str(relations), overwrite=overwrite,
@@ -1189,7 +1177,7 @@ def _read_options(
     strict: bool,
 ) -> ReadOptions:
     """The shared log-reading options (``--format``, the topic overrides, ``--strict``) as one value."""
-    from .replay import ReadOptions
+    from .io import ReadOptions
 
     return ReadOptions(fmt=fmt, scan_topic=scan_topic, odom_topic=odom_topic, cmd_topic=cmd_topic,
                        truth_topic=truth_topic, strict=strict)
