@@ -641,7 +641,7 @@ class CarmenReader:
             raise
         self._saturation = detect_saturation(head.samples.get(self.scan_stream, []))
         self._params: dict[str, str] = dict(head.params)
-        self._laser = self._laser_config()
+        self._laser = self._configure_laser()
         self._stats.sensor_pose_source = self._sensor_pose_source()
         self._angles: dict[tuple[int, float, float], F64] = {}
         self._stats_counts: dict[str, int] = {}
@@ -818,7 +818,8 @@ class CarmenReader:
     def report(self) -> ReadReport:
         return self._stats.to_report()
 
-    def _laser_config(self) -> _Laser:
+    def _configure_laser(self) -> _Laser:
+        """The scan laser's settings from the PARAMs read so far."""
         return _laser_config(_SIDE[self.scan_stream], self._params, self._saturation, self._fallback)
 
     def _sensor_pose_source(self) -> SensorPoseSource:
@@ -952,7 +953,7 @@ class CarmenReader:
         key, value = tok[1].decode("ascii", "replace"), tok[2].decode("ascii", "replace")
         if self._params.get(key) != value:
             self._params[key] = value
-            self._laser = self._laser_config()
+            self._laser = self._configure_laser()
             self._stats.use_sensor_pose_source(self._sensor_pose_source())
             self._angles.clear()  # the bearings may depend on the PARAM
         return None
