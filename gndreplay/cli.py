@@ -19,7 +19,7 @@ import logging
 import math
 import sys
 import warnings
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, NoReturn, ParamSpec, TextIO, TypeVar, cast
@@ -35,11 +35,12 @@ if TYPE_CHECKING:  # the CLI imports its heavy modules lazily, inside the comman
     from rich.progress import Progress, TaskID
 
     from .config import CliOverrides, Config
-    from .replay import ReadOptions, RunSink
+    from .io import ReadOptions
+    from .replay import RunSink
     from .scanmatch import MatcherReport
     from .scanmatch.run import Method
     from .sim.runner import SimOutcome
-    from .types import Subgoal, Tick
+    from .types import Subgoal
 
 __all__ = ["app", "cli_errors", "main"]
 
@@ -48,22 +49,9 @@ R = TypeVar("R")
 
 EXIT_ERROR = 2
 EXIT_INTERRUPTED = 130
-#: Suffixes of the files the commands read: an argument starting with "-" and ending so is a file's name.
-_FILE_SUFFIXES = (
-    ".clf",
-    ".log",
-    ".carmen",
-    ".gz",
-    ".bz2",
-    ".bag",
-    ".mcap",
-    ".db3",
-    ".yaml",
-    ".yml",
-    ".toml",
-    ".txt",
-    ".relations",
-)
+#: Suffixes of the files the commands read besides logs (``gndreplay.io.LOG_SUFFIXES``): an argument starting
+#: with "-" and ending so is a file's name.
+_OTHER_FILE_SUFFIXES = (".db3", ".yaml", ".yml", ".toml", ".txt", ".relations")
 #: Longest command-line error message printed (click quotes the value given, which may be any length).
 _MAX_MESSAGE = 400
 #: The exceptions of the click typer parses with (its own copy in recent versions, not the click package).
@@ -120,12 +108,12 @@ def _command_line_message(err: Exception, args: Sequence[str]) -> str:
 def _dash_file(option: str, args: Sequence[str]) -> str | None:
     """The argument an unknown ``option`` was read from when it names a file: it starts with "-", holds the
     option's letters and exists or ends like the files gndreplay reads (``-dash.clf``)."""
+    from .io import COMPRESSED_SUFFIXES, LOG_SUFFIXES
+
+    suffixes = (*LOG_SUFFIXES, *COMPRESSED_SUFFIXES, *_OTHER_FILE_SUFFIXES)
     for a in args:
-        if (
-            a.startswith("-")
-            and option.lstrip("-") in a
-            and (Path(a).suffix.lower() in _FILE_SUFFIXES or _exists(a))
-        ):
+        named = Path(a).suffix.lower() in suffixes or _exists(a)
+        if a.startswith("-") and option.lstrip("-") in a and named:
             return a
     return None
 
@@ -507,7 +495,7 @@ def _read_options(
     strict: bool,
 ) -> ReadOptions:
     """The log-reading options as one value."""
-    from .replay import ReadOptions
+    from .io import ReadOptions
 
     return ReadOptions(
         fmt=fmt,
@@ -653,15 +641,7 @@ def info(log: LogArg, json_out: JsonOpt = False, *, read: ReadOptions) -> None:
     """
     from .info import log_info
 
-    result = log_info(
-        log,
-        fmt=read.fmt,
-        scan_topic=read.scan_topic,
-        odom_topic=read.odom_topic,
-        cmd_topic=read.cmd_topic,
-        truth_topic=read.truth_topic,
-        strict=read.strict,
-    )
+    result = log_info(log, options=read)
     if json_out:
         import json
 
@@ -718,12 +698,9 @@ def _parse_goal(value: str | None, goal_ahead: float | None) -> tuple[float, flo
 def _log_stem(log: Path) -> str:
     """The default output name of a log: its name less the log suffixes, never ``.``/``..``/empty/hidden."""
     from .fsutil import safe_name
+    from .io import log_stem
 
-    name = log.name.rstrip("/")
-    for suffix in (".gz", ".bz2", ".clf", ".log", ".carmen", ".bag", ".mcap"):
-        if name.endswith(suffix):
-            name = name[: -len(suffix)]
-    return safe_name(name)
+    return safe_name(log_stem(log.name.rstrip("/")))
 
 
 @app.command()
@@ -892,8 +869,8 @@ def scanmatch(
     """
     from .config import choose
     from .evaluation import load_relations
-    from .io import open_log
     from .scanmatch import METHODS, run_scanmatch
+    from .scanmatch.run import log_ticks
 
     chosen = choose("--matcher", matcher, (*METHODS, "all"))
     methods: list[Method] = list(METHODS) if chosen == "all" else [cast("Method", chosen)]
@@ -901,14 +878,8 @@ def scanmatch(
     refs = load_relations(relations) if relations is not None else None
     out_dir = out if out is not None else Path("out") / f"{_log_stem(log)}-scanmatch"
 
-    def ticks() -> Iterator[Tick]:
-        with open_log(
-            log, fmt=read.fmt, scan_topic=read.scan_topic, odom_topic=read.odom_topic, strict=read.strict
-        ) as reader:
-            yield from reader.ticks()
-
     rows = run_scanmatch(
-        ticks,
+        log_ticks(log, read),
         methods,
         relations=refs,
         out_dir=out_dir,

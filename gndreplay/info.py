@@ -10,15 +10,14 @@ a decoded, evenly spaced sample of at most ``sample`` scans (``LogInfo.stats_sca
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .io import SyncOptions, detect_format, open_log
+from .io import DEFAULT_READ, ReadOptions, detect_format, open_log
 from .io.base import LogDescription, ReadReport
-from .io.sync import DEFAULT_SYNC
 from .types import NS_PER_S, Pose2D, Scan
 
 __all__ = ["LogInfo", "StreamStat", "log_info", "stream_rows", "summary_rows"]
@@ -52,6 +51,8 @@ class LogInfo:
         invalid_fraction, no_return_fraction: fraction of beams that are nan / +inf.
         stats_scans: scans the beam statistics were computed on (< scans when sampled).
         laser_pose: the laser pose in the robot frame (x [m], y [m], theta [rad]).
+        laser_pose_source: where it comes from (``ReadReport.sensor_pose_source``: log, tf, config default,
+            none).
         odom_source, cmd_stream, truth_stream: where odometry, commands and ground truth come from.
         time_reversals: records stamped before the previous record of the same stream (scans, for bags).
         out_of_order: records stamped before a record read earlier (merged by time; CARMEN).
@@ -84,6 +85,7 @@ class LogInfo:
     no_return_fraction: float
     stats_scans: int
     laser_pose: tuple[float, float, float]
+    laser_pose_source: str
     odom_source: str
     cmd_stream: str | None
     truth_stream: str | None
@@ -173,41 +175,24 @@ def _geometry(
 
 
 def log_info(
-    path: Path | str,
-    *,
-    fmt: str | None = None,
-    scan_topic: str | None = None,
-    odom_topic: str | None = None,
-    cmd_topic: str | None = None,
-    truth_topic: str | None = None,
-    strict: bool = False,
-    sample: int = DEFAULT_SAMPLE,
-    sync: SyncOptions = DEFAULT_SYNC,
+    path: Path | str, *, options: ReadOptions = DEFAULT_READ, sample: int = DEFAULT_SAMPLE
 ) -> LogInfo:
     """Describe a log (see the module docstring for how each format is summarised).
 
     Args:
-        path, fmt, scan_topic, odom_topic, cmd_topic, truth_topic, strict: as :func:`gndreplay.io.open_log`.
+        path, options: as :func:`gndreplay.io.open_log` (``options.sync`` also sets the gap threshold).
         sample: at most this many scans are decoded for beam statistics of ROS bags / MCAP files.
-        sync: gap threshold and reorder bounds.
 
     Raises:
         LogFormatError: as :func:`gndreplay.io.open_log`; also a log without scans.
     """
     path = Path(path)
-    name, target = detect_format(path, fmt)
+    name, target = detect_format(path, options.fmt)
     size = _size(target)
-    opts = dict(
-        scan_topic=scan_topic,
-        odom_topic=odom_topic,
-        cmd_topic=cmd_topic,
-        truth_topic=truth_topic,
-        strict=strict,
-        sync=sync,
-    )
+    opts = replace(options, fmt=name)
     if name == "carmen":
         return _carmen_info(target, size, opts)
-    return _ros_info(target, name, size, opts, sample=sample, gap_ns=sync.gap_ns)
+    return _ros_info(target, name, size, opts, sample=sample)
 
 
 def _size(path: Path) -> int:
@@ -228,13 +213,13 @@ def _streams(
     return tuple(out)
 
 
-def _carmen_info(path: Path, size: int, opts: dict[str, Any]) -> LogInfo:
+def _carmen_info(path: Path, size: int, opts: ReadOptions) -> LogInfo:
     from .io.carmen import CarmenReader
 
     stats = _BeamStats()
     first_t: int | None = None
     last_t: int | None = None
-    with open_log(path, fmt="carmen", **opts) as log:
+    with open_log(path, options=opts) as log:
         assert isinstance(log, CarmenReader)
         for tick in log.ticks():
             stats.add(tick.scan)
@@ -254,7 +239,7 @@ def _carmen_info(path: Path, size: int, opts: dict[str, Any]) -> LogInfo:
         last_t,
         duration,
         _streams(desc, counts, duration),
-        opts["sync"].gap_ns,
+        opts.sync.gap_ns,
         "full pass",
         rep.scans_without_odom_before,
         rep.scans_without_odom_after,
@@ -305,6 +290,7 @@ def _assemble(
         no_return_fraction=stats.no_return / total,
         stats_scans=stats.n,
         laser_pose=pose,
+        laser_pose_source=rep.sensor_pose_source,
         odom_source=desc.odom_source,
         cmd_stream=desc.cmd_stream,
         truth_stream=desc.truth_stream,
@@ -357,7 +343,7 @@ class _StampStats:
             self.after += t > self.odom_span[1]
 
 
-def _ros_info(path: Path, fmt: str, size: int, opts: dict[str, Any], *, sample: int, gap_ns: int) -> LogInfo:
+def _ros_info(path: Path, fmt: str, size: int, opts: ReadOptions, *, sample: int) -> LogInfo:
     from .errors import LogFormatError
     from .io.base import check_time
     from .io.mcap import mcap_files, read_mcap_summary
@@ -368,13 +354,13 @@ def _ros_info(path: Path, fmt: str, size: int, opts: dict[str, Any], *, sample: 
 
     def bad(i: int, topic: str, err: BaseException) -> None:
         where = f"message {i} on {topic}: cannot decode: {type(err).__name__}: {err}"
-        if opts["strict"]:
+        if opts.strict:
             raise LogFormatError(f"{path} {where}") from err
         malformed.append(where)
 
-    with open_log(path, fmt=fmt, **opts) as log:
+    with open_log(path, options=opts) as log:
         assert isinstance(log, RosbagReader)
-        desc = log.describe()
+        desc, pose_source = log.describe(), log.report.sensor_pose_source
         counts: dict[str, int] | None = None
         source = "bag index / metadata"
         if mcap_files(path):
@@ -396,7 +382,7 @@ def _ros_info(path: Path, fmt: str, size: int, opts: dict[str, Any], *, sample: 
                 stamps = [min(stamps[0], s), max(stamps[1], s)] if stamps else [s, s]
             odom_span = (stamps[0], stamps[1]) if stamps else None
         every = max(1, math.ceil(n_scans / max(sample, 1)))
-        beams, times = _BeamStats(), _StampStats(gap_ns, odom_span)
+        beams, times = _BeamStats(), _StampStats(opts.sync.gap_ns, odom_span)
         for i, (t_log, raw) in enumerate(log.raw_messages(log.scan_topic)):
             try:
                 times.add(check_time(log.header_stamp(raw) or t_log))
@@ -406,13 +392,14 @@ def _ros_info(path: Path, fmt: str, size: int, opts: dict[str, Any], *, sample: 
                 bad(i + 1, log.scan_topic, err)
         if times.seen == 0:
             raise LogFormatError(f"{path}: no scans on {log.scan_topic}")
-    rep = ReadReport(scans=times.seen, malformed=len(malformed), malformed_examples=tuple(malformed[:5]))
+    rep = ReadReport(scans=times.seen, malformed=len(malformed), malformed_examples=tuple(malformed[:5]),
+                     sensor_pose_source=pose_source)
     first_t, last_t = times.first, times.last
     duration = (last_t - first_t) / NS_PER_S if first_t is not None and last_t is not None else 0.0
     note = (f"beam statistics from {beams.n} of {times.seen} scans (every {every}th)",) if every > 1 else ()
     return _assemble(
         path, fmt, size, desc, rep, beams, first_t, last_t, duration, _streams(desc, counts, duration),
-        gap_ns, source, times.before if odom_span else None, times.after if odom_span else None,
+        opts.sync.gap_ns, source, times.before if odom_span else None, times.after if odom_span else None,
         reversals=times.reversals, gaps=times.gaps, max_gap_s=times.max_gap_ns / NS_PER_S, notes=note,
     )  # fmt: skip
 
@@ -447,6 +434,7 @@ def summary_rows(info: LogInfo) -> list[tuple[str, str]]:
         ("invalid beams", f"{100 * info.invalid_fraction:.2f} %{sampled}"),
         ("no-return beams", f"{100 * info.no_return_fraction:.2f} %{sampled}"),
         ("laser pose in robot", f"x {x:g} m, y {y:g} m, theta {math.degrees(th):g} deg"),
+        ("laser pose from", info.laser_pose_source),
         ("odometry", info.odom_source),
         ("commands", info.cmd_stream or "none"),
         ("ground truth", info.truth_stream or "none"),

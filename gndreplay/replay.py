@@ -38,6 +38,7 @@ from .errors import FOLLOW_NEEDS_SUBGOALS, ConfigError, LogFormatError
 from .evaluation import write_tum
 from .fsutil import check_output_dir, format_stamp, resolve_output_dir, staging_dir
 from .geometry import relative, wrap_angle
+from .io import DEFAULT_READ, ReadOptions
 from .pipeline.model import RobotCentredGrid
 from .pipeline.stack import MODULES, NavigationStack, TickResult, warm_up
 from .scanmatch import Matcher, make_matcher
@@ -696,25 +697,13 @@ def run_replay(
     return RunSummary(out_dir=staging.out, ticks=len(rec.t_s), data=summary)
 
 
-@dataclass(frozen=True, slots=True)
-class ReadOptions:
-    """How to open the log (see ``gndreplay.io.open_log``)."""
-
-    fmt: str | None = None
-    scan_topic: str | None = None
-    odom_topic: str | None = None
-    cmd_topic: str | None = None
-    truth_topic: str | None = None
-    strict: bool = False
-
-
 def run_log(
     log: Path,
     cfg: Config,
     out_dir: Path,
     *,
     options: RunOptions = RunOptions(),
-    read: ReadOptions = ReadOptions(),
+    read: ReadOptions = DEFAULT_READ,
     sinks: Iterable[RunSink] = (),
     on_tick: Callable[[TickResult], None] | None = None,
     overwrite: bool = False,
@@ -738,15 +727,7 @@ def run_log(
 
     check_navigation(cfg, options)
     check_output_dir(Path(out_dir), inputs=(Path(log),), overwrite=overwrite)
-    with open_log(
-        Path(log),
-        fmt=read.fmt,
-        scan_topic=read.scan_topic,
-        odom_topic=read.odom_topic,
-        cmd_topic=read.cmd_topic,
-        truth_topic=read.truth_topic,
-        strict=read.strict,
-    ) as reader:
+    with open_log(Path(log), options=read) as reader:
         if cfg.navigation.mode == "teleop" and not reader.records_commands():
             raise LogFormatError(f"{log}: no recorded velocity commands (cmd topic / CARMEN ODOM tv,rv); "
                                  "--mode teleop needs them")

@@ -766,7 +766,7 @@ def test_cli_batch_takes_the_read_options_of_run_and_a_timeout(
     import gndreplay.batch
     from gndreplay.batch import BatchResult
     from gndreplay.cli import app
-    from gndreplay.replay import ReadOptions
+    from gndreplay.io import ReadOptions
 
     seen: dict[str, Any] = {}
 

@@ -30,7 +30,7 @@ from test_io_rosbag import DT, T0, Msgs, ranges_for, typestore
 
 from gndreplay.errors import LogFormatError
 from gndreplay.info import log_info
-from gndreplay.io import open_log
+from gndreplay.io import ReadOptions, open_log
 from gndreplay.io.base import MAX_ABS_TIME_NS
 
 # inputs per format in CI: 490 in about 25 s on a loaded 2-core machine
@@ -102,12 +102,12 @@ def test_the_contract_check_catches_an_overflowing_value(tmp_path: Path) -> None
 
 def read_all(path: Path, *, strict: bool = False) -> tuple[int, Any]:
     """(ticks, read report) of a full pass, then ``log_info`` too (the CLI's two paths)."""
-    with open_log(path, strict=strict) as log:
+    with open_log(path, options=ReadOptions(strict=strict)) as log:
         ticks = list(log.ticks())
         for tick in ticks:
             fuzzing.check_tick(tick)
         report = log.report
-    log_info(path, strict=strict)
+    log_info(path, options=ReadOptions(strict=strict))
     return len(ticks), report
 
 

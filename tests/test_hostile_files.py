@@ -30,7 +30,7 @@ from gndreplay.batch.thresholds import THRESHOLD_KEYS, limit_bound, load_thresho
 from gndreplay.config import load_config
 from gndreplay.errors import ConfigError, GndReplayError, LogFormatError
 from gndreplay.evaluation import load_relations, read_tum
-from gndreplay.io import open_log, read_ticks
+from gndreplay.io import ReadOptions, open_log, read_ticks
 from gndreplay.io.base import MAX_BEAMS
 from gndreplay.replay import COMMAND_COLUMNS
 from gndreplay.report.maps import HitRaster, save_maps
@@ -451,7 +451,7 @@ def test_a_scan_with_too_many_beams_is_a_malformed_message(
     assert f"on /scan: cannot decode sensor_msgs/msg/LaserScan: ValueError: {MAX_BEAMS + 1} beams, more " \
            f"than the {MAX_BEAMS}" in report.malformed_examples[0]
     with pytest.raises(LogFormatError, match=rf"message \d+ on /scan: .*{MAX_BEAMS + 1} beams"):
-        list(read_ticks(bag, strict=True))
+        list(read_ticks(bag, options=ReadOptions(strict=True)))
 
 
 def test_a_bag_whose_every_scan_has_too_many_beams_says_why_it_has_no_scans(tmp_path: Path) -> None:

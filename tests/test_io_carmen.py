@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from gndreplay.errors import GndReplayError, LogFormatError
-from gndreplay.io import open_log, read_ticks
+from gndreplay.io import ReadOptions, open_log, read_ticks
 from gndreplay.io.carmen import (
     CarmenReader,
     clean_ranges,
@@ -203,7 +203,7 @@ def test_odom_lines_are_interpolated_at_scan_stamps_and_file_order_is_merged(tmp
     assert ticks[0].odom.x == pytest.approx(0.4) and ticks[0].odom.y == pytest.approx(0.8)
     assert ticks[1].odom.theta == pytest.approx(0.12)
     assert rep.out_of_order == 1 and rep.time_reversals == 1 and rep.late_dropped == 0
-    with open_log(log_file(tmp_path, text), odom_topic="FLASER") as log:
+    with open_log(log_file(tmp_path, text), options=ReadOptions(odom_topic="FLASER")) as log:
         assert [t.odom for t in log.ticks()] == [Pose2D(9, 9, 0)] * 2
 
 
@@ -211,7 +211,7 @@ def test_truepos_is_the_truth(tmp_path: Path) -> None:
     text = "TRUEPOS 0 0 0 0 0 0 1.0 h 0\n" + flaser("1.5", [1, 1, 1]) + "TRUEPOS 2 0 0.2 0 0 0 2.0 h 0\n"
     (tick,) = read_ticks(log_file(tmp_path, text))
     assert tick.truth == Pose2D(1.0, 0.0, pytest.approx(0.1))
-    (tick,) = read_ticks(log_file(tmp_path, text), truth_topic="FLASER")
+    (tick,) = read_ticks(log_file(tmp_path, text), options=ReadOptions(truth_topic="FLASER"))
     assert tick.truth == Pose2D(0.0, 0.0, 0.0)
 
 
@@ -289,7 +289,7 @@ def test_malformed_line_in_the_middle_is_skipped_and_counted(tmp_path: Path) -> 
 def test_strict_turns_a_malformed_line_into_an_error(tmp_path: Path) -> None:
     text = flaser("1.0", [1, 2, 3]) + "FLASER 3 1 2 3 0 0 0 0 0 0\n" + flaser("4.0", [1, 2, 3])
     with pytest.raises(LogFormatError, match=r"t\.clf line 2: FLASER declares 3 ranges: line ends early"):
-        list(read_ticks(log_file(tmp_path, text), strict=True))
+        list(read_ticks(log_file(tmp_path, text), options=ReadOptions(strict=True)))
 
 
 @pytest.mark.parametrize(
@@ -315,7 +315,7 @@ def test_each_malformed_line_kind_names_the_problem(tmp_path: Path, line: str, m
     )
     text = good + "TRUEPOS 0 0 0 0 0 0 0.5 h 0\n" + "ODOM 0 0 0 0 0 0 0.5 h 0\n" + line + "\n"
     with pytest.raises(LogFormatError, match=f"line 4: .*{message}"):
-        list(read_ticks(log_file(tmp_path, text), strict=True))
+        list(read_ticks(log_file(tmp_path, text), options=ReadOptions(strict=True)))
 
 
 def test_not_a_carmen_log(tmp_path: Path) -> None:
@@ -358,7 +358,7 @@ def test_missing_file_via_the_reader(tmp_path: Path) -> None:
 def test_wrong_streams_list_the_candidates(tmp_path: Path, kw: dict[str, str], message: str) -> None:
     p = log_file(tmp_path, flaser("1", [1, 2, 3]))
     with pytest.raises(LogFormatError, match=message):
-        list(read_ticks(p, **kw))
+        list(read_ticks(p, options=ReadOptions(**kw)))
 
 
 @pytest.mark.parametrize("suffix", [".clf.bz2", ".clf.gz"])
@@ -373,7 +373,8 @@ def test_truncated_compressed_log_is_an_error(tmp_path: Path, suffix: str) -> No
 
 def test_record_beyond_the_reorder_window_is_dropped_and_counted(tmp_path: Path) -> None:
     text = "".join(flaser(f"{i}.0", [1, 1, 1]) for i in (1, 2, 3, 4, 5)) + flaser("1.5", [2, 2, 2])
-    with open_log(log_file(tmp_path, text), sync=SyncOptions(reorder_window_ns=NS_PER_S)) as log:
+    options = ReadOptions(sync=SyncOptions(reorder_window_ns=NS_PER_S))
+    with open_log(log_file(tmp_path, text), options=options) as log:
         assert [t.t_ns // 10**8 for t in log.ticks()] == [10, 20, 30, 40, 50]
         assert log.report.late_dropped == 1
 
@@ -574,7 +575,7 @@ def test_corruption_or_truncation_raises_only_our_error(
     p = tmp_path / f"c{suffix}"
     p.write_bytes(raw)
     try:
-        with open_log(p, strict=strict) as log:
+        with open_log(p, options=ReadOptions(strict=strict)) as log:
             for tick in log.ticks():
                 assert tick.scan.ranges_m.shape == tick.scan.angles_rad.shape
     except GndReplayError as err:

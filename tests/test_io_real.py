@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from gndreplay.errors import LogFormatError
-from gndreplay.io import open_log
+from gndreplay.io import ReadOptions, open_log
 from gndreplay.types import NS_PER_S
 
 pytestmark = pytest.mark.slow
@@ -95,7 +95,7 @@ def test_aces_odom_lines_beat_the_stale_flaser_triple(datasets: Path) -> None:
     """The FLASER odometry triple is the last ODOM sample before the scan (stale by ~0.1 s)."""
     p = datasets / "carmen/aces.clf.bz2"
     _, _, interp, _ = load(p)
-    with open_log(p, odom_topic="FLASER") as log:
+    with open_log(p, options=ReadOptions(odom_topic="FLASER")) as log:
         embedded = np.array([t.odom.as_array() for t in log.ticks()])
     moved = np.hypot(*(interp[:, :2] - embedded[:, :2]).T)
     assert np.median(moved) > 0.005  # they differ while the robot moves

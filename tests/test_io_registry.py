@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from gndreplay.errors import LogFormatError
-from gndreplay.io import FORMAT_BY_SUFFIX, READERS, detect_format, open_log, special_file_kind
+from gndreplay.io import LOG_SUFFIXES, READERS, ReadOptions, detect_format, open_log, special_file_kind
 
 LINE = "FLASER 3 1 2 3 0 0 0 0 0 0 1.0 h 0\n"
 
@@ -34,7 +34,7 @@ def test_format_from_the_suffix(tmp_path: Path, name: str, fmt: str) -> None:
 
 
 def test_registry_covers_every_suffix() -> None:
-    assert set(FORMAT_BY_SUFFIX.values()) <= set(READERS)
+    assert set(LOG_SUFFIXES.values()) <= set(READERS)
     assert list(READERS) == ["carmen", "rosbag1", "rosbag2", "mcap"]
 
 
@@ -54,9 +54,9 @@ def test_format_override_reads_an_odd_suffix(tmp_path: Path) -> None:
         r"carmen .*use --format",
     ):
         detect_format(p)
-    with open_log(p, fmt="carmen") as log:
+    with open_log(p, options=ReadOptions(fmt="carmen")) as log:
         assert len(list(log.ticks())) == 1
-    with open_log(p, fmt="CLF") as log:
+    with open_log(p, options=ReadOptions(fmt="CLF")) as log:
         assert log.format_name == "carmen"
 
 
@@ -92,7 +92,7 @@ def test_a_bag_read_as_carmen_is_refused(tmp_path: Path) -> None:
     p = tmp_path / "b.bag"
     p.write_bytes(b"#ROSBAG V2.0\n\x00\x01\x02" * 20)
     with pytest.raises(LogFormatError, match=r"b\.bag: not a CARMEN log"):
-        open_log(p, fmt="carmen")
+        open_log(p, options=ReadOptions(fmt="carmen"))
 
 
 # ---- FIFOs, devices and sockets are refused before anything opens them (review F1 bug 11) ----------------

@@ -16,7 +16,7 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from gndreplay.errors import LogFormatError
-from gndreplay.io import detect_format, open_log, read_ticks, rosraw
+from gndreplay.io import ReadOptions, detect_format, open_log, read_ticks, rosraw
 from gndreplay.io.rosbag import RosbagReader, clean_ros_ranges
 from gndreplay.types import NS_PER_S, Pose2D
 
@@ -241,7 +241,7 @@ def test_odometry_from_tf_only(tmp_path: Path, kind: Kind) -> None:
 
 def test_tf_can_be_chosen_over_an_odometry_topic(tmp_path: Path) -> None:
     bag = write_bag(tmp_path, "mcap")
-    with open_log(bag, odom_topic="/tf") as log:
+    with open_log(bag, options=ReadOptions(odom_topic="/tf")) as log:
         check_ticks(list(log.ticks()), 12)
         assert log.describe().odom_source.startswith("/tf")
 
@@ -332,8 +332,8 @@ def test_several_scan_topics_must_be_chosen(tmp_path: Path) -> None:
     ):
         open_log(bag)
     with pytest.raises(LogFormatError, match=r"no scan topic '/nope'; candidates: --scan-topic /front"):
-        open_log(bag, scan_topic="/nope")
-    with open_log(bag, scan_topic="/rear") as log:
+        open_log(bag, options=ReadOptions(scan_topic="/nope"))
+    with open_log(bag, options=ReadOptions(scan_topic="/rear")) as log:
         assert log.describe().scan_stream == "/rear"
         assert len(list(log.ticks())) == 12
 
@@ -355,7 +355,7 @@ def test_ambiguous_command_topics(tmp_path: Path) -> None:
         LogFormatError, match=r"several cmd topics, choose one: --cmd-topic /a, --cmd-topic /b"
     ):
         open_log(bag)
-    with open_log(bag, cmd_topic="/b") as log:
+    with open_log(bag, options=ReadOptions(cmd_topic="/b")) as log:
         assert log.describe().cmd_stream == "/b"
 
 
@@ -372,13 +372,13 @@ def test_ambiguous_command_topics(tmp_path: Path) -> None:
 )
 def test_wrong_topics_list_the_candidates(tmp_path: Path, kw: dict[str, str], message: str) -> None:
     with pytest.raises(LogFormatError, match=message):
-        open_log(write_bag(tmp_path, "ros1"), **kw)
+        open_log(write_bag(tmp_path, "ros1"), options=ReadOptions(**kw))
 
 
 def test_tf_without_an_odom_transform(tmp_path: Path) -> None:
     bag = write_bag(tmp_path, "ros1", Spec(tf_odom=False))
     with pytest.raises(LogFormatError, match=r"no odometry topic '/tf'; candidates: --odom-topic /odom"):
-        open_log(bag, odom_topic="/tf")
+        open_log(bag, options=ReadOptions(odom_topic="/tf"))
 
 
 def test_bag_without_scans(tmp_path: Path) -> None:
@@ -395,7 +395,7 @@ def test_undecodable_message_is_skipped_and_counted_or_strict_error(tmp_path: Pa
     assert len(ticks) == 11 and rep.malformed == 1
     assert "on /scan: cannot decode sensor_msgs/msg/LaserScan" in rep.malformed_examples[0]
     with pytest.raises(LogFormatError, match=r"message \d+ on /scan: cannot decode"):
-        list(read_ticks(bag, strict=True))
+        list(read_ticks(bag, options=ReadOptions(strict=True)))
 
 
 def test_legacy_bag_is_refused_by_name(tmp_path: Path) -> None:
@@ -434,7 +434,7 @@ def test_reader_is_closed_after_a_setup_error(tmp_path: Path) -> None:
     bag = write_bag(tmp_path, "ros1", Spec(scan_topics=("/a", "/b")))
     with pytest.raises(LogFormatError):
         RosbagReader(bag)
-    with RosbagReader(bag, scan_topic="/a") as log:  # the file can be opened again
+    with RosbagReader(bag, options=ReadOptions(scan_topic="/a")) as log:  # the file can be opened again
         assert log.describe().scan_stream == "/a"
 
 
@@ -524,4 +524,4 @@ def test_info_counts_an_undecodable_scan_and_strict_refuses_it(tmp_path: Path) -
     assert info.malformed_examples[0].startswith("message 4 on /scan: cannot decode")
     assert (info.scans_without_odom_before, info.scans_without_odom_after) == (0, 0)
     with pytest.raises(LogFormatError, match=r"fix message 4 on /scan: cannot decode"):
-        log_info(bag, strict=True)
+        log_info(bag, options=ReadOptions(strict=True))

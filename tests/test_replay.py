@@ -15,8 +15,8 @@ from gndreplay.cli import app
 from gndreplay.config import PRESETS
 from gndreplay.errors import LogFormatError
 from gndreplay.geometry import relative
-from gndreplay.io import read_ticks
-from gndreplay.replay import Matched, ReadOptions, RunOptions, assign_goals, motion_agreement, run_log
+from gndreplay.io import ReadOptions, read_ticks
+from gndreplay.replay import Matched, RunOptions, assign_goals, motion_agreement, run_log
 from gndreplay.types import Pose2D, Scan, Tick
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from gndreplay.errors import LogFormatError
-from gndreplay.io import open_log
+from gndreplay.io import ReadOptions, open_log
 from gndreplay.io.carmen import CarmenReader, odom_has_commands
 
 RANGES = "1.0 2.0 3.0 2.0 1.0"
@@ -54,7 +54,7 @@ def test_all_zero_tv_rv_are_no_commands(tmp_path: Path) -> None:
     assert desc.cmd_stream is None
     assert "ODOM tv/rv are all zero: no recorded velocity commands" in desc.notes
     with pytest.raises(LogFormatError, match=r"z\.clf: no command stream 'ODOM': every ODOM tv and rv is 0"):
-        CarmenReader(p, cmd_topic="ODOM")
+        CarmenReader(p, options=ReadOptions(cmd_topic="ODOM"))
 
 
 def test_commands_start_at_the_first_non_zero_velocity(tmp_path: Path) -> None:
@@ -90,20 +90,20 @@ def test_non_zero_velocities_after_the_head_are_found(tmp_path: Path) -> None:
 
 def test_cmd_topic_odom_is_accepted_and_other_names_are_refused(tmp_path: Path) -> None:
     p = write_log(tmp_path / "a.clf", [(0.3, 0.1)] * 3)
-    with CarmenReader(p, cmd_topic="ODOM") as log:
+    with CarmenReader(p, options=ReadOptions(cmd_topic="ODOM")) as log:
         assert [t.cmd.v_mps for t in log.ticks() if t.cmd is not None] == [0.3] * 3
     with pytest.raises(LogFormatError, match=r"no command stream '/cmd_vel'.*tv/rv \(candidates: ODOM\)"):
-        CarmenReader(p, cmd_topic="/cmd_vel")
+        CarmenReader(p, options=ReadOptions(cmd_topic="/cmd_vel"))
     no_odom = tmp_path / "n.clf"
     no_odom.write_text(flaser(1.0, 0.0))
     with pytest.raises(LogFormatError, match=r"no command stream 'ODOM'.*\(candidates: none\)"):
-        CarmenReader(no_odom, cmd_topic="ODOM")
+        CarmenReader(no_odom, options=ReadOptions(cmd_topic="ODOM"))
 
 
 def test_commands_with_the_odometry_embedded_in_flaser(tmp_path: Path) -> None:
     """odom_topic=FLASER takes the pose from the scan line; ODOM still gives the commands."""
     p = write_log(tmp_path / "a.clf", [(0.2, 0.1)] * 4)
-    with open_log(p, odom_topic="FLASER") as log:
+    with open_log(p, options=ReadOptions(odom_topic="FLASER")) as log:
         ticks = list(log.ticks())
         assert log.describe().cmd_stream == "ODOM"
     assert all(t.cmd is not None and t.cmd.v_mps == pytest.approx(0.2) for t in ticks)
@@ -166,11 +166,12 @@ def test_strict_does_not_stop_on_a_bad_odom_line_used_for_nothing(tmp_path: Path
     lines[2] = "ODOM 0 0 0 fast 0 0 100.200 host 0.0\n" + flaser(100.25, 0.0)
     p = tmp_path / "bad_odom.clf"
     p.write_text("".join(lines))
-    with open_log(p, odom_topic="FLASER", strict=True) as log:
+    with open_log(p, options=ReadOptions(odom_topic="FLASER", strict=True)) as log:
         ticks = list(log.ticks())
         assert log.report.malformed == 1
     assert len(ticks) == 5 and ticks[2].cmd is not None and ticks[2].cmd.t_ns == round(100.1 * 1e9)
-    with open_log(p, strict=True) as log, pytest.raises(LogFormatError, match=r"bad_odom\.clf line 5: ODOM"):
+    strict, message = ReadOptions(strict=True), r"bad_odom\.clf line 5: ODOM"
+    with open_log(p, options=strict) as log, pytest.raises(LogFormatError, match=message):
         list(log.ticks())  # ODOM is the odometry here: strict stops on it
 
 
@@ -179,7 +180,8 @@ def test_describe_says_when_odom_is_both_odometry_and_commands(tmp_path: Path) -
         desc = log.describe()
     assert desc.cmd_stream == "ODOM" and desc.odom_source.startswith("ODOM")
     assert "commands: ODOM tv/rv (ODOM is both the odometry and the command stream)" in desc.notes
-    with open_log(write_log(tmp_path / "b.clf", [(0.2, 0.0)] * 3), odom_topic="FLASER") as log:
+    embedded = ReadOptions(odom_topic="FLASER")
+    with open_log(write_log(tmp_path / "b.clf", [(0.2, 0.0)] * 3), options=embedded) as log:
         assert "commands: ODOM tv/rv" in log.describe().notes  # the scan lines give the odometry
 
 

@@ -15,7 +15,6 @@ the numeric libraries to one thread before the replay code is loaded.
 
 from .aggregate import ScenarioAggregate, aggregate_scenarios
 from .jobs import (
-    LOG_SUFFIXES,
     SCENARIO_SUFFIXES,
     Job,
     JobKind,
@@ -60,7 +59,6 @@ __all__ = [
     "DEFAULT_LIMITS",
     "DEFAULT_TIMEOUT_S",
     "LATENCY_METRICS",
-    "LOG_SUFFIXES",
     "RELATION_METRICS",
     "SCENARIO_CSV_COLUMNS",
     "SCENARIO_METRICS",

@@ -19,11 +19,10 @@ from typing import Literal
 
 from .. import fsutil
 from ..errors import ConfigError
+from ..io import LOG_SUFFIXES, log_stem, log_suffix
 from ..io.base import special_file_kind
 
 __all__ = [
-    "COMPRESSED_SUFFIXES",
-    "LOG_SUFFIXES",
     "MAX_SEEDS",
     "RESERVED_NAMES",
     "SCENARIO_SUFFIXES",
@@ -44,11 +43,6 @@ __all__ = [
 
 JobKind = Literal["log", "scenario"]
 
-#: Suffixes of log files found in folders (ROS2 bag folders are recognised by their metadata.yaml).
-LOG_SUFFIXES: tuple[str, ...] = (".clf", ".log", ".carmen", ".bag", ".mcap")
-#: Compression suffixes accepted after a text-log suffix (``run.clf.bz2``).
-COMPRESSED_SUFFIXES: tuple[str, ...] = (".gz", ".bz2")
-_TEXT_LOG_SUFFIXES = (".clf", ".log", ".carmen")
 #: Suffixes of scenario files (closed-loop runs, ``gndreplay.sim.scenario_file``).
 SCENARIO_SUFFIXES: tuple[str, ...] = (".yaml", ".yml")
 _UNSAFE = re.compile(r"[^A-Za-z0-9._+-]+")
@@ -84,17 +78,6 @@ class Job:
     scenario: str = ""
 
 
-def _log_suffix(path: Path) -> str | None:
-    """The recognised log suffix of a file name (``".clf.bz2"``, ``".bag"``), or None."""
-    suffixes = [s.lower() for s in path.suffixes]
-    if not suffixes:
-        return None
-    last = suffixes[-1]
-    if last in COMPRESSED_SUFFIXES and len(suffixes) >= 2 and suffixes[-2] in _TEXT_LOG_SUFFIXES:
-        return suffixes[-2] + last
-    return last if last in LOG_SUFFIXES else None
-
-
 def is_scenario_file(path: Path) -> bool:
     """True for a path with a scenario suffix (``.yaml``/``.yml``) that is not a folder (a ROS2 bag folder's
     metadata.yaml is only ever found inside a bag folder, which is taken as a whole)."""
@@ -106,8 +89,9 @@ def _is_ros2_bag(path: Path) -> bool:
 
 
 def is_log(path: Path) -> bool:
-    """True for a file with a log suffix or a ROS2 bag folder (what a folder search picks up)."""
-    return _is_ros2_bag(path) or (path.is_file() and _log_suffix(path) is not None)
+    """True for a file with a log suffix (``gndreplay.io.LOG_SUFFIXES``) or a ROS2 bag folder (what a folder
+    search picks up)."""
+    return _is_ros2_bag(path) or (path.is_file() and log_suffix(path) is not None)
 
 
 def find_logs(folder: Path) -> list[Path]:
@@ -137,8 +121,7 @@ def input_stem(path: Path) -> str:
     """A log or scenario file name without its suffix (``mit-csail.clf.bz2`` -> ``mit-csail``,
     ``u_trap.yaml`` -> ``u_trap``; a bag folder: its name), made safe for a folder name
     (``.hidden.clf`` -> ``hidden``)."""
-    suffix = None if path.is_dir() else (path.suffix if is_scenario_file(path) else _log_suffix(path))
-    name = path.name[: -len(suffix)] if suffix and len(path.name) > len(suffix) else path.name
+    name = path.name if path.is_dir() else (path.stem if is_scenario_file(path) else log_stem(path.name))
     return safe_name(name)
 
 

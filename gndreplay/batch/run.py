@@ -33,7 +33,8 @@ from .worker import InputResult, Runner, Task, crash_message, error_result, exec
 
 if TYPE_CHECKING:
     from ..config import Config
-    from ..replay import ReadOptions, RunOptions
+    from ..io import ReadOptions
+    from ..replay import RunOptions
 
 __all__ = ["DASK_EXTRA_HINT", "DEFAULT_TIMEOUT_S", "BatchResult", "make_tasks", "run_batch", "run_tasks"]
 

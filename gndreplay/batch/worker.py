@@ -24,7 +24,8 @@ from .thresholds import check_limits
 
 if TYPE_CHECKING:
     from ..config import Config
-    from ..replay import ReadOptions, RunOptions
+    from ..io import ReadOptions
+    from ..replay import RunOptions
 
 __all__ = [
     "THREAD_ENV_VARS",
@@ -111,7 +112,8 @@ def run_input(task: Task) -> RunOutcome:
     """
     job = task.job
     if job.kind == "log":
-        from ..replay import ReadOptions, run_log
+        from ..io import ReadOptions
+        from ..replay import run_log
 
         return run_log(
             job.path, task.cfg, task.run_dir, options=task.options, read=task.read or ReadOptions()

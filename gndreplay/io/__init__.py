@@ -1,35 +1,42 @@
 """Log readers: each yields time-ordered Ticks with constant memory; chosen by a small registry.
 
->>> with open_log(Path("mit-csail.clf.bz2")) as log:       # doctest: +SKIP
+>>> with open_log(Path("mit-csail.clf.bz2"), options=ReadOptions(strict=True)) as log:  # doctest: +SKIP
 ...     for tick in log.ticks():
 ...         tick.scan.ranges_m, tick.odom
 ...     log.report.malformed
 
-The format comes from the path (``FORMAT_BY_SUFFIX``; ``.gz`` / ``.bz2`` by the inner suffix; a folder with
-``metadata.yaml`` is a ROS2 bag) or from ``fmt`` (``READERS`` keys, plus the alias "rosbag" for any ROS bag).
+The format comes from the path (``LOG_SUFFIXES``; ``COMPRESSED_SUFFIXES`` by the inner suffix, for text
+logs; a folder with ``metadata.yaml`` is a ROS2 bag) or from ``ReadOptions.fmt`` (``READERS`` keys, plus
+the alias "rosbag" for any ROS bag). ``LOG_SUFFIXES`` is also what folder searches (``gndreplay batch``)
+and default output names go by.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping
-from pathlib import Path
-from typing import Any
+from pathlib import Path, PurePath
 
 from ..errors import LogFormatError
 from ..types import Tick
 from .base import LogDescription, LogReader, ReadReport, StreamInfo, special_file_kind
 from .carmen import CarmenReader, write_carmen
-from .sync import DEFAULT_SYNC, SyncOptions
+from .options import DEFAULT_READ, ReadOptions
+from .sync import SyncOptions
 
 __all__ = [
-    "FORMAT_BY_SUFFIX",
+    "COMPRESSED_SUFFIXES",
+    "DEFAULT_READ",
+    "LOG_SUFFIXES",
     "READERS",
     "LogDescription",
     "LogReader",
+    "ReadOptions",
     "ReadReport",
     "StreamInfo",
     "SyncOptions",
     "detect_format",
+    "log_stem",
+    "log_suffix",
     "open_log",
     "read_ticks",
     "special_file_kind",
@@ -40,31 +47,32 @@ ReaderFactory = Callable[..., LogReader]
 
 
 def _rosbag(format_name: str) -> ReaderFactory:
-    def make(path: Path, **kw: Any) -> LogReader:
+    def make(path: Path, *, options: ReadOptions) -> LogReader:
         from .rosbag import RosbagReader  # rosbags is imported only when a bag is opened
 
-        return RosbagReader(path, format_name=format_name, **kw)
+        return RosbagReader(path, options=options, format_name=format_name)
 
     make.__name__ = f"open_{format_name}"
     return make
 
 
-#: Format name -> reader factory (called as ``factory(path, scan_topic=..., ..., strict=..., sync=...)``).
+#: Format name -> reader factory (called as ``factory(path, options=...)``).
 READERS: Mapping[str, ReaderFactory] = {
     "carmen": CarmenReader,
     "rosbag1": _rosbag("rosbag1"),
     "rosbag2": _rosbag("rosbag2"),
     "mcap": _rosbag("mcap"),
 }
-#: File suffix -> format name (compressed files by their inner suffix).
-FORMAT_BY_SUFFIX: Mapping[str, str] = {
+#: Log file suffix -> format name (lower case; compressed files by their inner suffix).
+LOG_SUFFIXES: Mapping[str, str] = {
     ".clf": "carmen",
     ".log": "carmen",
     ".carmen": "carmen",
     ".bag": "rosbag1",
     ".mcap": "mcap",
 }
-_COMPRESSED = (".gz", ".bz2")
+#: Compression suffixes accepted after the suffix of a text (CARMEN) log: ``run.clf.bz2``.
+COMPRESSED_SUFFIXES: tuple[str, ...] = (".gz", ".bz2")
 _ALIASES = {"rosbag": None, "clf": "carmen", "ros1": "rosbag1", "ros2": "rosbag2"}
 KNOWN_FORMATS_HELP = (
     "carmen (.clf, .log; plain, .gz or .bz2), rosbag1 (.bag), rosbag2 (folder with "
@@ -134,14 +142,14 @@ def detect_format(path: Path, fmt: str | None = None) -> tuple[str, Path]:
         )
     suffixes = [s.lower() for s in path.suffixes]
     suffix = suffixes[-1] if suffixes else ""
-    if suffix in _COMPRESSED:
+    if suffix in COMPRESSED_SUFFIXES:
         suffix = suffixes[-2] if len(suffixes) >= 2 else ""
-        if FORMAT_BY_SUFFIX.get(suffix) != "carmen":
+        if LOG_SUFFIXES.get(suffix) != "carmen":
             raise LogFormatError(
                 f"{path}: unknown log format (compressed {suffix or 'file'}); known formats: "
                 f"{KNOWN_FORMATS_HELP}; use --format"
             )
-    found = FORMAT_BY_SUFFIX.get(suffix)
+    found = LOG_SUFFIXES.get(suffix)
     if found is None:
         raise LogFormatError(
             f"{path}: unknown log format (suffix {suffix!r}); known formats: "
@@ -150,45 +158,43 @@ def detect_format(path: Path, fmt: str | None = None) -> tuple[str, Path]:
     return found, path
 
 
-def open_log(
-    path: Path | str,
-    *,
-    fmt: str | None = None,
-    scan_topic: str | None = None,
-    odom_topic: str | None = None,
-    cmd_topic: str | None = None,
-    truth_topic: str | None = None,
-    strict: bool = False,
-    sync: SyncOptions = DEFAULT_SYNC,
-) -> LogReader:
+def log_suffix(name: str | PurePath) -> str | None:
+    """The log suffix a file name ends with, in lower case and with its compression (``".clf.bz2"``,
+    ``".bag"``), or None when the name has none of ``LOG_SUFFIXES``."""
+    suffixes = [s.lower() for s in PurePath(name).suffixes]
+    if not suffixes:
+        return None
+    last = suffixes[-1]
+    if last in COMPRESSED_SUFFIXES and len(suffixes) >= 2 and LOG_SUFFIXES.get(suffixes[-2]) == "carmen":
+        return suffixes[-2] + last
+    return last if last in LOG_SUFFIXES else None
+
+
+def log_stem(name: str) -> str:
+    """A log file name without its log suffix (``mit-csail.clf.bz2`` -> ``mit-csail``); the name itself
+    when it has none (``.clf`` is a hidden name, not a suffix)."""
+    suffix = log_suffix(name)
+    return name[: -len(suffix)] if suffix else name
+
+
+def open_log(path: Path | str, *, options: ReadOptions = DEFAULT_READ) -> LogReader:
     """Open a log with the reader for its format (a context manager; see :class:`LogReader`).
 
     Args:
         path: the log file or ROS2 bag folder.
-        fmt: a ``READERS`` name (or "rosbag") instead of detecting it from the path.
-        scan_topic, odom_topic, cmd_topic, truth_topic: streams to use instead of the auto-detected ones
-            (ROS topics, or CARMEN message names such as ``FLASER`` / ``ODOM`` / ``TRUEPOS``).
-        strict: a malformed record is an error instead of being skipped and counted.
-        sync: reorder and wait bounds of the time synchronisation.
+        options: the format (instead of detecting it from the path), streams, strictness, laser-mounting
+            fallback and sync bounds (see :class:`ReadOptions`).
 
     Raises:
         LogFormatError: missing file, unknown format, unreadable or refused log, unknown or ambiguous topic
             (messages name the file and list the candidates).
     """
-    name, target = detect_format(Path(path), fmt)
-    return READERS[name](
-        target,
-        scan_topic=scan_topic,
-        odom_topic=odom_topic,
-        cmd_topic=cmd_topic,
-        truth_topic=truth_topic,
-        strict=strict,
-        sync=sync,
-    )
+    name, target = detect_format(Path(path), options.fmt)
+    return READERS[name](target, options=options)
 
 
-def read_ticks(path: Path | str, **opts: Any) -> Iterator[Tick]:
-    """Convenience: open ``path`` (options as :func:`open_log`) and yield its ticks, closing it at the end.
+def read_ticks(path: Path | str, *, options: ReadOptions = DEFAULT_READ) -> Iterator[Tick]:
+    """Convenience: open ``path`` (as :func:`open_log`) and yield its ticks, closing it at the end.
 
     Yields:
         time-ordered ticks.
@@ -196,5 +202,5 @@ def read_ticks(path: Path | str, **opts: Any) -> Iterator[Tick]:
     Raises:
         LogFormatError: as :func:`open_log` and ``LogReader.ticks``.
     """
-    with open_log(path, **opts) as log:
+    with open_log(path, options=options) as log:
         yield from log.ticks()

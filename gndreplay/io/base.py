@@ -29,6 +29,7 @@ __all__ = [
     "LogDescription",
     "LogReader",
     "ReadReport",
+    "SensorPoseSource",
     "StreamInfo",
     "StreamRole",
     "check_beams",
@@ -137,6 +138,11 @@ def check_bearings(first: float, step: float, n: int) -> None:
         raise ValueError(f"beam bearings from {first:.6g} to {last:.6g} rad are not finite or out of range")
 
 
+#: Where the laser pose in the base frame comes from: the log's own record (CARMEN laser offset PARAMs or
+#: ROBOTLASER lines, a ROS scan in the base frame), the bag's base -> laser transforms, the reader's
+#: ``ReadOptions.default_sensor_pose``, or nowhere (the identity; CARMEN's rear laser faces backwards).
+SensorPoseSource = Literal["log", "tf", "config default", "none"]
+
 StreamRole = Literal["scan", "odom", "cmd", "truth", "tf", "tf_static", "param", "other"]
 
 
@@ -206,6 +212,8 @@ class ReadReport:
         max_gap_s: the longest interval between consecutive scans [s].
         index_clock: True when the log had no timestamps and an index clock was used.
         warnings: messages for the user (e.g. the index clock).
+        sensor_pose_source: where the scans' laser pose in the base frame came from (a
+            ``SensorPoseSource``; several joined by " then " when a CARMEN PARAM line changed it mid-log).
     """
 
     scans: int = 0
@@ -222,6 +230,7 @@ class ReadReport:
     max_gap_s: float = 0.0
     index_clock: bool = False
     warnings: tuple[str, ...] = field(default=())
+    sensor_pose_source: str = "none"
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict of every field (tuples become lists)."""

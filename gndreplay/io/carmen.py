@@ -30,7 +30,10 @@ Reader decisions (see also ECOSYSTEM.md §3 and the datasets README):
   after a complete pass, or else from one scan of the ODOM lines that stops at the first non-zero tv/rv (the
   cost of decompressing the log once, paid only when the answer is asked for before a pass).
 - The laser pose in the robot frame comes from ``PARAM robot_frontlaser_offset`` (+ ``_side_offset``,
-  ``_angular_offset``), the rear laser facing backwards; ROBOTLASER lines give it per line.
+  ``_angular_offset``; a missing one is 0), the rear laser facing backwards; ROBOTLASER lines give it per
+  line. A log without any of these PARAMs records no mounting: ``ReadOptions.default_sensor_pose`` applies
+  when given, else the identity (the rear laser facing backwards). The report's ``sensor_pose_source`` says
+  which.
 - File order is not time order: records go through the bounded reorder heap of :mod:`.sync`.
 - Malformed lines are skipped and counted (``strict`` makes them an error); all-zero stamps get an index
   clock. A line is malformed when its fields do not add up: the trailer of each message must have as many
@@ -75,6 +78,7 @@ from .base import (
     MAX_RANGE_LIMIT_M,
     LogDescription,
     ReadReport,
+    SensorPoseSource,
     StreamInfo,
     StreamRole,
     check_bearings,
@@ -82,13 +86,12 @@ from .base import (
     check_speed,
     check_time,
 )
+from .options import DEFAULT_READ, ReadOptions
 from .sync import (
-    DEFAULT_SYNC,
     Event,
     OdomEvent,
     PoseMode,
     ScanEvent,
-    SyncOptions,
     SyncStats,
     TruthEvent,
     reorder,
@@ -527,6 +530,7 @@ class _Laser:
     """Per-laser settings that old-style lines do not carry."""
 
     sensor_pose: Pose2D
+    sensor_pose_source: SensorPoseSource
     max_range_m: float
     max_range_source: str
     min_range_m: float
@@ -546,29 +550,49 @@ def _param_float(params: Mapping[str, str], key: str, limit: float = MAX_ABS_POS
     return f if abs(f) < limit else None
 
 
-def _laser_config(side: str | None, params: Mapping[str, str], saturation: float | None) -> _Laser:
+def _mounting(
+    side: str | None, params: Mapping[str, str], fallback: Pose2D | None
+) -> tuple[Pose2D, SensorPoseSource]:
+    """The ``side`` laser's pose in the robot frame and its source: the laser offset PARAMs when the log has
+    any of them (a missing one is 0), else ``fallback``, else the identity (the rear laser facing
+    backwards)."""
     if side is None:
-        return _Laser(Pose2D(0.0, 0.0, 0.0), DEFAULT_MAX_RANGE_M, "readlog.c default", 0.0, None, None)
-    x = _param_float(params, f"robot_{side}laser_offset") or 0.0
-    y = _param_float(params, f"robot_{side}laser_side_offset") or 0.0
-    th = _param_float(params, f"robot_{side}laser_angular_offset") or 0.0
-    pose = Pose2D(x, y, wrap(th + (math.pi if side == _REAR else 0.0)))
-    max_r, source = DEFAULT_MAX_RANGE_M, "readlog.c default"
+        offsets: list[float | None] = [None, None, None]
+        pose = Pose2D(0.0, 0.0, 0.0)
+    else:
+        offsets = [_param_float(params, f"robot_{side}laser_{k}") for k in ("offset", "side_offset",
+                                                                             "angular_offset")]
+        x, y, th = (v or 0.0 for v in offsets)
+        pose = Pose2D(x, y, wrap(th + (math.pi if side == _REAR else 0.0)))
+    if any(v is not None for v in offsets):
+        return pose, "log"
+    return (pose, "none") if fallback is None else (fallback, "config default")
+
+
+def _laser_config(
+    side: str | None, params: Mapping[str, str], saturation: float | None, fallback: Pose2D | None
+) -> _Laser:
+    """The settings of the ``side`` laser from the PARAMs (``fallback``: its pose when no PARAM gives one)."""
+    pose, source = _mounting(side, params, fallback)
+    if side is None:
+        return _Laser(pose, source, DEFAULT_MAX_RANGE_M, "readlog.c default", 0.0, None, None)
+    max_r, range_source = DEFAULT_MAX_RANGE_M, "readlog.c default"
     for key in _MAX_RANGE_PARAMS:
         v = _param_float(params, key.format(s=side), MAX_RANGE_LIMIT_M)
         if v is not None and v > 0:
-            max_r, source = v, f"PARAM {key.format(s=side)}"
+            max_r, range_source = v, f"PARAM {key.format(s=side)}"
             break
     else:
         if saturation is not None:
-            max_r, source = saturation, f"no-return marker {saturation:g} m"
+            max_r, range_source = saturation, f"no-return marker {saturation:g} m"
     min_r = _param_float(params, f"laser_{side}_laser_min_range") or 0.0
     if not 0.0 <= min_r < max_r:
         min_r = 0.0
     fov = _param_float(params, f"laser_{side}_laser_fov", 720.0)
     res = _param_float(params, f"laser_{side}_laser_resolution", 720.0)
     return _Laser(
-        pose, max_r, source, min_r, math.radians(fov) if fov else None, math.radians(res) if res else None
+        pose, source, max_r, range_source, min_r, math.radians(fov) if fov else None,
+        math.radians(res) if res else None,
     )
 
 
@@ -581,13 +605,16 @@ class CarmenReader:
 
     Args:
         path: the log (plain, .gz or .bz2).
-        scan_topic: scan message name (FLASER, RLASER, ROBOTLASER1/2, RAWLASER1-4); auto when None.
-        odom_topic: "ODOM" (interpolated ODOM lines) or the scan message name (its embedded odometry).
-        cmd_topic: "ODOM" (the tv/rv of ODOM lines; an error when they are all zero), or None: ODOM when
-            the log has a non-zero tv or rv (see the module docstring); anything else is an error.
-        truth_topic: "TRUEPOS", or the scan message name (its first pose triple, as a reference pose).
-        strict: a malformed line is an error instead of being skipped and counted.
-        sync: reorder / wait bounds.
+        options: what to read (``fmt`` is the registry's); for CARMEN logs:
+            ``scan_topic``: scan message name (FLASER, RLASER, ROBOTLASER1/2, RAWLASER1-4); auto when None.
+            ``odom_topic``: "ODOM" (interpolated ODOM lines) or the scan message name (its embedded
+            odometry).
+            ``cmd_topic``: "ODOM" (the tv/rv of ODOM lines; an error when they are all zero), or None: ODOM
+            when the log has a non-zero tv or rv (see the module docstring); anything else is an error.
+            ``truth_topic``: "TRUEPOS", or the scan message name (its first pose triple, as a reference
+            pose).
+            ``default_sensor_pose``: the laser pose when no laser offset PARAM gives one (not for
+            ROBOTLASER lines, which carry it).
 
     Raises:
         LogFormatError: missing file, not CARMEN, or a stream that is not in the log (lists the candidates).
@@ -595,20 +622,11 @@ class CarmenReader:
 
     format_name = "carmen"
 
-    def __init__(
-        self,
-        path: Path,
-        *,
-        scan_topic: str | None = None,
-        odom_topic: str | None = None,
-        cmd_topic: str | None = None,
-        truth_topic: str | None = None,
-        strict: bool = False,
-        sync: SyncOptions = DEFAULT_SYNC,
-    ) -> None:
+    def __init__(self, path: Path, *, options: ReadOptions = DEFAULT_READ) -> None:
         self.path = Path(path)
-        self._strict = strict
-        self._sync = sync
+        self._strict = options.strict
+        self._sync = options.sync
+        self._fallback = options.sensor_pose_fallback()
         self._stats = SyncStats()
         self._fh: _LogFile | None = None
         self._opened: _Opened | None = None
@@ -617,13 +635,14 @@ class CarmenReader:
         head, self._opened = _peek(self.path)
         self._head = head
         try:
-            self._choose(scan_topic, odom_topic, cmd_topic, truth_topic)
+            self._choose(options.scan_topic, options.odom_topic, options.cmd_topic, options.truth_topic)
         except BaseException:
             self.close()
             raise
         self._saturation = detect_saturation(head.samples.get(self.scan_stream, []))
         self._params: dict[str, str] = dict(head.params)
-        self._laser = _laser_config(_SIDE[self.scan_stream], self._params, self._saturation)
+        self._laser = self._configure_laser()
+        self._stats.sensor_pose_source = self._sensor_pose_source()
         self._angles: dict[tuple[int, float, float], F64] = {}
         self._stats_counts: dict[str, int] = {}
         self._trailers: dict[bytes, int] = {}
@@ -799,6 +818,14 @@ class CarmenReader:
     def report(self) -> ReadReport:
         return self._stats.to_report()
 
+    def _configure_laser(self) -> _Laser:
+        """The scan laser's settings from the PARAMs read so far."""
+        return _laser_config(_SIDE[self.scan_stream], self._params, self._saturation, self._fallback)
+
+    def _sensor_pose_source(self) -> SensorPoseSource:
+        """Where the scans' laser pose comes from: ROBOTLASER lines carry it, other scans take the laser's."""
+        return "log" if self.scan_stream.startswith("ROBOTLASER") else self._laser.sensor_pose_source
+
     # -- streaming ---------------------------------------------------------------------------------
     def ticks(self) -> Iterator[Tick]:
         """Time-ordered ticks; see the class docstring.
@@ -809,7 +836,7 @@ class CarmenReader:
         Raises:
             LogFormatError: truncated/corrupt compressed data, no scans, or (strict) a malformed line.
         """
-        stats = SyncStats()
+        stats = SyncStats(sensor_pose_source=self._sensor_pose_source())
         self._stats = stats
         self._odom_moved = False
         events = self._events(stats)
@@ -926,7 +953,8 @@ class CarmenReader:
         key, value = tok[1].decode("ascii", "replace"), tok[2].decode("ascii", "replace")
         if self._params.get(key) != value:
             self._params[key] = value
-            self._laser = _laser_config(_SIDE[self.scan_stream], self._params, self._saturation)
+            self._laser = self._configure_laser()
+            self._stats.use_sensor_pose_source(self._sensor_pose_source())
             self._angles.clear()  # the bearings may depend on the PARAM
         return None
 

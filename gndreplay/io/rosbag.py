@@ -7,8 +7,10 @@
 - Commands: ``geometry_msgs/Twist`` (stamped with the log time) or ``TwistStamped``.
 - Ground truth: an Odometry / PoseStamped / PoseWithCovarianceStamped topic named like a ground truth
   (``truth``, ``ground``, ``gt``, ``mocap``, ``vicon``).
-- Laser mounting: the chain base -> laser frame from ``/tf_static`` (or static-looking ``/tf`` edges), else
-  the identity.
+- Laser mounting: the chain base -> laser frame from ``/tf_static`` (or static-looking ``/tf`` edges); the
+  identity when the scan's frame is the base frame; else (no such chain, no frame_id, no scan)
+  ``ReadOptions.default_sensor_pose`` when given, or the identity. The report's ``sensor_pose_source`` says
+  which.
 - Topic choice: a single candidate is taken; among several, the conventional name (``/scan``, ``/odom``,
   ``/cmd_vel``) if present; otherwise, or for a topic that is not in the bag, a LogFormatError lists the
   candidates.
@@ -49,6 +51,7 @@ from .base import (
     MAX_RANGE_LIMIT_M,
     LogDescription,
     ReadReport,
+    SensorPoseSource,
     StreamInfo,
     StreamRole,
     check_beams,
@@ -57,14 +60,13 @@ from .base import (
     check_speed,
     check_time,
 )
+from .options import DEFAULT_READ, ReadOptions
 from .sync import (
-    DEFAULT_SYNC,
     CmdEvent,
     Event,
     OdomEvent,
     PoseMode,
     ScanEvent,
-    SyncOptions,
     SyncStats,
     TruthEvent,
     reorder,
@@ -247,10 +249,9 @@ class RosbagReader:
 
     Args:
         path: ``.bag`` file, ROS2 bag folder (with ``metadata.yaml``) or ``.mcap`` file.
-        scan_topic, odom_topic, cmd_topic, truth_topic: override the auto-detected topics;
-            ``odom_topic="/tf"`` takes odometry from the odom -> base transforms.
-        strict: a message that fails to decode is an error instead of being skipped and counted.
-        sync: reorder / wait bounds.
+        options: what to read (``fmt`` is the registry's): the topics override the auto-detected ones
+            (``odom_topic="/tf"`` takes odometry from the odom -> base transforms); ``default_sensor_pose``
+            is the laser mounting when the bag has no base -> laser transform (see the module docstring).
         format_name: registry name for reports ("rosbag1", "rosbag2", "mcap").
 
     Raises:
@@ -258,21 +259,13 @@ class RosbagReader:
     """
 
     def __init__(
-        self,
-        path: Path,
-        *,
-        scan_topic: str | None = None,
-        odom_topic: str | None = None,
-        cmd_topic: str | None = None,
-        truth_topic: str | None = None,
-        strict: bool = False,
-        sync: SyncOptions = DEFAULT_SYNC,
-        format_name: str = "rosbag",
+        self, path: Path, *, options: ReadOptions = DEFAULT_READ, format_name: str = "rosbag"
     ) -> None:
         self.path = Path(path)
         self.format_name = format_name
-        self._strict = strict
-        self._sync = sync
+        self._strict = options.strict
+        self._sync = options.sync
+        self._fallback = options.sensor_pose_fallback()
         self._stats = SyncStats()
         self._angles: dict[tuple[int, float, float], F64] = {}
         self._typestore: Any = None
@@ -297,7 +290,7 @@ class RosbagReader:
                 f"{self.path}: the ROS bag reader (rosbags) refuses it: {_describe_error(err)}"
             ) from err
         try:
-            self._setup(scan_topic, odom_topic, cmd_topic, truth_topic)
+            self._setup(options.scan_topic, options.odom_topic, options.cmd_topic, options.truth_topic)
         except BaseException:
             self.close()
             raise
@@ -345,7 +338,8 @@ class RosbagReader:
             path, "cmd", "--cmd-topic", of(TWIST, TWIST_STAMPED), cmd_topic, required=False
         )
         self.truth_topic = _pick(path, "truth", "--truth-topic", truths, truth_topic, required=False)
-        self._sensor_pose, self._pose_note = self._mounting()
+        self._sensor_pose, self._pose_source, self._pose_note = self._mounting()
+        self._stats.sensor_pose_source = self._pose_source
 
     def _conn(self, topic: str) -> list[Any]:
         return [c for c in self._reader.connections if c.topic == topic]
@@ -375,13 +369,14 @@ class RosbagReader:
                         return _frame(tr.child)
         return None
 
-    def _mounting(self) -> tuple[Pose2D, str]:
-        """Laser pose in the base frame from static transforms; identity (with a note) when unknown."""
+    def _mounting(self) -> tuple[Pose2D, SensorPoseSource, str]:
+        """Laser pose in the base frame, its source and a note for the description: from static transforms;
+        the identity for a scan in the base frame; else the fallback, or the identity."""
         identity = Pose2D(0.0, 0.0, 0.0)
         with _translate(self.path, "reading the first scan and transforms"):
             first = self._first(self.scan_topic)
             if not first:
-                return identity, "identity (no scan)"
+                return self._unknown_mounting("no scan")
             laser = _frame(self._scan_fields(first[0][1]).frame_id)
             base = self._tf_child
             if base is None and self.odom_topic and self.topics[self.odom_topic].msgtype == ODOMETRY:
@@ -398,8 +393,10 @@ class RosbagReader:
                             pose = check_pose(tr.x, tr.y, rosraw.yaw_of(tr.q), "transform")
                             edges[child] = (parent, pose)
         base = base or "base_link"
-        if laser == base or not laser:
-            return identity, "identity (the scan frame is the base frame)"
+        if not laser:
+            return self._unknown_mounting("the scan has no frame_id")
+        if laser == base:
+            return identity, "log", "identity (the scan frame is the base frame)"
         pose, frame, seen = identity, laser, set()
         while frame in edges and frame not in seen:
             seen.add(frame)
@@ -407,9 +404,18 @@ class RosbagReader:
             pose = _compose(p, pose)
             if parent == base:
                 with _translate(self.path, f"the transform {base} -> {laser}"):
-                    return check_pose(pose.x, pose.y, pose.theta, "laser mounting"), f"tf {base} -> {laser}"
+                    mounting = check_pose(pose.x, pose.y, pose.theta, "laser mounting")
+                return mounting, "tf", f"tf {base} -> {laser}"
             frame = parent
-        return identity, f"identity (no transform {base} -> {laser} in the bag)"
+        return self._unknown_mounting(f"no transform {base} -> {laser} in the bag")
+
+    def _unknown_mounting(self, why: str) -> tuple[Pose2D, SensorPoseSource, str]:
+        """The mounting when the bag does not give one: the fallback if any, else the identity."""
+        p = self._fallback
+        if p is None:
+            return Pose2D(0.0, 0.0, 0.0), "none", f"identity ({why})"
+        where = f"x {p.x:g} m, y {p.y:g} m, theta {math.degrees(p.theta):g} deg"
+        return p, "config default", f"{where} from the configuration ({why})"
 
     # -- decoding (raw bytes -> fields; big-endian CDR through rosbags) -----------------------------------
     def _fast(self, raw: bytes | memoryview) -> bool:
@@ -623,7 +629,7 @@ class RosbagReader:
         Raises:
             LogFormatError: corrupt bag, no scans, or (strict) a message that fails to decode.
         """
-        stats = SyncStats()
+        stats = SyncStats(sensor_pose_source=self._pose_source)
         self._stats = stats
         odom_mode: PoseMode = "stream" if self.odom_topic else "none"
         truth_mode: PoseMode = "stream" if self.truth_topic else "none"

@@ -128,12 +128,19 @@ class SyncStats:
     max_gap_ns: int = 0
     index_clock: bool = False
     warnings: list[str] = field(default_factory=list)
+    sensor_pose_source: str = "none"
 
     def add_malformed(self, where: str) -> None:
         """Count a skipped record; keep the first few descriptions."""
         self.malformed += 1
         if len(self.malformed_examples) < MAX_EXAMPLES:
             self.malformed_examples.append(where)
+
+    def use_sensor_pose_source(self, source: str) -> None:
+        """Record that the scans from here on take their laser pose from ``source`` (a change mid-log is
+        appended: ``"config default then log"``)."""
+        if source != self.sensor_pose_source.rsplit(" then ", 1)[-1]:
+            self.sensor_pose_source += f" then {source}"
 
     def to_report(self) -> ReadReport:
         return ReadReport(
@@ -151,6 +158,7 @@ class SyncStats:
             max_gap_s=self.max_gap_ns / NS_PER_S,
             index_clock=self.index_clock,
             warnings=tuple(self.warnings),
+            sensor_pose_source=self.sensor_pose_source,
         )
 
 

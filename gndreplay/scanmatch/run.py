@@ -6,7 +6,7 @@ import dataclasses
 import math
 import os
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -18,13 +18,14 @@ from .. import detmath as dm
 from ..errors import ScanMatchError
 from ..evaluation import Relations, RelationStats, relation_errors, write_tum
 from ..fsutil import check_output_dir, resolve_output_dir, staging_dir
+from ..io import DEFAULT_READ, ReadOptions, open_log
 from ..types import Tick
 from .base import Matcher, OdomMatcher
 from .idc import IdcMatcher, IdcParams
 from .kiss import KissIcpMatcher, KissParams
 
 __all__ = ["METHODS", "CorrectedTrajectory", "MatcherReport", "correct_trajectory", "keep_by_travel",
-           "make_matcher", "matcher_report", "run_scanmatch"]
+           "log_ticks", "make_matcher", "matcher_report", "run_scanmatch"]
 
 Method = Literal["idc", "kiss-icp", "odom"]
 METHODS: tuple[Method, ...] = ("odom", "idc", "kiss-icp")
@@ -157,6 +158,17 @@ def matcher_report(traj: CorrectedTrajectory, relations: Relations | None = None
     p99 = float(np.percentile(ms, 99)) if ms.size else math.nan
     stats = None if relations is None else relation_errors(traj.t_ns, traj.poses, relations, tol_s=tol_s)
     return MatcherReport(traj.method, int(traj.t_ns.size), traj.failures, med, p99, stats, tum_path)
+
+
+def log_ticks(log: Path, read: ReadOptions = DEFAULT_READ) -> Callable[[], Iterator[Tick]]:
+    """A factory of fresh tick streams of ``log`` (``run_scanmatch``'s ``ticks_factory``): each call opens
+    the log for one matcher's pass (an unreadable log or a bad topic fails on the first)."""
+
+    def ticks() -> Iterator[Tick]:
+        with open_log(log, options=read) as reader:
+            yield from reader.ticks()
+
+    return ticks
 
 
 def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence[Method] = METHODS, *,
