@@ -112,8 +112,9 @@ def _dash_file(option: str, args: Sequence[str]) -> str | None:
 
     suffixes = (*LOG_SUFFIXES, *COMPRESSED_SUFFIXES, *_OTHER_FILE_SUFFIXES)
     for a in args:
-        named = Path(a).suffix.lower() in suffixes or _exists(a)
-        if a.startswith("-") and option.lstrip("-") in a and named:
+        if not (a.startswith("-") and option.lstrip("-") in a):
+            continue
+        if Path(a).suffix.lower() in suffixes or _exists(a):
             return a
     return None
 
