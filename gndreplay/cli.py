@@ -32,7 +32,7 @@ if TYPE_CHECKING:  # the CLI imports its heavy modules lazily, inside the comman
     from rich.progress import Progress, TaskID
 
     from .config import Config
-    from .replay import ReadOptions, RunSink
+    from .replay import ReadOptions
     from .scanmatch import MatcherReport
     from .scanmatch.run import Method
     from .sim.scenario_file import ScenarioSpec
@@ -661,7 +661,9 @@ def run(
     import dataclasses
 
     from .config import load_config
-    from .replay import RunOptions, command_gap_warning, run_log
+    from .replay import RunOptions, run_log
+    from .report.sinks import default_sinks
+    from .report.summary import command_gap_warning
 
     goal_xy = _parse_goal(goal)
     if goal_xy is not None and goal_ahead is not None:
@@ -687,7 +689,7 @@ def run(
             out_dir,
             options=options,
             read=read,
-            sinks=_run_sinks(
+            sinks=default_sinks(
                 figures=figures,
                 mcap=mcap,
                 enforce_budgets=cfg.supervisor.enforce_budgets,
@@ -1046,8 +1048,11 @@ def batch(
     perfect_odometry: PerfectOdometryOpt = False,
     time_limit: TimeLimitOpt = None,
     figures: Annotated[
-        bool, typer.Option("--figures/--no-figures", help="Scenarios: draw each run's figures.")
-    ] = True,
+        bool | None,
+        typer.Option("--figures/--no-figures",
+                     help="Draw each run's figures (and a log's maps.npz and report.md). Default: scenario "
+                     "runs only."),
+    ] = None,
     timeout: Annotated[
         float,
         typer.Option(
@@ -1105,7 +1110,7 @@ def batch(
                            no_selector)
     goals = _load_subgoals(subgoals)  # read once, for the scenarios and the logs alike
     sim = SimOptions(latency_s=parse_latency(latency), perfect_odometry=perfect_odometry,
-                     time_limit_s=time_limit, figures=figures, config=config, preset=preset_name,
+                     time_limit_s=time_limit, figures=figures is not False, config=config, preset=preset_name,
                      planner=planner, mode=mode, local=local, subgoals=goals, no_selector=no_selector)
     job_list = expand_inputs(
         inputs or [], scenarios=scenarios or [], seeds=None if seeds is None else parse_seeds(seeds)
@@ -1127,6 +1132,7 @@ def batch(
             timeout_s=timeout,
             overwrite=overwrite,
             sim=sim,
+            figures=figures is True,
         )
     if result.out_dir != Path(os.path.abspath(out)):
         typer.echo(f"gndreplay: {out} holds an earlier batch; wrote {result.out_dir} "
@@ -1246,27 +1252,6 @@ def _with_matcher(cfg: Config, matcher: str) -> Config:
     except GndReplayError:
         raise ConfigError(f"--matcher must be idc, kiss-icp or odom, got {brief(matcher)}"
                           f"{did_you_mean(matcher, ('idc', 'kiss-icp', 'odom'))}") from None
-
-
-def _run_sinks(
-    *, figures: bool, mcap: bool, enforce_budgets: bool, on_draw: Callable[[], None] | None = None
-) -> list[RunSink]:
-    """The sinks of ``run``: maps + figures + report.md (drawn last, inside the staging directory) and
-    the results MCAP (whose flags topic records what commands.csv records)."""
-    sinks: list[RunSink] = []
-    if figures:
-        from .report import MapSink
-
-        sinks.append(MapSink())
-    if mcap:
-        from .report import McapSink
-
-        sinks.append(McapSink(enforce_budgets=enforce_budgets))
-    if figures:
-        from .report import ReportSink
-
-        sinks.append(ReportSink(on_draw=on_draw))
-    return sinks
 
 
 class _progress:

@@ -52,7 +52,7 @@ from ..errors import ConfigError
 from ..geometry import compose, relative
 from ..io.userfile import brief, check_number, did_you_mean
 from ..pipeline.stack import TickResult
-from ..replay import recorded_flags
+from ..report.rundir import recorded_flags
 from ..types import Command, Flag, Pose2D, Scan, Subgoal, Tick
 from .geometry import (
     Clearance,

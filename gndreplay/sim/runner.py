@@ -23,12 +23,11 @@ from typing import Any
 
 import numpy as np
 
-from .. import detmath as dm
 from ..config import Config, apply_overrides, load_config, preset
 from ..errors import ConfigError
 from ..io.userfile import brief
 from .closedloop import ClosedLoop, SimParams
-from .geometry import footprint_vertices
+from .figure import draw_world
 from .geometry import warm_up as warm_up_geometry
 from .scenario_file import ScenarioSpec, resolve_scenario
 
@@ -100,8 +99,6 @@ class SimSink:
         write_sim_mcap(run_dir / LOG_FILE, self.loop)
         (run_dir / TIMING_FILE).write_text(json.dumps(timings(self.loop), indent=2) + "\n")
         if self.figure:
-            from .figure import draw_world
-
             draw_world(run_dir / FIGURE_FILE, self.loop, result)
 
     def abort(self) -> None:
@@ -259,6 +256,7 @@ def simulate_scenario(
         ConfigError: a bad scenario file (one line naming the file and the key).
     """
     from ..replay import RunOptions, run_replay
+    from ..report.sinks import default_sinks
 
     spec = scenario if isinstance(scenario, ScenarioSpec) else resolve_scenario(scenario)
     cfg = cfg if cfg is not None else preset(spec.preset)
@@ -271,22 +269,8 @@ def simulate_scenario(
         if on_tick is not None:
             on_tick(r)
 
-    sinks: list[Any] = [SimSink(loop, figure=figures)]
-    if figures:
-        from ..report import MapSink, ReportSink
-
-        # the report last, inside the staging folder: the run directory appears with every figure
-        sinks = [MapSink(), *sinks, ReportSink()]
+    sinks = default_sinks(figures=figures, extra=[SimSink(loop, figure=figures)])
     summary = run_replay(loop.ticks(), loop.cfg, Path(out_dir), log=Path(spec.source),
                          options=RunOptions(goal_xy=spec.goal, subgoals=spec.subgoals), on_tick=tick_done,
                          sinks=sinks, overwrite=overwrite, **(run_kwargs or {}))
     return _outcome(loop.result(), summary.out_dir, timings(loop))
-
-
-def footprint_outline(cfg: Config) -> np.ndarray:
-    """The footprint's outline in the robot frame (a 32-gon for a circle), for drawing."""
-    r = cfg.robot
-    if r.shape == "circle":
-        a = np.linspace(0.0, 2.0 * math.pi, 33)[:-1]
-        return np.column_stack([r.radius_m * dm.cos_a(a), r.radius_m * dm.sin_a(a)])
-    return footprint_vertices(r.front_m, r.rear_m, r.width_m)
