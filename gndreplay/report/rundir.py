@@ -10,7 +10,7 @@ that read them back, each file's writer beside its reader.
   by :func:`read_summary`.
 - config.toml, the resolved configuration: written by :func:`write_config`, read by
   ``gndreplay.config.load_config``.
-- the files of the replay's ``RunSink`` s: maps.npz, results.mcap, the figures and report.md
+- the files of the replay's sinks (``RunSink``): maps.npz, results.mcap, the figures and report.md
   (``gndreplay.report.sinks.default_sinks``).
 
 The records are a pure function of log + config: commands.csv, the trajectories and maps never carry
@@ -204,9 +204,8 @@ class TrajectoryWriter:
     def add(self, t_ns: int, odom: Pose2D, corrected: Pose2D) -> None:
         """A scan's stamp, raw-odometry pose and corrected pose."""
         self.t_ns.append(t_ns)
-        o, c = odom, corrected
-        self.odom.append((o.x, o.y, o.theta))
-        self.corrected.append((c.x, c.y, c.theta))
+        self.odom.append((odom.x, odom.y, odom.theta))
+        self.corrected.append((corrected.x, corrected.y, corrected.theta))
 
     def write(self, run_dir: Path) -> None:
         """trajectory_odom.tum and trajectory_corrected.tum into ``run_dir``."""
