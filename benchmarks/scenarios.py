@@ -37,9 +37,8 @@ from typing import Any
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
-from gndreplay.config import Config, apply_overrides, preset
+from gndreplay.config import CliOverrides, Config, configure
 from gndreplay.sim import resolve_scenario, shipped_scenarios, simulate_scenario
-from gndreplay.sim.closedloop import with_navigation
 
 # scenario, preset, planner ("-": not GND), selector on, seed, output folder
 Task = tuple[str, str, str, bool, int, str]
@@ -48,10 +47,8 @@ NO_PLANNER = "-"
 
 def config(preset_name: str, planner: str, selector: bool = True) -> Config:
     """The preset with the planner chosen ("-": the preset's own), the mode selector on or off."""
-    cfg = preset(preset_name)
-    if planner != NO_PLANNER:
-        cfg = apply_overrides(cfg, {"planner": {"kind": planner}})
-    return with_navigation(cfg, no_selector=not selector)
+    chosen = CliOverrides(planner=None if planner == NO_PLANNER else planner, no_selector=not selector)
+    return configure(preset_name=preset_name, overrides=chosen)
 
 
 def planners_of(name: str, planners: list[str]) -> list[str]:

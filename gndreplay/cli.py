@@ -36,7 +36,6 @@ if TYPE_CHECKING:  # the CLI imports its heavy modules lazily, inside the comman
 
     from .config import CliOverrides, Config
     from .io import ReadOptions
-    from .replay import RunSink
     from .scanmatch import MatcherReport
     from .scanmatch.run import Method
     from .sim.runner import SimOutcome
@@ -784,7 +783,9 @@ def run(
 
       gndreplay run run.bag --mode teleop       # where would the stack have taken over from the driver?
     """
-    from .replay import RunOptions, command_gap_warning, run_log
+    from .replay import RunOptions, run_log
+    from .report.sinks import default_sinks
+    from .report.summary import command_gap_warning
     from .sim.scenario import sample_log
 
     goal_xy = _parse_goal(goal, goal_ahead)
@@ -799,7 +800,7 @@ def run(
         subgoals=setup.subgoals,
     )
     with _RunProgress(enabled=not (quiet or json_out), label=log_path.name, until_s=until) as progress:
-        sinks = _run_sinks(
+        sinks = default_sinks(
             figures=figures,
             mcap=mcap,
             enforce_budgets=cfg.supervisor.enforce_budgets,
@@ -1154,11 +1155,13 @@ def batch(
     perfect_odometry: PerfectOdometryOpt = False,
     time_limit: TimeLimitOpt = None,
     figures: Annotated[
-        bool,
+        bool | None,
         typer.Option(
-            "--figures/--no-figures", help="Scenarios: draw each run's figures.", rich_help_panel=_RUN_PANEL
+            "--figures/--no-figures",
+            help="Draw each run's figures (and a log's maps.npz and report.md). Default: scenario runs only.",
+            rich_help_panel=_RUN_PANEL,
         ),
-    ] = True,
+    ] = None,
     timeout: Annotated[
         float,
         typer.Option(
@@ -1205,8 +1208,8 @@ def batch(
 
     cfg = setup.config()
     sim = SimOptions(latency_s=parse_latency(latency), perfect_odometry=perfect_odometry,
-                     time_limit_s=time_limit, figures=figures, config=setup.path, preset=setup.preset,
-                     overrides=setup.overrides, subgoals=setup.subgoals)
+                     time_limit_s=time_limit, figures=figures is not False, config=setup.path,
+                     preset=setup.preset, overrides=setup.overrides, subgoals=setup.subgoals)
     job_list = expand_inputs(
         inputs or [], scenarios=scenarios or [], seeds=None if seeds is None else parse_seeds(seeds)
     )
@@ -1216,7 +1219,7 @@ def batch(
     with _progress(enabled=not quiet, label="batch", total=len(job_list), unit="inputs") as progress:
         result = run_batch(job_list, cfg=cfg, options=options, thresholds=limits, out_dir=out, workers=jobs,
                            dask_address=dask, progress=progress, junit=junit, read=read, timeout_s=timeout,
-                           overwrite=overwrite, sim=sim)
+                           overwrite=overwrite, sim=sim, figures=figures is True)
     _said_moved(Path(os.path.abspath(out)), result.out_dir, "batch")
     _print_batch(result, quiet=quiet)
     raise typer.Exit(result.exit_code)
@@ -1271,25 +1274,6 @@ def _num(value: object, fmt: str = "{:.2f}") -> str:
     return fmt.format(value) if isinstance(value, int | float) and math.isfinite(value) else "-"
 
 
-def _run_sinks(
-    *, figures: bool, mcap: bool, enforce_budgets: bool, on_draw: Callable[[], None] | None = None
-) -> list[RunSink]:
-    """The sinks of ``run``: maps + figures + report.md (drawn last, inside the staging directory) and
-    the results MCAP (whose flags topic records what commands.csv records)."""
-    sinks: list[RunSink] = []
-    if figures:
-        from .report import MapSink
-
-        sinks.append(MapSink())
-    if mcap:
-        from .report import McapSink
-
-        sinks.append(McapSink(enforce_budgets=enforce_budgets))
-    if figures:
-        from .report import ReportSink
-
-        sinks.append(ReportSink(on_draw=on_draw))
-    return sinks
 
 
 class _progress:

@@ -2,106 +2,51 @@
 
 Data flows one way: io yields Ticks, the matcher corrects each pose, a bounded lookahead buffer assigns
 each tick its goal (D metres further along the corrected trajectory, or a fixed goal), the stack decides,
-and rows are streamed to files in a staging directory that is renamed into place only when complete
-(``gndreplay.fsutil.staging_dir``: nothing the user owns is ever deleted or overwritten).
+and each result goes to the run directory's writers (:mod:`gndreplay.report.rundir`), the summary
+(:mod:`gndreplay.report.summary`) and the sinks, in a staging directory that is renamed into place only
+when complete (``gndreplay.fsutil.staging_dir``: nothing the user owns is ever deleted or overwritten).
 
-Records are a pure function of log + config: commands.csv, the trajectories and maps never carry wall-clock
-facts (the ``*_OVER_BUDGET`` flags live in timing.csv unless ``enforce_budgets`` let them change a
-command), every file prints a tick's time with ``fsutil.format_stamp``, and ``until_s`` does not change
-earlier ticks (the goal lookahead reads past it).
-
-The assisted-navigation audit (the multi-loop paper's takeovers) is part of the records: commands.csv
-carries each tick's desired and active navigation mode, the takeover reason and the follower's subgoal, and
-summary.json's ``interventions`` (:func:`interventions`) aggregates them into ticks per active mode, the
-takeovers and the reflexive overrides, each with its start, duration and reason.
+Records are a pure function of log + config (see :mod:`gndreplay.report.rundir`), and ``until_s`` does not
+change earlier ticks (the goal lookahead reads past it).
 """
 
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import time
-from collections import Counter, deque
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
 
-from . import __version__
 from . import detmath as dm
-from .config import Config, config_to_dict, config_to_toml
+from .config import Config
 from .errors import FOLLOW_NEEDS_SUBGOALS, ConfigError, LogFormatError
-from .evaluation import write_tum
-from .fsutil import check_output_dir, format_stamp, resolve_output_dir, staging_dir
-from .geometry import relative, wrap_angle
+from .fsutil import check_output_dir, resolve_output_dir, staging_dir
 from .io import DEFAULT_READ, ReadOptions
-from .pipeline.model import RobotCentredGrid
-from .pipeline.stack import MODULES, NavigationStack, TickResult, warm_up
+from .pipeline.stack import NavigationStack, TickResult, warm_up
+from .report.rundir import RunSink, StagedSink, TrajectoryWriter, tick_tables, write_config, write_summary
+from .report.summary import SummaryRecorder, summarise
 from .scanmatch import Matcher, make_matcher
-from .types import BUDGET_FLAGS, REFLEXIVE_MODES, Flag, Pose2D, Scan, Subgoal, Tick
+from .types import Pose2D, Scan, Subgoal, Tick
 
 if TYPE_CHECKING:
     from .io import LogReader
 
 __all__ = [
-    "BUDGET_FLAGS",
-    "COMMAND_COLUMNS",
-    "COMMAND_GAP_WARN_SHARE",
-    "NO_COMMAND_REASONS",
-    "REFLEXIVE_MODES",
     "STAGES",
-    "STALE_COMMAND_REASONS",
     "RunOptions",
-    "RunSink",
     "RunSummary",
-    "StagedSink",
     "assign_goals",
-    "check_local_option",
     "check_navigation",
-    "command_gap_warning",
     "corrected_stream",
-    "episodes",
-    "interventions",
-    "local_strategy_used",
-    "recorded_flags",
     "run_replay",
-    "runs",
-    "summarise",
-    "tick_edges",
     "warm_up_all",
 ]
-
-class RunSink(Protocol):
-    """Something that consumes the replay as it streams and writes its own files into the run directory
-    (figures' map rasters, the results MCAP, the report). ``finish`` receives the staging directory (the
-    run directory before it is published); it is called once, only when the replay completed, in the
-    order the sinks were given, after commands.csv, timing.csv, the trajectories, summary.json and
-    config.toml were written there."""
-
-    def add_scan(self, tick: Tick, pose_corrected: Pose2D) -> None:
-        """Every scan of the log (also those skipped by ``every``), at its corrected pose."""
-
-    def add_result(self, tick: Tick, result: TickResult, grid: RobotCentredGrid) -> None:
-        """Every tick the stack ran on, with its result and the robot-centred grid after integration."""
-
-    def finish(self, run_dir: Path) -> None:
-        """Write this sink's files into ``run_dir``."""
-
-    def abort(self) -> None:
-        """The replay failed: release whatever the sink holds (temporary files, writers)."""
-
-
-@runtime_checkable
-class StagedSink(Protocol):
-    """Optional extra of a ``RunSink``: ``start`` receives the staging directory before the first tick, so
-    the sink can keep its temporary files there (removed with it on any failure, never in $TMPDIR)."""
-
-    def start(self, staging: Path, target: Path) -> None:
-        """The replay is about to start; ``staging`` becomes the run directory ``target`` when complete."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -236,301 +181,6 @@ class RunSummary:
     data: dict[str, Any] = field(repr=False)
 
 
-#: commands.csv's columns: the command, what produced it (GND mode or reflexive rule, ND+ situation, flags),
-#: then the audit: desired and active navigation mode, the takeover reason (why the active mode is not the
-#: desired one, or why the desired module stood still: "teleop: no command", "teleop: command stale"; ""
-#: when the desired module's own command won), the subgoal.
-COMMAND_COLUMNS = (
-    "t", "v", "vy", "w", "mode", "situation", "flags", "desired", "active", "takeover", "subgoal",
-)  # fmt: skip
-_COMMAND_HEADER = ",".join(COMMAND_COLUMNS) + "\n"
-_TIMING_HEADER = "t," + ",".join(f"{m}_ms" for m in MODULES) + ",total_ms,planner_nodes,path_m,flags\n"
-
-
-def recorded_flags(flags: Flag, *, enforce_budgets: bool) -> Flag:
-    """The flags commands.csv records: all of them when budgets are enforced (they then change commands),
-    otherwise all but the wall-clock ``BUDGET_FLAGS`` (which timing.csv records)."""
-    return flags if enforce_budgets else flags & ~BUDGET_FLAGS
-
-
-def _csv_text(text: str) -> str:
-    """Free text as one CSV field without quoting: commas become semicolons, line breaks spaces."""
-    return " ".join(text.replace(",", ";").split())
-
-
-def _command_row(r: TickResult, enforce_budgets: bool) -> str:
-    flags = "|".join(recorded_flags(r.flags, enforce_budgets=enforce_budgets).names())
-    return (
-        f"{format_stamp(r.t_ns)},{r.v_mps:.6f},{r.vy_mps:.6f},{r.w_radps:.6f},"
-        f"{r.mode.value},{r.situation.name},{flags},"
-        f"{_csv_text(r.desired_mode)},{_csv_text(r.active_mode)},{_csv_text(r.takeover_reason)},"
-        f"{r.subgoal_index}\n"
-    )
-
-
-def _timing_row(r: TickResult) -> str:
-    ms = [r.timings_ms.get(m, 0.0) for m in MODULES]
-    over = "|".join((r.flags & BUDGET_FLAGS).names())
-    stats = f"{r.planner_nodes},{r.planner_length_m:.3f}"
-    return f"{format_stamp(r.t_ns)}," + ",".join(f"{x:.4f}" for x in ms) + f",{sum(ms):.4f},{stats},{over}\n"
-
-
-class _Trajectories:
-    """Raw-odometry and corrected poses of every scan (7 numbers a scan), written as TUM at the end."""
-
-    def __init__(self) -> None:
-        self.t_ns: list[int] = []
-        self.odom: list[tuple[float, float, float]] = []
-        self.corrected: list[tuple[float, float, float]] = []
-
-    def add(self, m: Matched) -> None:
-        self.t_ns.append(m.tick.t_ns)
-        o, c = m.tick.odom, m.pose
-        self.odom.append((o.x, o.y, o.theta))
-        self.corrected.append((c.x, c.y, c.theta))
-
-    def write(self, run_dir: Path) -> None:
-        n = len(self.t_ns)
-        t = np.asarray(self.t_ns, dtype=np.int64)
-        for name, poses in (("odom", self.odom), ("corrected", self.corrected)):
-            arr = np.asarray(poses, dtype=np.float64).reshape(n, 3)
-            write_tum(run_dir / f"trajectory_{name}.tum", t, arr)
-
-
-class _Recorder:
-    """Accumulates the per-tick numbers the summary needs (a few floats per tick)."""
-
-    def __init__(self, *, enforce_budgets: bool = False) -> None:
-        self.enforce_budgets = enforce_budgets
-        self.t_s: list[float] = []
-        self.pose: list[tuple[float, float, float]] = []
-        self.cmd: list[tuple[float, float, float]] = []  # v, w, direction
-        self.timing: list[list[float]] = []
-        self.modes: Counter[str] = Counter()
-        self.situations: Counter[str] = Counter()
-        self.flags: Counter[str] = Counter()
-        self.over_budget: Counter[str] = Counter()
-        self.planner: list[tuple[float, float]] = []  # nodes expanded (cells for NF1), path length [m]
-        self.t_ns: list[int] = []
-        self.audit: list[tuple[str, str, str, str]] = []  # desired, active, takeover reason, GND mode / rule
-
-    def add(self, r: TickResult) -> None:
-        self.t_s.append(r.t_ns / 1e9)
-        self.t_ns.append(r.t_ns)
-        self.audit.append((r.desired_mode, r.active_mode, _csv_text(r.takeover_reason), r.mode.value))
-        p = r.pose_corrected
-        self.pose.append((p.x, p.y, p.theta))
-        self.cmd.append((r.v_mps, r.w_radps, r.direction_rad))
-        self.timing.append([r.timings_ms.get(m, 0.0) for m in MODULES])
-        self.modes[r.mode.value] += 1
-        self.situations[r.situation.name] += 1
-        for name in recorded_flags(r.flags, enforce_budgets=self.enforce_budgets).names():
-            self.flags[name] += 1
-        for name in (r.flags & BUDGET_FLAGS).names():
-            self.over_budget[name] += 1
-        self.planner.append((float(r.planner_nodes), r.planner_length_m))
-
-
-def motion_agreement(
-    t_s: NDArray[np.float64],
-    poses: NDArray[np.float64],
-    cmd: NDArray[np.float64],
-    *,
-    horizon_s: float = 1.0,
-    min_motion_m: float = 0.05,
-) -> dict[str, float]:
-    """Agreement between the commands and the motion the robot actually made in the log.
-
-    For tick i the actual motion is the corrected pose horizon_s later expressed in the robot frame at
-    i: its bearing (where the robot went), its distance / horizon (speed) and its heading change /
-    horizon (turn rate). Heading agreement compares the ND+ direction with that bearing on ticks where
-    the robot moved at least min_motion_m; speed and turn-rate agreement compare v and w.
-    """
-    n = t_s.shape[0]
-    if n < 2:
-        return {"ticks_compared": 0}
-    j = np.searchsorted(t_s, t_s + horizon_s)
-    ok = j < n
-    i = np.nonzero(ok)[0]
-    j = j[ok]
-    if i.size == 0:  # the run is shorter than the horizon
-        return {"horizon_s": horizon_s, "ticks_compared": 0}
-    dt = t_s[j] - t_s[i]
-    rel = relative(poses[i], poses[j])
-    dist = np.hypot(rel[:, 0], rel[:, 1])
-    v_act = dist * np.sign(rel[:, 0]) / dt
-    w_act = rel[:, 2] / dt
-    bearing = dm.atan2_a(rel[:, 1], rel[:, 0])
-    moved = (dist >= min_motion_m) & np.isfinite(cmd[i, 2]) & (cmd[i, 0] > 0)
-    err = np.abs(np.asarray(wrap_angle(cmd[i, 2] - bearing)))[moved]
-    out: dict[str, float] = {
-        "horizon_s": horizon_s,
-        "ticks_compared": int(i.size),
-        "heading_ticks": int(err.size),
-        "heading_err_median_deg": float(np.degrees(np.median(err))) if err.size else float("nan"),
-        "heading_within_30deg": float(np.mean(err <= math.radians(30))) if err.size else float("nan"),
-        "speed_mae_mps": float(np.mean(np.abs(cmd[i, 0] - v_act))),
-        "turn_rate_mae_radps": float(np.mean(np.abs(cmd[i, 1] - w_act))),
-        "turn_sign_agreement": float(
-            np.mean(np.sign(cmd[i, 1]) == np.sign(w_act))
-        ),
-    }
-    return out
-
-
-def _latency(values: NDArray[np.float64]) -> dict[str, float]:
-    if values.size == 0:
-        return {}
-    q = np.percentile(values, [50, 90, 99])
-    return {"median": float(q[0]), "p90": float(q[1]), "p99": float(q[2]), "max": float(values.max())}
-
-
-def _planner_stats(rec: _Recorder, cfg: Config) -> dict[str, Any]:
-    """Which planner ran and its work per tick: nodes expanded (NF1: cells the wave labelled; tunnel: nodes
-    expanded) and the length of the path or tunnel chain it returned, over the ticks where it found one."""
-    stats = np.asarray(rec.planner, dtype=np.float64).reshape(-1, 2)
-    out: dict[str, Any] = {"kind": cfg.planner.kind}
-    for k, name in enumerate(("nodes", "path_m")):
-        col = stats[np.isfinite(stats[:, k]), k]
-        if col.size:
-            q = np.percentile(col, [50, 99])
-            out[name] = {"median": float(q[0]), "p99": float(q[1]), "max": float(col.max())}
-    return out
-
-
-def runs(labels: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Start and end (exclusive) indices of the runs of equal consecutive labels."""
-    a = np.asarray(labels)
-    if a.size == 0:
-        return np.zeros(0, np.intp), np.zeros(0, np.intp)
-    cut = np.flatnonzero(a[1:] != a[:-1]) + 1
-    return np.concatenate([[0], cut]).astype(np.intp), np.concatenate([cut, [a.size]]).astype(np.intp)
-
-
-def episodes(keys: Sequence[str]) -> list[tuple[int, int]]:
-    """(first, end) index pairs (end exclusive) of the maximal runs of equal non-empty consecutive keys."""
-    start, end = runs(np.asarray(keys, dtype=np.str_))
-    return [(int(i), int(j)) for i, j in zip(start, end, strict=True) if keys[i]]
-
-
-def tick_edges(t: ArrayLike) -> NDArray[np.float64]:
-    """(K + 1,) edges of the ticks' time spans: each tick lasts until the next one, the last for the median
-    tick period (1 s for a single tick). The one definition of a tick's span: summary.json's episodes,
-    report.md and the figures' bands all use it."""
-    tt = np.asarray(t, dtype=np.float64)
-    if tt.size == 0:
-        return np.zeros(1)
-    dt = float(np.median(np.diff(tt))) if tt.size > 1 else 1.0
-    return np.concatenate([tt, [tt[-1] + dt]])
-
-
-def _span(edges: NDArray[np.float64], first: int, end: int) -> dict[str, Any]:
-    """An episode's start [s since the first tick], duration (``tick_edges``: until the tick after it, or
-    one tick period past the last tick at the end of the run) and ticks; times are rounded to the
-    nanosecond, the stamps' resolution, so 0.2 s does not print as 0.1999999999999993."""
-    return {"t_start_s": round(float(edges[first]), 9),
-            "duration_s": round(float(edges[end] - edges[first]), 9), "ticks": end - first}
-
-
-#: Takeover reasons the stack records on a teleop tick whose desired module stands still for want of a
-#: usable command (``pipeline.stack``'s teleop command check): ``no_command_ticks`` / ``stale_command_ticks``.
-NO_COMMAND_REASONS = ("teleop: no command", "teleop: command not finite")
-STALE_COMMAND_REASONS = ("teleop: command stale",)
-
-
-def interventions(
-    t_ns: Sequence[int], desired: Sequence[str], active: Sequence[str], reasons: Sequence[str],
-    modes: Sequence[str],
-) -> dict[str, Any]:
-    """The assisted-navigation audit of a run (summary.json's ``interventions``), from its ticks.
-
-    Ticks per desired and per active navigation mode; the takeovers: consecutive ticks whose active mode is
-    not the desired one are one takeover (its reason and active mode: those of its first tick); the
-    reflexive overrides (``modes`` in ``REFLEXIVE_MODES``: emergency stops, safe replacements, stale data,
-    trap escapes): consecutive ticks of the same rule are one. Each episode has ``t_start_s`` (since the
-    first tick), ``duration_s`` (``tick_edges``: until the tick after it; at the end of the run, one median
-    tick period past its last tick) and
-    ``ticks``. ``no_command_ticks`` / ``stale_command_ticks``: ticks whose teleop command was missing or not
-    finite / older than the timeout (the robot stood still for want of a driver's command, with active ==
-    desired: not takeovers, but a replay where they are many did not test the driver's commands). Pure:
-    behaviour only, no wall clock.
-    """
-    edges = tick_edges((np.asarray(t_ns, dtype=np.int64) - (t_ns[0] if len(t_ns) else 0)) / 1e9)
-    taken = ["takeover" if a != d else "" for d, a in zip(desired, active, strict=True)]
-    rules = [m if m in REFLEXIVE_MODES else "" for m in modes]
-    takeovers = [{**_span(edges, i, j), "desired": desired[i], "active": active[i], "reason": reasons[i]}
-                 for i, j in episodes(taken)]
-    emergencies = [{**_span(edges, i, j), "rule": rules[i]} for i, j in episodes(rules)]
-    return {
-        "desired": dict(sorted(Counter(desired).items())),
-        "active": dict(sorted(Counter(active).items())),
-        "takeover_ticks": sum(1 for x in taken if x),
-        "takeovers": takeovers,
-        "reflexive_ticks": sum(1 for x in rules if x),
-        "emergencies": emergencies,
-        "no_command_ticks": sum(1 for r in reasons if r in NO_COMMAND_REASONS),
-        "stale_command_ticks": sum(1 for r in reasons if r in STALE_COMMAND_REASONS),
-    }
-
-
-#: Share of ticks without a usable teleop command above which ``command_gap_warning`` speaks.
-COMMAND_GAP_WARN_SHARE = 0.2
-
-
-def command_gap_warning(summary: dict[str, Any]) -> str | None:
-    """One line when more than ``COMMAND_GAP_WARN_SHARE`` of a run's ticks had no usable teleop command
-    (missing, not finite or stale: the robot stood still, so the audit says little about the driver's
-    commands), else None. ``summary``: summary.json's content."""
-    iv, n = summary.get("interventions") or {}, int(summary.get("ticks", 0) or 0)
-    missing, stale = int(iv.get("no_command_ticks", 0) or 0), int(iv.get("stale_command_ticks", 0) or 0)
-    if n == 0 or missing + stale <= COMMAND_GAP_WARN_SHARE * n:
-        return None
-    return (f"{missing + stale} of {n} ticks ({100.0 * (missing + stale) / n:.0f} %) had no usable teleop "
-            f"command ({missing} none or not finite, {stale} stale): the robot stood still on them")
-
-
-def summarise(
-    rec: _Recorder, cfg: Config, log: Path, options: RunOptions, read_report: Any
-) -> dict[str, Any]:
-    """summary.json: counts, histograms, agreement and (last, the only non-deterministic part) latency and
-    the ticks over each module's time budget. ``flags`` counts what commands.csv records."""
-    n = len(rec.t_s)
-    timing = np.asarray(rec.timing, dtype=np.float64).reshape(n, len(MODULES))
-    latency = {m: _latency(timing[:, k]) for k, m in enumerate(MODULES)}
-    latency["stack"] = _latency(timing[:, 1:].sum(axis=1))  # model + planner + reactor
-    latency["total"] = _latency(timing.sum(axis=1))
-    t = np.asarray(rec.t_s)
-    agreement = motion_agreement(t, np.asarray(rec.pose).reshape(n, 3), np.asarray(rec.cmd).reshape(n, 3))
-    desired, active, reasons, modes = (list(col) for col in zip(*rec.audit, strict=True)) if n else ([],) * 4
-    return {
-        "gndreplay_version": __version__,
-        "log": str(log),
-        "ticks": n,
-        "duration_s": float(t[-1] - t[0]) if n else 0.0,
-        "modes": dict(sorted(rec.modes.items())),
-        "situations": dict(sorted(rec.situations.items())),
-        "flags": {
-            name: rec.flags.get(name, 0)
-            for name in (f.name for f in Flag if f.value and f.name)
-            if rec.enforce_budgets or not Flag[name] & BUDGET_FLAGS
-        },
-        "interventions": interventions(rec.t_ns, desired, active, reasons, modes),
-        "agreement": agreement,
-        "read_report": read_report,
-        "options": {
-            "goal": list(options.goal_xy) if options.goal_xy else None,
-            "goal_ahead_m": options.goal_ahead_m,
-            "until_s": options.until_s,
-            "every": options.every,
-            "subgoals": [[g.x, g.y, g.theta, g.kind] for g in options.subgoals],
-        },
-        "config": config_to_dict(cfg),
-        "planner": _planner_stats(rec, cfg),
-        "latency_ms": latency,
-        "over_budget": {name: rec.over_budget.get(name, 0) for name in BUDGET_FLAGS.names()},
-    }
-
-
 class _CompileListener:
     """Reports each gndreplay numba kernel compiled (a disk-cache miss) while active."""
 
@@ -586,26 +236,6 @@ def check_navigation(cfg: Config, options: RunOptions) -> None:
                           "give --mode follow or drop --subgoals")
 
 
-def local_strategy_used(cfg: Config) -> bool:
-    """Whether ``cfg``'s navigation runs a local strategy: mode "local", or "teleop" / "follow" with the
-    mode selector (local navigation takes over); never "gnd" (GND's own ND+, no selector)."""
-    nav = cfg.navigation
-    return nav.mode == "local" or (nav.mode in ("teleop", "follow") and nav.selector)
-
-
-def check_local_option(cfg: Config, local: str | None) -> None:
-    """Refuse ``--local`` given (``local`` not None) for a navigation that runs no local strategy.
-
-    Raises:
-        ConfigError: one line naming the option and the mode.
-    """
-    if local is not None and not local_strategy_used(cfg):
-        nav = cfg.navigation
-        why = f"mode {nav.mode}" + (" without the mode selector" if nav.mode != "gnd" else "")
-        raise ConfigError(f"--local {local}: {why} runs no local strategy (mode local, or teleop / follow "
-                          "with the selector, do): drop --local")
-
-
 #: Stages ``run_replay`` reports through ``on_stage``, in order.
 STAGES = ("warm-up", "replay", "write")
 
@@ -659,18 +289,13 @@ def run_replay(
             stage("warm-up")
             warm_up_all(cfg, on_compile)
             stage("replay")
-            rec = _Recorder(enforce_budgets=enforce)
-            traj = _Trajectories()
+            rec = SummaryRecorder(enforce_budgets=enforce)
+            traj = TrajectoryWriter()
             stack = NavigationStack(cfg.stack_params(), options.subgoals)
-            with (
-                open(tmp / "commands.csv", "w", newline="") as f_cmd,
-                open(tmp / "timing.csv", "w", newline="") as f_tim,
-            ):
-                f_cmd.write(_COMMAND_HEADER)
-                f_tim.write(_TIMING_HEADER)
+            with tick_tables(tmp, enforce_budgets=enforce) as write_tick:
                 pairs = assign_goals(corrected_stream(ticks, cfg, options), options)
                 for k, (m, goal) in enumerate(pairs):
-                    traj.add(m)
+                    traj.add(m.tick.t_ns, m.tick.odom, m.pose)
                     for sink in sinks:
                         sink.add_scan(m.tick, m.pose)
                     if k % options.every:
@@ -678,16 +303,15 @@ def run_replay(
                     r = stack.step(m.tick, m.pose, goal, match_ms=m.match_ms, match_failed=m.failed)
                     for sink in sinks:
                         sink.add_result(m.tick, r, stack.grid)
-                    f_cmd.write(_command_row(r, enforce))
-                    f_tim.write(_timing_row(r))
+                    write_tick(r)
                     rec.add(r)
                     if on_tick is not None:
                         on_tick(r)
             stage("write")
             traj.write(tmp)
             summary = summarise(rec, cfg, log_path, options, read_report())
-            (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=True) + "\n")
-            (tmp / "config.toml").write_text(config_to_toml(cfg))
+            write_summary(tmp, summary)
+            write_config(tmp, cfg)
             for sink in sinks:
                 sink.finish(tmp)
         except BaseException:  # abort before the staging directory (holding the sinks' files) goes

@@ -13,21 +13,18 @@ import pytest
 from gndreplay.config import PRESETS
 from gndreplay.pipeline.nd import Situation
 from gndreplay.pipeline.stack import TickResult
-from gndreplay.replay import (
+from gndreplay.replay import RunOptions
+from gndreplay.report.markdown import MAX_EPISODE_ROWS, interventions_section
+from gndreplay.report.rundir import (
     COMMAND_COLUMNS,
-    REFLEXIVE_MODES,
-    RunOptions,
-    _command_row,
-    _Recorder,
-    command_gap_warning,
+    RunDirError,
+    command_row,
     episodes,
-    interventions,
-    summarise,
+    read_commands,
     tick_edges,
 )
-from gndreplay.report.markdown import MAX_EPISODE_ROWS, interventions_section
-from gndreplay.report.rundir import RunDirError, read_commands
-from gndreplay.types import Flag, Mode, Pose2D
+from gndreplay.report.summary import SummaryRecorder, command_gap_warning, interventions, summarise
+from gndreplay.types import REFLEXIVE_MODES, Flag, Mode, Pose2D
 
 T0 = 1_000_000_000_000
 DT = 200_000_000  # 5 Hz
@@ -107,12 +104,12 @@ def test_no_intervention_in_a_clean_gnd_run() -> None:
 
 
 def test_summary_and_commands_csv_carry_the_audit(tmp_path: Path) -> None:
-    rec = _Recorder()
+    rec = SummaryRecorder()
     rows = [",".join(COMMAND_COLUMNS) + "\n"]
     for k, (d, a, why, mode) in enumerate(SCRIPT):
         r = result(k, d, a, why.replace("(scan)", "(scan, left)"), mode, subgoal=k // 3)
         rec.add(r)
-        rows.append(_command_row(r, False))
+        rows.append(command_row(r, False))
     summary = summarise(rec, PRESETS["wheelchair"], Path("x.clf"), RunOptions(), None)
     iv = summary["interventions"]
     assert iv["takeovers"][0]["reason"] == "teleop: swept area occupied (scan; left)"  # one CSV field
@@ -155,7 +152,7 @@ def test_fig_modes_shades_each_takeover_and_bands_each_rule(tmp_path: Path) -> N
     from gndreplay.report.rundir import RunData, Timing
 
     rows = [",".join(COMMAND_COLUMNS) + "\n"]
-    rows += [_command_row(result(k, d, a, why, mode), False) for k, (d, a, why, mode) in enumerate(SCRIPT)]
+    rows += [command_row(result(k, d, a, why, mode), False) for k, (d, a, why, mode) in enumerate(SCRIPT)]
     (tmp_path / "commands.csv").write_text("".join(rows))
     c = read_commands(tmp_path / "commands.csv")
     data = RunData(run_dir=tmp_path, commands=c, timing=Timing(t_s=c.t_s, ms={}), traj_odom=np.zeros((0, 4)),

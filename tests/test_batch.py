@@ -683,6 +683,15 @@ def test_make_tasks_folds_goals_and_rejects_duplicate_names() -> None:
         run_tasks(tasks, workers=0, runner=fake_runner)
 
 
+def test_make_tasks_gives_figures_to_logs_only() -> None:
+    """``figures`` is a log's switch; a scenario run's figures come from its ``SimOptions``."""
+    jobs = [Job("a", Path("a.clf")), Job("s", Path("s.yaml"), kind="scenario")]
+    common: dict[str, Any] = {"cfg": None, "options": FakeOptions(), "thresholds": Thresholds(),
+                              "out_dir": Path("out")}
+    assert [t.figures for t in make_tasks(jobs, **common)] == [False, False]
+    assert [t.figures for t in make_tasks(jobs, figures=True, **common)] == [True, False]
+
+
 def test_execute_in_process_captures_errors(tmp_path: Path) -> None:
     bad = write_input(tmp_path, "bad.clf", "BAD")
     cfg: Any = None
@@ -788,6 +797,32 @@ def test_cli_batch_takes_the_read_options_of_run_and_a_timeout(
     assert CliRunner().invoke(app, ["batch", str(log), "--timeout", "0"]).exit_code == 2  # typer: min
 
 
+@pytest.mark.parametrize(
+    ("flag", "logs", "scenarios"),
+    [((), False, True), (("--figures",), True, True), (("--no-figures",), False, False)],
+)
+def test_cli_batch_figures_default_to_scenario_runs_only(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, flag: tuple[str, ...], logs: bool, scenarios: bool
+) -> None:
+    from typer.testing import CliRunner
+
+    import gndreplay.batch
+    from gndreplay.batch import BatchResult
+    from gndreplay.cli import app
+
+    seen: dict[str, Any] = {}
+
+    def capture(jobs: Any, **kw: Any) -> BatchResult:
+        seen.update(kw)
+        return BatchResult((), tmp_path, tmp_path / "s.csv", tmp_path / "s.md", None, 0.0)
+
+    monkeypatch.setattr(gndreplay.batch, "run_batch", capture)
+    log = write_input(tmp_path, "a.clf", "")
+    result = CliRunner().invoke(app, ["batch", str(log), *flag, "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert (seen["figures"], seen["sim"].figures) == (logs, scenarios)
+
+
 def test_cli_batch_format_reaches_the_worker(tmp_path: Path) -> None:
     """Without --format a .txt input is refused with a hint to use --format, which batch has; with
     ``--format carmen`` the worker reads it as CARMEN and says why it is not one."""
@@ -876,6 +911,23 @@ def test_real_batch_good_log_passes_corrupted_inputs_fail_alone(tmp_path: Path) 
         ("truncated", "error", "0"),
         ("garbage", "error", "0"),
     ]
+
+
+def test_real_batch_draws_a_logs_figures_when_asked(tmp_path: Path) -> None:
+    """With ``figures`` a log's run directory gets what ``gndreplay run`` draws: maps.npz, the figures and
+    report.md; without, none of them."""
+    from gndreplay.config import Config
+    from gndreplay.replay import RunOptions
+    from gndreplay.report import FIGURES, MAPS_FILE, REPORT_FILE
+
+    drawn = {MAPS_FILE, REPORT_FILE, *FIGURES}
+    for figures in (True, False):
+        res = run_batch([Job("office", SAMPLE_LOG)], cfg=Config(), options=RunOptions(until_s=2.0),
+                        out_dir=tmp_path / f"out-{figures}", figures=figures)
+        (office,) = res.results
+        assert office.status == "pass" and office.run_dir is not None
+        names = {p.name for p in office.run_dir.iterdir()}
+        assert (drawn & names) == (drawn if figures else set())
 
 
 def test_real_batch_on_dask_matches_the_process_pool(tmp_path: Path, dask_cluster: Any) -> None:

@@ -4,6 +4,7 @@ thresholds on runs and on a scenario over its seeds, the reports, and real close
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import xml.etree.ElementTree as ET
@@ -35,7 +36,7 @@ from gndreplay.batch import (
 from gndreplay.batch.metrics import outcome_note
 from gndreplay.config import CliOverrides
 from gndreplay.errors import ConfigError
-from gndreplay.sim.runner import parse_latency, scenario_config
+from gndreplay.sim.runner import parse_latency
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_LOG = ROOT / "sample_logs" / "office.clf.bz2"
@@ -316,17 +317,22 @@ def test_reports_carry_the_runs_and_the_aggregates() -> None:
 # ---------------------------------------------------------------- configuration of a scenario run
 
 
-def test_scenario_config_uses_the_scenarios_preset_unless_one_is_given(tmp_path: Path) -> None:
+def test_a_scenario_run_uses_the_scenarios_preset_unless_one_is_given(tmp_path: Path) -> None:
     from gndreplay.config import load_config
+    from gndreplay.sim import resolve_scenario
+    from gndreplay.sim.closedloop import configure_scenario
 
+    spec = dataclasses.replace(resolve_scenario("u_trap"), preset="xr4000")
     toml = write(tmp_path, "c.toml", "[robot]\nvmax_mps = 0.2\n")
-    own = scenario_config("xr4000", config=toml)
+    _, own = configure_scenario(spec, config=toml)
     assert own == load_config(toml, preset_name="xr4000") and own.robot.vmax_mps == 0.2
-    assert scenario_config("xr4000", preset="wheelchair").preset == "wheelchair"
-    assert scenario_config("wheelchair", planner="TUNNEL").planner.kind == "tunnel"
+    assert configure_scenario(spec, preset="wheelchair")[1].preset == "wheelchair"
+    chosen = CliOverrides(planner="TUNNEL", sets=("reactor.security_m=0.4",))
+    tunnel = configure_scenario(spec, overrides=chosen)
+    assert tunnel[1].planner.kind == "tunnel" and tunnel[1].reactor.security_m == 0.4
     pinned = write(tmp_path, "p.toml", 'preset = "xr4000"\n')
     with pytest.raises(ConfigError, match=r"p.toml: preset 'xr4000' conflicts"):
-        scenario_config("wheelchair", config=pinned)
+        configure_scenario(spec, config=pinned, preset="wheelchair")
 
 
 def test_parse_latency() -> None:

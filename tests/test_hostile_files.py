@@ -32,9 +32,8 @@ from gndreplay.errors import ConfigError, GndReplayError, LogFormatError
 from gndreplay.evaluation import load_relations, read_tum
 from gndreplay.io import ReadOptions, open_log, read_ticks
 from gndreplay.io.base import MAX_BEAMS
-from gndreplay.replay import COMMAND_COLUMNS
 from gndreplay.report.maps import HitRaster, save_maps
-from gndreplay.report.rundir import RunDirError, load_run
+from gndreplay.report.rundir import COMMAND_COLUMNS, RunDirError, load_run
 
 BIG = "9" * 401  # beyond a float
 LONG = "9" * 4000  # within Python's int <-> str limit, far beyond a float

@@ -213,7 +213,7 @@ def test_started_sink_stages_inside_the_run_staging_dir(tmp_path: Path) -> None:
 
 
 def test_flags_topic_leaves_out_wall_clock_budget_flags_unless_enforced(tmp_path: Path) -> None:
-    """/gndreplay/flags records what commands.csv records (``replay.recorded_flags``): the *_OVER_BUDGET
+    """/gndreplay/flags records what commands.csv records (``rundir.recorded_flags``): the *_OVER_BUDGET
     flags depend on the machine's speed, so without enforce_budgets they are left out (timing.csv has
     them)."""
     over = Flag.REACTOR_OVER_BUDGET | Flag.PLANNER_OVER_BUDGET | Flag.EMERGENCY_STOP

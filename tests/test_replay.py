@@ -16,7 +16,8 @@ from gndreplay.config import PRESETS
 from gndreplay.errors import LogFormatError
 from gndreplay.geometry import relative
 from gndreplay.io import ReadOptions, read_ticks
-from gndreplay.replay import Matched, RunOptions, assign_goals, motion_agreement, run_log
+from gndreplay.replay import Matched, RunOptions, assign_goals, run_log
+from gndreplay.report.summary import motion_agreement
 from gndreplay.types import Pose2D, Scan, Tick
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"

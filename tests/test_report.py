@@ -27,7 +27,8 @@ from gndreplay.report import (
     load_run,
 )
 from gndreplay.report.markdown import trajectory_gap
-from gndreplay.report.plots import hit_image, plot_bands, runs
+from gndreplay.report.plots import hit_image, plot_bands
+from gndreplay.report.rundir import runs
 from gndreplay.types import Flag, Mode, Pose2D, Scan, Tick
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

@@ -95,10 +95,11 @@ def make_tasks(
     out_dir: Path,
     read: ReadOptions | None = None,
     sim: SimOptions | None = None,
+    figures: bool = False,
 ) -> list[Task]:
     """One task per job: per-input settings and limits from ``thresholds``, absolute paths (workers may run
     elsewhere; also ``sim``'s config file), run directory ``out_dir / job.name``, and the job's goal folded
-    into the options. Scenario jobs get ``sim`` (None: ``SimOptions()``).
+    into the options. Scenario jobs get ``sim`` (None: ``SimOptions()``), logs ``figures``.
 
     Raises:
         ConfigError: duplicate or empty job names, no jobs, or inputs that are FIFOs, devices or sockets
@@ -136,6 +137,7 @@ def make_tasks(
                 limits=thresholds.limits_for(job),
                 read=read,
                 sim=sim if job.kind == "scenario" else None,
+                figures=figures and job.kind == "log",
             )
         )
     return tasks
@@ -301,6 +303,7 @@ def run_batch(
     timeout_s: float | None = DEFAULT_TIMEOUT_S,
     overwrite: bool = False,
     sim: SimOptions | None = None,
+    figures: bool = False,
 ) -> BatchResult:
     """Run every job in its own worker process and write the batch folder: one run directory per input,
     ``summary.csv``, ``summary.md`` (and ``junit``); with scenario jobs also ``scenarios.csv``, the
@@ -329,6 +332,8 @@ def run_batch(
         overwrite: replace an earlier batch folder at ``out_dir``.
         sim: how scenario jobs run and which configuration they get (None: ``SimOptions()``, each
             scenario's own preset).
+        figures: draw each log's figures, maps.npz and report.md in its run directory (a scenario run's
+            figures: ``sim.figures``).
 
     Raises:
         ConfigError: no jobs, bad names, FIFO / device inputs, ``workers`` < 1, bad timeout, dask missing
@@ -340,7 +345,8 @@ def run_batch(
     thresholds = thresholds if thresholds is not None else Thresholds()
     out_dir = _absolute(Path(out_dir))
     tasks = make_tasks(
-        jobs, cfg=cfg, options=options, thresholds=thresholds, out_dir=out_dir, read=read, sim=sim
+        jobs, cfg=cfg, options=options, thresholds=thresholds, out_dir=out_dir, read=read, sim=sim,
+        figures=figures,
     )
     _check_run_args(workers, timeout_s)
     inputs = [t.job.path for t in tasks]

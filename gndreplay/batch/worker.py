@@ -74,6 +74,8 @@ class Task:
         limits: threshold key -> limit for this input.
         read: how to open the log (None: the defaults).
         sim: how to run a scenario and configure its stack (None: ``SimOptions()``).
+        figures: draw a log's figures, maps.npz and report.md (``report.sinks.default_sinks``); a scenario
+            run's come from ``sim``.
     """
 
     job: Job
@@ -83,6 +85,7 @@ class Task:
     limits: Mapping[str, float] = field(default_factory=dict)
     read: ReadOptions | None = None
     sim: SimOptions | None = None
+    figures: bool = False
 
 
 class RunOutcome(Protocol):
@@ -114,9 +117,11 @@ def run_input(task: Task) -> RunOutcome:
     if job.kind == "log":
         from ..io import ReadOptions
         from ..replay import run_log
+        from ..report.sinks import default_sinks
 
         return run_log(
-            job.path, task.cfg, task.run_dir, options=task.options, read=task.read or ReadOptions()
+            job.path, task.cfg, task.run_dir, options=task.options, read=task.read or ReadOptions(),
+            sinks=default_sinks(figures=task.figures),
         )
     if job.kind == "scenario":
         from .scenarios import run_scenario

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..fsutil import atomic_path
+from ..types import REFLEXIVE_MODES
 from .plots import (
     MODE_COLORS,
     NAV_MODE_COLORS,
@@ -26,9 +27,8 @@ from .plots import (
     plot_pose,
     plot_timing,
     plot_trajectory,
-    tick_edges,
 )
-from .rundir import TIMING_MODULES, RunData
+from .rundir import TIMING_MODULES, RunData, episodes, tick_edges
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -264,8 +264,6 @@ def figure_commands(data: RunData) -> Figure:
 def figure_modes(data: RunData) -> Figure:
     """The assisted-navigation audit: v and w over time with each takeover shaded, bands of the desired and
     the active navigation mode, and a band per reflexive override in the colour of its rule."""
-    from ..replay import REFLEXIVE_MODES, episodes
-
     c = data.commands
     t = c.t_s - _t0(data)
     fig = _new_figure(12.0, 4.8)

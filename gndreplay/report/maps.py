@@ -39,8 +39,7 @@ from ..errors import one_line
 from ..geometry import compose, transform_points
 from ..pipeline.model import RobotCentredGrid
 from ..pipeline.stack import TickResult
-from ..replay import BUDGET_FLAGS
-from ..types import Pose2D, Tick
+from ..types import BUDGET_FLAGS, Pose2D, Tick
 
 __all__ = [
     "MAPS_FILE",

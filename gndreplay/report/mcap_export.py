@@ -42,8 +42,8 @@ from .. import detmath as dm
 from ..geometry import compose, inverse
 from ..pipeline.model import RobotCentredGrid
 from ..pipeline.stack import MODULES, TickResult
-from ..replay import recorded_flags
 from ..types import Pose2D, Tick
+from .rundir import recorded_flags
 
 __all__ = ["MCAP_FILE", "TOPICS", "McapSink", "RosMessages", "grid_to_occupancy"]
 
@@ -181,7 +181,7 @@ class McapSink:
         compress: zstd chunk compression.
         staging_dir: where to create the temporary bag folder.
         enforce_budgets: the run's ``supervisor.enforce_budgets``: /gndreplay/flags records the flags
-            commands.csv records (``replay.recorded_flags``), so without it the wall-clock
+            commands.csv records (``rundir.recorded_flags``), so without it the wall-clock
             ``*_OVER_BUDGET`` flags are left out and the bag is a pure function of the log and config.
     """
 

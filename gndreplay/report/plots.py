@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..replay import runs, tick_edges  # one definition of runs and tick spans, shared with the audit
+from .rundir import runs, tick_edges  # one definition of runs and tick spans, shared with the audit
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

@@ -1,6 +1,23 @@
-"""Read a run directory back (commands.csv, timing.csv, the TUM trajectories, summary.json, maps.npz).
+"""The run directory: its files, their formats, the writers a replay streams into them and the readers
+that read them back, each file's writer beside its reader.
 
-Only the files are used: ``gndreplay report RUN_DIR`` redraws everything without the log. The folder may
+- commands.csv (``COMMAND_COLUMNS``): each tick's command, what produced it and the assisted-navigation
+  audit; timing.csv: milliseconds per module, the planner's work and the wall-clock ``*_OVER_BUDGET`` flags.
+  Written a row per tick by :func:`tick_tables`, read by :func:`read_commands` and :func:`read_timing`.
+- trajectory_odom.tum, trajectory_corrected.tum: the raw-odometry and the corrected pose of every scan (TUM,
+  as evo reads it). Written by :class:`TrajectoryWriter`, read by :func:`read_tum`.
+- summary.json (built by :func:`gndreplay.report.summary.summarise`): written by :func:`write_summary`, read
+  by :func:`read_summary`.
+- config.toml, the resolved configuration: written by :func:`write_config`, read by
+  ``gndreplay.config.load_config``.
+- the files of the replay's sinks (``RunSink``): maps.npz, results.mcap, the figures and report.md
+  (``gndreplay.report.sinks.default_sinks``).
+
+The records are a pure function of log + config: commands.csv, the trajectories and maps never carry
+wall-clock facts (the ``*_OVER_BUDGET`` flags live in timing.csv unless ``enforce_budgets`` let them change a
+command: :func:`recorded_flags`), and every file prints a tick's time with ``fsutil.format_stamp``.
+
+Only the files are read back: ``gndreplay report RUN_DIR`` redraws everything without the log. The folder may
 have been damaged since the run wrote it: each file is read through :mod:`gndreplay.io.userfile` (a regular
 file of bounded size, UTF-8, JSON nesting bounded) and maps.npz's members are checked before they are
 loaded (:func:`~gndreplay.report.maps.load_maps`); anything malformed is a one-line RunDirError naming the
@@ -12,29 +29,233 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
+from ..config import Config, config_to_toml
 from ..errors import ConfigError, GndReplayError
-from ..evaluation import MAX_TUM_BYTES
+from ..evaluation import MAX_TUM_BYTES, write_tum
 from ..evaluation import read_tum as read_tum_ns
+from ..fsutil import format_stamp
 from ..io.userfile import load_json, read_text
+from ..pipeline.model import RobotCentredGrid
+from ..pipeline.stack import MODULES, TickResult
+from ..types import BUDGET_FLAGS, Flag, Pose2D, Tick
 from .maps import MAPS_FILE, MapsData, load_maps
 
-__all__ = ["Commands", "RunData", "RunDirError", "Timing", "check_summary", "load_run", "read_commands",
-           "read_timing", "read_tum"]
+__all__ = [
+    "COMMANDS_FILE",
+    "COMMAND_COLUMNS",
+    "COMMAND_HEADER",
+    "CONFIG_FILE",
+    "CORRECTED_TRAJECTORY_FILE",
+    "ODOM_TRAJECTORY_FILE",
+    "SUMMARY_FILE",
+    "TIMING_FILE",
+    "TIMING_HEADER",
+    "Commands",
+    "RunData",
+    "RunDirError",
+    "RunSink",
+    "StagedSink",
+    "Timing",
+    "TrajectoryWriter",
+    "check_summary",
+    "command_row",
+    "csv_text",
+    "episodes",
+    "load_run",
+    "read_commands",
+    "read_summary",
+    "read_timing",
+    "read_tum",
+    "recorded_flags",
+    "runs",
+    "tick_edges",
+    "tick_tables",
+    "timing_row",
+    "write_config",
+    "write_summary",
+]
 
 F64 = NDArray[np.float64]
-TIMING_MODULES = ("match", "model", "planner", "reactor")
+
+COMMANDS_FILE = "commands.csv"
+TIMING_FILE = "timing.csv"
+ODOM_TRAJECTORY_FILE = "trajectory_odom.tum"
+CORRECTED_TRAJECTORY_FILE = "trajectory_corrected.tum"
+SUMMARY_FILE = "summary.json"
+CONFIG_FILE = "config.toml"
+
+#: commands.csv's columns: the command, what produced it (GND mode or reflexive rule, ND+ situation, flags),
+#: then the audit: desired and active navigation mode, the takeover reason (why the active mode is not the
+#: desired one, or why the desired module stood still: "teleop: no command", "teleop: command stale"; ""
+#: when the desired module's own command won), the subgoal.
+COMMAND_COLUMNS = (
+    "t", "v", "vy", "w", "mode", "situation", "flags", "desired", "active", "takeover", "subgoal",
+)  # fmt: skip
+COMMAND_HEADER = ",".join(COMMAND_COLUMNS) + "\n"
+TIMING_HEADER = "t," + ",".join(f"{m}_ms" for m in MODULES) + ",total_ms,planner_nodes,path_m,flags\n"
+TIMING_MODULES = MODULES
+"""The modules timing.csv has a ``<module>_ms`` column for."""
 MAX_TABLE_BYTES = MAX_TUM_BYTES
 """Largest commands.csv / timing.csv read back (256 MB: millions of ticks, days of a long run)."""
 MAX_SUMMARY_BYTES = 16 << 20
 """Largest summary.json read back (16 MB; a run writes a few KB)."""
+
+
+# ---- what streams into a run directory ----------------------------------------------------------------
+
+
+class RunSink(Protocol):
+    """Something that consumes the replay as it streams and writes its own files into the run directory
+    (figures' map rasters, the results MCAP, the report). ``finish`` receives the staging directory (the
+    run directory before it is published); it is called once, only when the replay completed, in the
+    order the sinks were given, after commands.csv, timing.csv, the trajectories, summary.json and
+    config.toml were written there."""
+
+    def add_scan(self, tick: Tick, pose_corrected: Pose2D) -> None:
+        """Every scan of the log (also those skipped by ``every``), at its corrected pose."""
+
+    def add_result(self, tick: Tick, result: TickResult, grid: RobotCentredGrid) -> None:
+        """Every tick the stack ran on, with its result and the robot-centred grid after integration."""
+
+    def finish(self, run_dir: Path) -> None:
+        """Write this sink's files into ``run_dir``."""
+
+    def abort(self) -> None:
+        """The replay failed: release whatever the sink holds (temporary files, writers)."""
+
+
+@runtime_checkable
+class StagedSink(Protocol):
+    """Optional extra of a ``RunSink``: ``start`` receives the staging directory before the first tick, so
+    the sink can keep its temporary files there (removed with it on any failure, never in $TMPDIR)."""
+
+    def start(self, staging: Path, target: Path) -> None:
+        """The replay is about to start; ``staging`` becomes the run directory ``target`` when complete."""
+
+
+# ---- writing ------------------------------------------------------------------------------------------
+
+
+def recorded_flags(flags: Flag, *, enforce_budgets: bool) -> Flag:
+    """The flags commands.csv records: all of them when budgets are enforced (they then change commands),
+    otherwise all but the wall-clock ``BUDGET_FLAGS`` (which timing.csv records)."""
+    return flags if enforce_budgets else flags & ~BUDGET_FLAGS
+
+
+def csv_text(text: str) -> str:
+    """Free text as one CSV field without quoting: commas become semicolons, line breaks spaces."""
+    return " ".join(text.replace(",", ";").split())
+
+
+def command_row(r: TickResult, enforce_budgets: bool) -> str:
+    """A tick's commands.csv row (``COMMAND_COLUMNS``)."""
+    flags = "|".join(recorded_flags(r.flags, enforce_budgets=enforce_budgets).names())
+    return (
+        f"{format_stamp(r.t_ns)},{r.v_mps:.6f},{r.vy_mps:.6f},{r.w_radps:.6f},"
+        f"{r.mode.value},{r.situation.name},{flags},"
+        f"{csv_text(r.desired_mode)},{csv_text(r.active_mode)},{csv_text(r.takeover_reason)},"
+        f"{r.subgoal_index}\n"
+    )
+
+
+def timing_row(r: TickResult) -> str:
+    """A tick's timing.csv row (``TIMING_HEADER``)."""
+    ms = [r.timings_ms.get(m, 0.0) for m in MODULES]
+    over = "|".join((r.flags & BUDGET_FLAGS).names())
+    stats = f"{r.planner_nodes},{r.planner_length_m:.3f}"
+    return f"{format_stamp(r.t_ns)}," + ",".join(f"{x:.4f}" for x in ms) + f",{sum(ms):.4f},{stats},{over}\n"
+
+
+@contextmanager
+def tick_tables(run_dir: Path, *, enforce_budgets: bool) -> Iterator[Callable[[TickResult], None]]:
+    """Open commands.csv and timing.csv in ``run_dir``, write their headers and give the function that
+    appends a tick's row to each: the tables stream, one row per tick, and close with the ``with``."""
+    with (
+        open(run_dir / COMMANDS_FILE, "w", newline="") as f_cmd,
+        open(run_dir / TIMING_FILE, "w", newline="") as f_tim,
+    ):
+        f_cmd.write(COMMAND_HEADER)
+        f_tim.write(TIMING_HEADER)
+
+        def write_tick(r: TickResult) -> None:
+            f_cmd.write(command_row(r, enforce_budgets))
+            f_tim.write(timing_row(r))
+
+        yield write_tick
+
+
+class TrajectoryWriter:
+    """Raw-odometry and corrected poses of every scan (7 numbers a scan), written as TUM at the end."""
+
+    def __init__(self) -> None:
+        self.t_ns: list[int] = []
+        self.odom: list[tuple[float, float, float]] = []
+        self.corrected: list[tuple[float, float, float]] = []
+
+    def add(self, t_ns: int, odom: Pose2D, corrected: Pose2D) -> None:
+        """A scan's stamp, raw-odometry pose and corrected pose."""
+        self.t_ns.append(t_ns)
+        self.odom.append((odom.x, odom.y, odom.theta))
+        self.corrected.append((corrected.x, corrected.y, corrected.theta))
+
+    def write(self, run_dir: Path) -> None:
+        """trajectory_odom.tum and trajectory_corrected.tum into ``run_dir``."""
+        n = len(self.t_ns)
+        t = np.asarray(self.t_ns, dtype=np.int64)
+        for name, poses in ((ODOM_TRAJECTORY_FILE, self.odom), (CORRECTED_TRAJECTORY_FILE, self.corrected)):
+            arr = np.asarray(poses, dtype=np.float64).reshape(n, 3)
+            write_tum(run_dir / name, t, arr)
+
+
+def write_summary(run_dir: Path, summary: Mapping[str, Any]) -> None:
+    """summary.json into ``run_dir`` (indented; NaN kept as JSON's NaN); :func:`read_summary` reads it."""
+    (run_dir / SUMMARY_FILE).write_text(json.dumps(summary, indent=2, allow_nan=True) + "\n")
+
+
+def write_config(run_dir: Path, cfg: Config) -> None:
+    """config.toml, the resolved configuration, into ``run_dir``; ``config.load_config`` reads it back."""
+    (run_dir / CONFIG_FILE).write_text(config_to_toml(cfg))
+
+
+# ---- episodes: runs of equal consecutive ticks ----------------------------------------------------------
+
+
+def runs(labels: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Start and end (exclusive) indices of the runs of equal consecutive labels."""
+    a = np.asarray(labels)
+    if a.size == 0:
+        return np.zeros(0, np.intp), np.zeros(0, np.intp)
+    cut = np.flatnonzero(a[1:] != a[:-1]) + 1
+    return np.concatenate([[0], cut]).astype(np.intp), np.concatenate([cut, [a.size]]).astype(np.intp)
+
+
+def episodes(keys: Sequence[str]) -> list[tuple[int, int]]:
+    """(first, end) index pairs (end exclusive) of the maximal runs of equal non-empty consecutive keys."""
+    start, end = runs(np.asarray(keys, dtype=np.str_))
+    return [(int(i), int(j)) for i, j in zip(start, end, strict=True) if keys[i]]
+
+
+def tick_edges(t: ArrayLike) -> NDArray[np.float64]:
+    """(K + 1,) edges of the ticks' time spans: each tick lasts until the next one, the last for the median
+    tick period (1 s for a single tick). The one definition of a tick's span: summary.json's episodes,
+    report.md and the figures' bands all use it."""
+    tt = np.asarray(t, dtype=np.float64)
+    if tt.size == 0:
+        return np.zeros(1)
+    dt = float(np.median(np.diff(tt))) if tt.size > 1 else 1.0
+    return np.concatenate([tt, [tt[-1] + dt]])
+
+
+# ---- reading -------------------------------------------------------------------------------------------
 
 
 class RunDirError(GndReplayError):
@@ -121,14 +342,12 @@ _COMMAND_HEADER_V1 = ["t", "v", "vy", "w", "mode", "situation", "flags"]
 
 
 def read_commands(path: Path) -> Commands:
-    """Parse commands.csv (header ``replay.COMMAND_COLUMNS``, or the older one without the audit columns
+    """Parse commands.csv (header ``COMMAND_COLUMNS``, or the older one without the audit columns
     ``desired,active,takeover,subgoal``).
 
     Raises:
         RunDirError: missing file, wrong header or a malformed row (named by line).
     """
-    from ..replay import COMMAND_COLUMNS
-
     rows = _rows(path)
     expected = list(COMMAND_COLUMNS)
     if not rows or rows[0] not in (expected, _COMMAND_HEADER_V1):
@@ -285,6 +504,19 @@ def check_summary(path: Path, summary: Any) -> dict[str, Any]:
     return summary
 
 
+def read_summary(path: Path) -> dict[str, Any]:
+    """Read summary.json (written by :func:`write_summary`), checked by :func:`check_summary`.
+
+    Raises:
+        RunDirError: missing, too large (``MAX_SUMMARY_BYTES``), not JSON, or a key of the wrong shape.
+    """
+    summary_path = _need(path)
+    try:
+        return check_summary(summary_path, load_json(summary_path, "summary", MAX_SUMMARY_BYTES))
+    except ConfigError as err:
+        raise RunDirError(str(err)) from None
+
+
 def load_run(run_dir: Path) -> RunData:
     """Read a run directory.
 
@@ -294,11 +526,7 @@ def load_run(run_dir: Path) -> RunData:
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise RunDirError(f"{run_dir}: not a directory")
-    summary_path = _need(run_dir / "summary.json")
-    try:
-        summary = check_summary(summary_path, load_json(summary_path, "summary", MAX_SUMMARY_BYTES))
-    except ConfigError as err:
-        raise RunDirError(str(err)) from None
+    summary = read_summary(run_dir / SUMMARY_FILE)
     maps = None
     if (run_dir / MAPS_FILE).is_file():
         try:
@@ -307,10 +535,10 @@ def load_run(run_dir: Path) -> RunData:
             raise RunDirError(f"{run_dir / MAPS_FILE}: {err}") from err
     return RunData(
         run_dir=run_dir,
-        commands=read_commands(run_dir / "commands.csv"),
-        timing=read_timing(run_dir / "timing.csv"),
-        traj_odom=read_tum(run_dir / "trajectory_odom.tum"),
-        traj_corrected=read_tum(run_dir / "trajectory_corrected.tum"),
+        commands=read_commands(run_dir / COMMANDS_FILE),
+        timing=read_timing(run_dir / TIMING_FILE),
+        traj_odom=read_tum(run_dir / ODOM_TRAJECTORY_FILE),
+        traj_corrected=read_tum(run_dir / CORRECTED_TRAJECTORY_FILE),
         summary=summary,
         maps=maps,
     )

@@ -53,7 +53,7 @@ from ..errors import ConfigError
 from ..geometry import compose, relative
 from ..io.userfile import check_number
 from ..pipeline.stack import TickResult
-from ..replay import recorded_flags
+from ..report.rundir import recorded_flags
 from ..types import Command, Flag, Pose2D, Scan, Subgoal, Tick
 from .geometry import (
     Clearance,

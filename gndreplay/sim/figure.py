@@ -11,7 +11,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .. import detmath as dm
+from ..config import Config
 from ..geometry import compose
+from .geometry import footprint_vertices
 
 if TYPE_CHECKING:
     from .closedloop import ClosedLoop
@@ -37,6 +40,15 @@ def _draw_modes(ax: Any, loop: ClosedLoop, truth: np.ndarray, tt: np.ndarray) ->
         first = False
 
 
+def footprint_outline(cfg: Config) -> np.ndarray:
+    """The footprint's outline in the robot frame (a 32-gon for a circle), for drawing."""
+    r = cfg.robot
+    if r.shape == "circle":
+        a = np.linspace(0.0, 2.0 * math.pi, 33)[:-1]
+        return np.column_stack([r.radius_m * dm.cos_a(a), r.radius_m * dm.sin_a(a)])
+    return footprint_vertices(r.front_m, r.rear_m, r.width_m)
+
+
 def draw_world(path: Path, loop: ClosedLoop, result: dict[str, Any]) -> Path:
     """Draw and save the figure; returns ``path``."""
     import matplotlib
@@ -44,8 +56,6 @@ def draw_world(path: Path, loop: ClosedLoop, result: dict[str, Any]) -> Path:
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle, Polygon
-
-    from .runner import footprint_outline
 
     spec = loop.spec
     rec = loop.rec

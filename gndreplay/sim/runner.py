@@ -23,17 +23,16 @@ from typing import Any
 
 import numpy as np
 
-from .. import detmath as dm
-from ..config import Config, apply_overrides, load_config, preset
+from ..config import Config, preset
 from ..errors import ConfigError
 from ..io.userfile import brief
 from .closedloop import ClosedLoop, SimParams
-from .geometry import footprint_vertices
+from .figure import draw_world
 from .geometry import warm_up as warm_up_geometry
 from .scenario_file import ScenarioSpec, resolve_scenario
 
 __all__ = [
-    "RESULT_FILE", "SimOutcome", "SimSink", "parse_latency", "scenario_config", "simulate_scenario",
+    "RESULT_FILE", "SimOutcome", "SimSink", "parse_latency", "simulate_scenario",
     "write_sim_mcap",
 ]
 
@@ -100,8 +99,6 @@ class SimSink:
         write_sim_mcap(run_dir / LOG_FILE, self.loop)
         (run_dir / TIMING_FILE).write_text(json.dumps(timings(self.loop), indent=2) + "\n")
         if self.figure:
-            from .figure import draw_world
-
             draw_world(run_dir / FIGURE_FILE, self.loop, result)
 
     def abort(self) -> None:
@@ -198,24 +195,6 @@ def parse_latency(text: str) -> float | None:
     return value
 
 
-def scenario_config(
-    scenario_preset: str,
-    *,
-    config: Path | None = None,
-    preset: str | None = None,
-    planner: str | None = None,
-) -> Config:
-    """The stack configuration of a scenario run: ``preset`` if given, else the scenario's own, with the
-    ``config`` file over it (``load_config``: a file whose ``preset`` key differs is an error), and the
-    planner kind when given.
-
-    Raises:
-        ConfigError: a bad config file or key (naming the file and the key), or an unknown planner.
-    """
-    cfg = load_config(config, preset_name=preset or scenario_preset)
-    return cfg if planner is None else apply_overrides(cfg, {"planner": {"kind": planner.lower()}})
-
-
 def _outcome(result: dict[str, Any], out_dir: Path, t: dict[str, float]) -> SimOutcome:
     names = {f.name for f in fields(SimOutcome)}
     kw = {k: v for k, v in result.items() if k in names}
@@ -259,6 +238,7 @@ def simulate_scenario(
         ConfigError: a bad scenario file (one line naming the file and the key).
     """
     from ..replay import RunOptions, run_replay
+    from ..report.sinks import default_sinks
 
     spec = scenario if isinstance(scenario, ScenarioSpec) else resolve_scenario(scenario)
     cfg = cfg if cfg is not None else preset(spec.preset)
@@ -271,22 +251,8 @@ def simulate_scenario(
         if on_tick is not None:
             on_tick(r)
 
-    sinks: list[Any] = [SimSink(loop, figure=figures)]
-    if figures:
-        from ..report import MapSink, ReportSink
-
-        # the report last, inside the staging folder: the run directory appears with every figure
-        sinks = [MapSink(), *sinks, ReportSink()]
+    sinks = default_sinks(figures=figures, extra=[SimSink(loop, figure=figures)])
     summary = run_replay(loop.ticks(), loop.cfg, Path(out_dir), log=Path(spec.source),
                          options=RunOptions(goal_xy=spec.goal, subgoals=spec.subgoals), on_tick=tick_done,
                          sinks=sinks, overwrite=overwrite, **(run_kwargs or {}))
     return _outcome(loop.result(), summary.out_dir, timings(loop))
-
-
-def footprint_outline(cfg: Config) -> np.ndarray:
-    """The footprint's outline in the robot frame (a 32-gon for a circle), for drawing."""
-    r = cfg.robot
-    if r.shape == "circle":
-        a = np.linspace(0.0, 2.0 * math.pi, 33)[:-1]
-        return np.column_stack([r.radius_m * dm.cos_a(a), r.radius_m * dm.sin_a(a)])
-    return footprint_vertices(r.front_m, r.rear_m, r.width_m)

@@ -1,0 +1,35 @@
+"""``default_sinks``: the one list of sinks a replay writes its run directory's extra files with, for
+``gndreplay run``, ``gndreplay simulate`` and ``gndreplay batch`` alike."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+from .build import ReportSink
+from .maps import MapSink
+from .mcap_export import McapSink
+from .rundir import RunSink
+
+__all__ = ["default_sinks"]
+
+
+def default_sinks(
+    *,
+    figures: bool,
+    mcap: bool = False,
+    enforce_budgets: bool = False,
+    extra: Sequence[RunSink] = (),
+    on_draw: Callable[[], None] | None = None,
+) -> list[RunSink]:
+    """The sinks of a run, in the order they finish: with ``figures`` the map rasters (maps.npz) first,
+    then the caller's ``extra`` sinks (a simulation's result.json, log.mcap, ...), the results MCAP with
+    ``mcap`` (its flags topic records what commands.csv records, so it needs ``enforce_budgets``), and with
+    ``figures`` the figures and report.md last, drawn inside the staging directory from the files the others
+    wrote (``on_draw`` is called just before drawing)."""
+    sinks: list[RunSink] = [MapSink()] if figures else []
+    sinks += extra
+    if mcap:
+        sinks.append(McapSink(enforce_budgets=enforce_budgets))
+    if figures:
+        sinks.append(ReportSink(on_draw=on_draw))
+    return sinks

@@ -1,0 +1,268 @@
+"""summary.json: what a run did, aggregated from its ticks (:class:`SummaryRecorder` collects a few numbers
+per tick as the replay streams, :func:`summarise` builds the summary at the end; ``rundir.write_summary``
+writes it, ``rundir.read_summary`` reads it back).
+
+The assisted-navigation audit (the multi-loop paper's takeovers) is part of it: :func:`interventions`
+aggregates commands.csv's desired and active navigation modes and takeover reasons into ticks per active
+mode, the takeovers and the reflexive overrides, each with its start, duration and reason. Everything but
+``latency_ms`` and ``over_budget`` (the wall clock) is a pure function of the ticks.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import __version__
+from .. import detmath as dm
+from ..config import Config, config_to_dict
+from ..geometry import relative, wrap_angle
+from ..pipeline.stack import MODULES, TickResult
+from ..types import BUDGET_FLAGS, REFLEXIVE_MODES, Flag, Subgoal
+from .rundir import csv_text, episodes, recorded_flags, tick_edges
+
+__all__ = [
+    "COMMAND_GAP_WARN_SHARE",
+    "NO_COMMAND_REASONS",
+    "STALE_COMMAND_REASONS",
+    "SummaryOptions",
+    "SummaryRecorder",
+    "command_gap_warning",
+    "interventions",
+    "motion_agreement",
+    "summarise",
+]
+
+
+class SummaryOptions(Protocol):
+    """The replay options summary.json records (``gndreplay.replay.RunOptions`` is one)."""
+
+    @property
+    def goal_xy(self) -> tuple[float, float] | None: ...
+
+    @property
+    def goal_ahead_m(self) -> float: ...
+
+    @property
+    def until_s(self) -> float | None: ...
+
+    @property
+    def every(self) -> int: ...
+
+    @property
+    def subgoals(self) -> tuple[Subgoal, ...]: ...
+
+
+class SummaryRecorder:
+    """Accumulates the per-tick numbers the summary needs (a few floats per tick), as the replay streams."""
+
+    def __init__(self, *, enforce_budgets: bool = False) -> None:
+        self.enforce_budgets = enforce_budgets
+        self.t_s: list[float] = []
+        self.pose: list[tuple[float, float, float]] = []
+        self.cmd: list[tuple[float, float, float]] = []  # v, w, direction
+        self.timing: list[list[float]] = []
+        self.modes: Counter[str] = Counter()
+        self.situations: Counter[str] = Counter()
+        self.flags: Counter[str] = Counter()
+        self.over_budget: Counter[str] = Counter()
+        self.planner: list[tuple[float, float]] = []  # nodes expanded (cells for NF1), path length [m]
+        self.t_ns: list[int] = []
+        self.audit: list[tuple[str, str, str, str]] = []  # desired, active, takeover reason, GND mode / rule
+
+    def add(self, r: TickResult) -> None:
+        """A tick the stack ran on."""
+        self.t_s.append(r.t_ns / 1e9)
+        self.t_ns.append(r.t_ns)
+        self.audit.append((r.desired_mode, r.active_mode, csv_text(r.takeover_reason), r.mode.value))
+        p = r.pose_corrected
+        self.pose.append((p.x, p.y, p.theta))
+        self.cmd.append((r.v_mps, r.w_radps, r.direction_rad))
+        self.timing.append([r.timings_ms.get(m, 0.0) for m in MODULES])
+        self.modes[r.mode.value] += 1
+        self.situations[r.situation.name] += 1
+        for name in recorded_flags(r.flags, enforce_budgets=self.enforce_budgets).names():
+            self.flags[name] += 1
+        for name in (r.flags & BUDGET_FLAGS).names():
+            self.over_budget[name] += 1
+        self.planner.append((float(r.planner_nodes), r.planner_length_m))
+
+
+def motion_agreement(
+    t_s: NDArray[np.float64],
+    poses: NDArray[np.float64],
+    cmd: NDArray[np.float64],
+    *,
+    horizon_s: float = 1.0,
+    min_motion_m: float = 0.05,
+) -> dict[str, float]:
+    """Agreement between the commands and the motion the robot actually made in the log.
+
+    For tick i the actual motion is the corrected pose horizon_s later expressed in the robot frame at
+    i: its bearing (where the robot went), its distance / horizon (speed) and its heading change /
+    horizon (turn rate). Heading agreement compares the ND+ direction with that bearing on ticks where
+    the robot moved at least min_motion_m; speed and turn-rate agreement compare v and w.
+    """
+    n = t_s.shape[0]
+    if n < 2:
+        return {"ticks_compared": 0}
+    j = np.searchsorted(t_s, t_s + horizon_s)
+    ok = j < n
+    i = np.nonzero(ok)[0]
+    j = j[ok]
+    if i.size == 0:  # the run is shorter than the horizon
+        return {"horizon_s": horizon_s, "ticks_compared": 0}
+    dt = t_s[j] - t_s[i]
+    rel = relative(poses[i], poses[j])
+    dist = np.hypot(rel[:, 0], rel[:, 1])
+    v_act = dist * np.sign(rel[:, 0]) / dt
+    w_act = rel[:, 2] / dt
+    bearing = dm.atan2_a(rel[:, 1], rel[:, 0])
+    moved = (dist >= min_motion_m) & np.isfinite(cmd[i, 2]) & (cmd[i, 0] > 0)
+    err = np.abs(np.asarray(wrap_angle(cmd[i, 2] - bearing)))[moved]
+    out: dict[str, float] = {
+        "horizon_s": horizon_s,
+        "ticks_compared": int(i.size),
+        "heading_ticks": int(err.size),
+        "heading_err_median_deg": float(np.degrees(np.median(err))) if err.size else float("nan"),
+        "heading_within_30deg": float(np.mean(err <= math.radians(30))) if err.size else float("nan"),
+        "speed_mae_mps": float(np.mean(np.abs(cmd[i, 0] - v_act))),
+        "turn_rate_mae_radps": float(np.mean(np.abs(cmd[i, 1] - w_act))),
+        "turn_sign_agreement": float(
+            np.mean(np.sign(cmd[i, 1]) == np.sign(w_act))
+        ),
+    }
+    return out
+
+
+def _latency(values: NDArray[np.float64]) -> dict[str, float]:
+    if values.size == 0:
+        return {}
+    q = np.percentile(values, [50, 90, 99])
+    return {"median": float(q[0]), "p90": float(q[1]), "p99": float(q[2]), "max": float(values.max())}
+
+
+def _planner_stats(rec: SummaryRecorder, cfg: Config) -> dict[str, Any]:
+    """Which planner ran and its work per tick: nodes expanded (NF1: cells the wave labelled; tunnel: nodes
+    expanded) and the length of the path or tunnel chain it returned, over the ticks where it found one."""
+    stats = np.asarray(rec.planner, dtype=np.float64).reshape(-1, 2)
+    out: dict[str, Any] = {"kind": cfg.planner.kind}
+    for k, name in enumerate(("nodes", "path_m")):
+        col = stats[np.isfinite(stats[:, k]), k]
+        if col.size:
+            q = np.percentile(col, [50, 99])
+            out[name] = {"median": float(q[0]), "p99": float(q[1]), "max": float(col.max())}
+    return out
+
+
+def _span(edges: NDArray[np.float64], first: int, end: int) -> dict[str, Any]:
+    """An episode's start [s since the first tick], duration (``tick_edges``: until the tick after it, or
+    one tick period past the last tick at the end of the run) and ticks; times are rounded to the
+    nanosecond, the stamps' resolution, so 0.2 s does not print as 0.1999999999999993."""
+    return {"t_start_s": round(float(edges[first]), 9),
+            "duration_s": round(float(edges[end] - edges[first]), 9), "ticks": end - first}
+
+
+#: Takeover reasons the stack records on a teleop tick whose desired module stands still for want of a
+#: usable command (``pipeline.stack``'s teleop command check): ``no_command_ticks`` / ``stale_command_ticks``.
+NO_COMMAND_REASONS = ("teleop: no command", "teleop: command not finite")
+STALE_COMMAND_REASONS = ("teleop: command stale",)
+
+
+def interventions(
+    t_ns: Sequence[int], desired: Sequence[str], active: Sequence[str], reasons: Sequence[str],
+    modes: Sequence[str],
+) -> dict[str, Any]:
+    """The assisted-navigation audit of a run (summary.json's ``interventions``), from its ticks.
+
+    Ticks per desired and per active navigation mode; the takeovers: consecutive ticks whose active mode is
+    not the desired one are one takeover (its reason and active mode: those of its first tick); the
+    reflexive overrides (``modes`` in ``REFLEXIVE_MODES``: emergency stops, safe replacements, stale data,
+    trap escapes): consecutive ticks of the same rule are one. Each episode has ``t_start_s`` (since the
+    first tick), ``duration_s`` (``tick_edges``: until the tick after it; at the end of the run, one median
+    tick period past its last tick) and
+    ``ticks``. ``no_command_ticks`` / ``stale_command_ticks``: ticks whose teleop command was missing or not
+    finite / older than the timeout (the robot stood still for want of a driver's command, with active ==
+    desired: not takeovers, but a replay where they are many did not test the driver's commands). Pure:
+    behaviour only, no wall clock.
+    """
+    edges = tick_edges((np.asarray(t_ns, dtype=np.int64) - (t_ns[0] if len(t_ns) else 0)) / 1e9)
+    taken = ["takeover" if a != d else "" for d, a in zip(desired, active, strict=True)]
+    rules = [m if m in REFLEXIVE_MODES else "" for m in modes]
+    takeovers = [{**_span(edges, i, j), "desired": desired[i], "active": active[i], "reason": reasons[i]}
+                 for i, j in episodes(taken)]
+    emergencies = [{**_span(edges, i, j), "rule": rules[i]} for i, j in episodes(rules)]
+    return {
+        "desired": dict(sorted(Counter(desired).items())),
+        "active": dict(sorted(Counter(active).items())),
+        "takeover_ticks": sum(1 for x in taken if x),
+        "takeovers": takeovers,
+        "reflexive_ticks": sum(1 for x in rules if x),
+        "emergencies": emergencies,
+        "no_command_ticks": sum(1 for r in reasons if r in NO_COMMAND_REASONS),
+        "stale_command_ticks": sum(1 for r in reasons if r in STALE_COMMAND_REASONS),
+    }
+
+
+#: Share of ticks without a usable teleop command above which ``command_gap_warning`` speaks.
+COMMAND_GAP_WARN_SHARE = 0.2
+
+
+def command_gap_warning(summary: dict[str, Any]) -> str | None:
+    """One line when more than ``COMMAND_GAP_WARN_SHARE`` of a run's ticks had no usable teleop command
+    (missing, not finite or stale: the robot stood still, so the audit says little about the driver's
+    commands), else None. ``summary``: summary.json's content."""
+    iv, n = summary.get("interventions") or {}, int(summary.get("ticks", 0) or 0)
+    missing, stale = int(iv.get("no_command_ticks", 0) or 0), int(iv.get("stale_command_ticks", 0) or 0)
+    if n == 0 or missing + stale <= COMMAND_GAP_WARN_SHARE * n:
+        return None
+    return (f"{missing + stale} of {n} ticks ({100.0 * (missing + stale) / n:.0f} %) had no usable teleop "
+            f"command ({missing} none or not finite, {stale} stale): the robot stood still on them")
+
+
+def summarise(
+    rec: SummaryRecorder, cfg: Config, log: Path, options: SummaryOptions, read_report: Any
+) -> dict[str, Any]:
+    """summary.json: counts, histograms, agreement and (last, the only non-deterministic part) latency and
+    the ticks over each module's time budget. ``flags`` counts what commands.csv records."""
+    n = len(rec.t_s)
+    timing = np.asarray(rec.timing, dtype=np.float64).reshape(n, len(MODULES))
+    latency = {m: _latency(timing[:, k]) for k, m in enumerate(MODULES)}
+    latency["stack"] = _latency(timing[:, 1:].sum(axis=1))  # model + planner + reactor
+    latency["total"] = _latency(timing.sum(axis=1))
+    t = np.asarray(rec.t_s)
+    agreement = motion_agreement(t, np.asarray(rec.pose).reshape(n, 3), np.asarray(rec.cmd).reshape(n, 3))
+    desired, active, reasons, modes = (list(col) for col in zip(*rec.audit, strict=True)) if n else ([],) * 4
+    return {
+        "gndreplay_version": __version__,
+        "log": str(log),
+        "ticks": n,
+        "duration_s": float(t[-1] - t[0]) if n else 0.0,
+        "modes": dict(sorted(rec.modes.items())),
+        "situations": dict(sorted(rec.situations.items())),
+        "flags": {
+            name: rec.flags.get(name, 0)
+            for name in (f.name for f in Flag if f.value and f.name)
+            if rec.enforce_budgets or not Flag[name] & BUDGET_FLAGS
+        },
+        "interventions": interventions(rec.t_ns, desired, active, reasons, modes),
+        "agreement": agreement,
+        "read_report": read_report,
+        "options": {
+            "goal": list(options.goal_xy) if options.goal_xy else None,
+            "goal_ahead_m": options.goal_ahead_m,
+            "until_s": options.until_s,
+            "every": options.every,
+            "subgoals": [[g.x, g.y, g.theta, g.kind] for g in options.subgoals],
+        },
+        "config": config_to_dict(cfg),
+        "planner": _planner_stats(rec, cfg),
+        "latency_ms": latency,
+        "over_budget": {name: rec.over_budget.get(name, 0) for name in BUDGET_FLAGS.names()},
+    }
