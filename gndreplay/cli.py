@@ -698,9 +698,13 @@ def _parse_goal(value: str | None, goal_ahead: float | None) -> tuple[float, flo
 def _log_stem(log: Path) -> str:
     """The default output name of a log: its name less the log suffixes, never ``.``/``..``/empty/hidden."""
     from .fsutil import safe_name
-    from .io import log_stem
+    from .io import COMPRESSED_SUFFIXES, LOG_SUFFIXES
 
-    return safe_name(log_stem(log.name.rstrip("/")))
+    name = log.name.rstrip("/")
+    for suffix in (*COMPRESSED_SUFFIXES, *LOG_SUFFIXES):
+        if name.endswith(suffix):
+            name = name[: -len(suffix)]
+    return safe_name(name)
 
 
 @app.command()
