@@ -1205,7 +1205,9 @@ def _with_planner(cfg: Config, planner: str | None) -> Config:
 
 def _planner(planner: str | None) -> str | None:
     """``--planner`` lower-cased, or ConfigError naming the planners (and the closest)."""
-    return _choice("--planner", planner, ("nf1", "tunnel"))
+    from .pipeline.planners import PLANNERS
+
+    return _choice("--planner", planner, tuple(PLANNERS))
 
 
 def _with_navigation(cfg: Config, mode: str | None, local: str | None, no_selector: bool) -> Config:
