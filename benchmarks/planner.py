@@ -47,7 +47,8 @@ from gndreplay.geometry import wrap_angle
 from gndreplay.io import read_ticks
 from gndreplay.pipeline.cspace import free_cspace
 from gndreplay.pipeline.model import FREE, OCCUPIED
-from gndreplay.pipeline.nf1 import Nf1Params, Planner, descend, nf1_wavefront, plan, tighten
+from gndreplay.pipeline.nf1 import Nf1Params, descend, nf1_wavefront, plan, tighten
+from gndreplay.pipeline.planner import Planner
 from gndreplay.pipeline.stack import NavigationStack, make_planner, warm_up
 from gndreplay.pipeline.tunnel import TunnelParams, tunnel_plan, warm_up_planners
 from gndreplay.replay import RunOptions, assign_goals, corrected_stream
@@ -203,12 +204,10 @@ def dev_log(log: Path, n_ticks: int, repeat: int) -> None:
     planner's cost)."""
     cfg = PRESETS["wheelchair"]
     params = cfg.stack_params()
-    planners: dict[str, Planner] = {
-        "nf1": make_planner(params),
-        "tunnel": make_planner(dataclasses.replace(params, planner_kind="tunnel")),
-    }
+    tunnel = dataclasses.replace(params, planner=dataclasses.replace(params.planner, kind="tunnel"))
+    planners: dict[str, Planner] = {"nf1": make_planner(params), "tunnel": make_planner(tunnel)}
     warm_up(params)
-    warm_up_planners(params.tunnel)
+    warm_up_planners(params.planner.tunnel)
     stack = NavigationStack(params)
     ms: dict[str, list[float]] = {k: [] for k in planners}
     ok = dict.fromkeys(planners, 0)

@@ -1,6 +1,6 @@
 """Run configuration: frozen sections per stage, presets, and TOML loading with validation.
 
-Stage-specific parameter dataclasses live next to the code that uses them (model, scanmatch, nf1, nd,
+Stage-specific parameter dataclasses live next to the code that uses them (model, scanmatch, planners, nd,
 supervisor) so a stage receives only its own section; this module composes them into one ``Config``,
 owns the presets (case-insensitive names) and the TOML loader (unknown keys and wrong types are errors
 naming the key and file), and holds the physical range of every numeric setting in one table, ``RANGES``,
@@ -30,7 +30,9 @@ from .pipeline.local import LOCAL_STRATEGIES, LocalParams
 from .pipeline.model import GRID_400, GridParams
 from .pipeline.nd import NdParams
 from .pipeline.nf1 import Nf1Params
-from .pipeline.stack import NAV_MODES, PLANNERS, StackParams
+from .pipeline.planner import RouteParams
+from .pipeline.planners import PLANNERS, PlannerParams
+from .pipeline.stack import NAV_MODES, StackParams
 from .pipeline.supervisor import SupervisorParams
 from .pipeline.tunnel import TunnelParams
 from .robot import WHEELCHAIR_LASER, WHEELCHAIR_ROBOT, XR4000_LASER, XR4000_ROBOT, LaserConfig, RobotConfig
@@ -47,7 +49,6 @@ __all__ = [
     "CspaceConfig",
     "LaserConfig",
     "NavigationConfig",
-    "PlannerConfig",
     "Range",
     "RobotConfig",
     "ScanMatchConfig",
@@ -81,20 +82,6 @@ class CspaceConfig:
 
     margin_m: float = 0.05
     unknown_is_free: bool = True
-
-
-@dataclass(frozen=True, slots=True)
-class PlannerConfig(Nf1Params):
-    """The planner section: which planner runs, NF1's settings (inherited, so ``[planner] connectivity``
-    keeps working) and the tunnel planner's (``[planner.tunnel]``).
-
-    Attributes:
-        kind: "nf1" (GND) or "tunnel" (the wheelchair paper).
-        tunnel: the tunnel planner's settings.
-    """
-
-    kind: Literal["nf1", "tunnel"] = "nf1"
-    tunnel: TunnelParams = TunnelParams()
 
 
 @dataclass(frozen=True, slots=True)
@@ -150,7 +137,7 @@ class Config:
     laser: LaserConfig = WHEELCHAIR_LASER
     grid: GridParams = GRID_400
     cspace: CspaceConfig = CspaceConfig()
-    planner: PlannerConfig = PlannerConfig()
+    planner: PlannerParams = PlannerParams()
     reactor: NdParams = NdParams()
     supervisor: SupervisorParams = SupervisorParams()
     scanmatch: ScanMatchConfig = ScanMatchConfig()
@@ -161,10 +148,7 @@ class Config:
         return StackParams(
             robot=self.robot,
             grid=self.grid,
-            # NF1's own settings only: which planner runs is planner_kind, said once
-            planner=Nf1Params(**{f.name: getattr(self.planner, f.name) for f in _NF1_FIELDS}),
-            planner_kind=self.planner.kind,
-            tunnel=self.planner.tunnel,
+            planner=self.planner,
             reactor=self.reactor,
             supervisor=self.supervisor,
             cspace_margin_m=self.cspace.margin_m,
@@ -178,8 +162,6 @@ class Config:
             follow=self.navigation.follow,
         )
 
-
-_NF1_FIELDS = dataclasses.fields(Nf1Params)
 
 PRESETS: dict[str, Config] = {
     # the wheelchair paper: 1.2 x 0.7 m, differential drive, laser 0.72 m ahead of the axle,
@@ -288,12 +270,12 @@ RANGES: dict[tuple[type, str], Range] = {
     (GridParams, "control_zone_m"): _nonneg(10_000.0),
     (GridParams, "free_clip_m"): _nonneg(_RANGE_M),
     (CspaceConfig, "margin_m"): _nonneg(10.0),
-    (Nf1Params, "lookahead_m"): _pos(_LEN),
+    (RouteParams, "lookahead_m"): _pos(_LEN),
+    (RouteParams, "route_keep_ratio"): Range(0.0, 10.0),
+    (RouteParams, "route_keep_m"): _nonneg(_LEN),
     (Nf1Params, "escape_m"): _nonneg(_LEN),
     (Nf1Params, "border_search_m"): _nonneg(_LEN),
     (Nf1Params, "unknown_cost"): Range(1.0, 100.0),
-    (Nf1Params, "route_keep_ratio"): Range(0.0, 10.0),
-    (Nf1Params, "route_keep_m"): _nonneg(_LEN),
     (TunnelParams, "margin_m"): _nonneg(10.0),
     (TunnelParams, "n_rays"): _count(8, 100_000),
     (TunnelParams, "jump_m"): _pos(_LEN),
@@ -495,7 +477,7 @@ def numeric_fields(section: type) -> list[str]:
 
 
 def range_of(section: type, name: str) -> Range | None:
-    """The range of ``section.name``, inherited from a base section (PlannerConfig from Nf1Params)."""
+    """The range of ``section.name``, inherited from a base section (PlannerParams from RouteParams)."""
     for cls in section.__mro__:
         if (cls, name) in RANGES:
             return RANGES[(cls, name)]
@@ -718,7 +700,7 @@ def _merge(into: dict[str, Any], table: dict[str, Any]) -> dict[str, Any]:
 def _option_table(ov: CliOverrides) -> dict[str, Any]:
     """The named options of ``ov`` as one nested table of overrides, each value checked by name first."""
     table: dict[str, Any] = {}
-    if (kind := choose("--planner", ov.planner, PLANNERS)) is not None:
+    if (kind := choose("--planner", ov.planner, tuple(PLANNERS))) is not None:
         table["planner"] = {"kind": kind}
     if (method := choose("--matcher", ov.matcher, MATCHER_METHODS)) is not None:
         table["scanmatch"] = {"method": method}

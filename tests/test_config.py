@@ -67,6 +67,17 @@ def test_overrides_apply_and_keep_the_rest(tmp_path: Path) -> None:
     assert cfg.scanmatch.method == "odom"
 
 
+def test_planner_section_shared_settings_and_one_table_per_planner(tmp_path: Path) -> None:
+    text = "[planner]\nkind = 'tunnel'\nlookahead_m = 0.8\n[planner.nf1]\nconnectivity = 8\n"
+    cfg = load_config(write(tmp_path, text + "[planner.tunnel]\nn_rays = 720\n"))
+    p = cfg.planner
+    assert (p.kind, p.lookahead_m, p.nf1.connectivity, p.tunnel.n_rays) == ("tunnel", 0.8, 8, 720)
+    assert cfg.stack_params().planner is p
+    d = PRESETS["wheelchair"].planner  # the defaults
+    assert (d.kind, d.lookahead_m, d.route_keep_ratio, d.route_keep_m) == ("nf1", 1.0, 0.1, 0.3)
+    assert dataclasses.astuple(d.nf1) == (4, 0.5, True, 1.0, True, 1.0)
+
+
 def test_int_is_accepted_for_a_float(tmp_path: Path) -> None:
     cfg = load_config(write(tmp_path, "[robot]\nvmax_mps = 1\n"))
     assert cfg.robot.vmax_mps == 1.0 and isinstance(cfg.robot.vmax_mps, float)
@@ -89,7 +100,10 @@ def test_preset_from_file_and_from_option(tmp_path: Path) -> None:
         ("[grid]\nsize_cells = 2.5\n", r"grid.size_cells: expected an integer, got 2.5"),
         ("[cspace]\nunknown_is_free = 1\n", r"cspace.unknown_is_free: expected true or false, got 1"),
         ("[robot]\nshape = 'oval'\n", r"robot.shape: expected one of 'circle', 'rectangle', got 'oval'"),
-        ("[planner]\nconnectivity = 6\n", r"planner.connectivity: expected one of 4, 8, got 6"),
+        ("[planner.nf1]\nconnectivity = 6\n", r"planner.nf1.connectivity: expected one of 4, 8, got 6"),
+        # NF1's own settings are in its table, not in [planner]
+        ("[planner]\nconnectivity = 8\n", r"cfg.toml: unknown key 'planner.connectivity' \(known in "),
+        ("[planner]\nkind = 'rrt'\n", r"\[planner\] unknown planner kind 'rrt'; known: nf1, tunnel"),
         ("robot = 3\n", r"robot: expected a table"),
         ("[grid]\ncell_m = -1.0\n", r"cfg.toml: grid.cell_m must be in \[0.001, 10\], got -1.0"),
         ("[scanmatch.idc]\nnot_a_key = 1\n", r"unknown key 'scanmatch.idc.not_a_key'"),
@@ -138,7 +152,7 @@ def test_every_numeric_field_of_every_section_has_a_range() -> None:
     ]
     assert not missing, f"add these to config.RANGES: {missing}"
     # and the table names no field that does not exist (a renamed field would leave a dead entry);
-    # a section may inherit its fields' ranges from a base section (PlannerConfig from Nf1Params)
+    # a section may inherit its fields' ranges from a base section (PlannerParams from RouteParams)
     known = {
         (base, name) for cls in _sections(Config) for base in cls.__mro__ for name in numeric_fields(cls)
     }

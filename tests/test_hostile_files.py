@@ -105,7 +105,7 @@ def write(path: Path, text: str | bytes) -> Path:
         (f"[robot]\nvmax_mps = -{LONG}\n", ("robot.vmax_mps", "an integer of")),
         (f"[grid]\nsize_cells = {BIG}\n", ("grid.size_cells", "[4, 4000]")),
         (f"[grid]\nsize_cells = {LONG}\n", ("grid.size_cells",)),
-        (f"[planner]\nconnectivity = {LONG}\n", ("planner.connectivity", "expected one of 4, 8")),
+        (f"[planner.nf1]\nconnectivity = {LONG}\n", ("planner.nf1.connectivity", "expected one of 4, 8")),
         (f"[robot]\nshape = '{'x' * 100_000}'\n", ("robot.shape",)),
         (f"[robot]\nvmax_mps = '{'x' * 100_000}'\n", ("robot.vmax_mps", "expected a number")),
         ("[robot]\nvmax_mps = " + "[" * DEEP + "]" * DEEP + "\n", ("nested more than",)),

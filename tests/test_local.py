@@ -190,7 +190,7 @@ def test_bad_inputs() -> None:
     with pytest.raises(ConfigError, match=r"navigation\.local\.approach_s"):
         LocalParams(approach_s=0.0)
     with pytest.raises(ConfigError, match=r"navigation\.local\.strategy"):
-        LocalParams(strategy="bug2")  # type: ignore[arg-type]
+        LocalParams(strategy="bug2")
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
@@ -198,7 +198,7 @@ def test_empty_map_every_strategy_moves_at_full_speed(robot: RobotConfig) -> Non
     warm_up_local(robot)
     pm = polar_map(np.zeros((0, 2)), robot, LocalParams())
     for s in LOCAL_STRATEGIES[1:]:
-        cmd = local_command(pm, None, robot, LocalParams(strategy=s))  # type: ignore[arg-type]
+        cmd = local_command(pm, None, robot, LocalParams(strategy=s))
         assert math.hypot(cmd.v_mps, cmd.vy_mps) == pytest.approx(robot.vmax_mps), s
 
 
@@ -418,7 +418,7 @@ def scenes(draw: st.DrawFn) -> tuple[RobotConfig, LocalParams, np.ndarray, np.nd
     parts = [seg((a, b), (c, d)) for a, b, c, d in walls] + [np.array(loose, float).reshape(-1, 2)]
     pts = np.vstack(parts)
     target = draw(st.one_of(st.none(), st.tuples(coord, coord)))
-    params = LocalParams(strategy=strategy)  # type: ignore[arg-type]
+    params = LocalParams(strategy=strategy)
     return robot, params, pts, None if target is None else np.array(target)
 
 

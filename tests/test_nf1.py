@@ -12,7 +12,6 @@ from scipy.ndimage import distance_transform_edt
 
 from gndreplay.pipeline.nf1 import (
     Nf1Params,
-    PlanResult,
     _visible,  # the kernel behind every line-of-sight claim
     descend,
     nf1_wavefront,
@@ -22,6 +21,7 @@ from gndreplay.pipeline.nf1 import (
     reaches_border,
     tighten,
 )
+from gndreplay.pipeline.planner import PlanResult, RouteParams
 from gndreplay.types import Flag
 
 CELL_M = 0.05
@@ -359,7 +359,7 @@ def test_lookahead_point_along_polyline() -> None:
     assert path_direction(wp, 100.0) == pytest.approx(math.pi / 4)
     free = np.ones((100, 100), dtype=bool)
     free[20:80, 60:70] = False  # wall 10 cells east of the robot; go round its south end (row < 20)
-    res = plan(free, (50, 50), corner((50, 90)), cell_m=CELL_M, params=Nf1Params(lookahead_m=0.5))
+    res = plan(free, (50, 50), corner((50, 90)), cell_m=CELL_M, lookahead_m=0.5)
     check_valid(res, free, (50, 50))
     first = res.waypoints_cells[1] - res.waypoints_cells[0]
     assert res.direction_rad == pytest.approx(math.atan2(first[0], first[1]))
@@ -370,7 +370,9 @@ def test_bad_arguments() -> None:
     with pytest.raises(ValueError, match="connectivity must be 4 or 8"):
         Nf1Params(connectivity=6)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="lookahead_m must be > 0"):
-        Nf1Params(lookahead_m=0.0)
+        RouteParams(lookahead_m=0.0)
+    with pytest.raises(ValueError, match="lookahead_m must be > 0"):
+        plan(free, (1, 1), (5.0, 5.0), cell_m=CELL_M, lookahead_m=0.0)
     with pytest.raises(ValueError, match="escape_m must be >= 0"):
         Nf1Params(escape_m=-1.0)
     with pytest.raises(ValueError, match="border_search_m must be >= 0"):

@@ -1,4 +1,4 @@
-"""Route hysteresis of ``Nf1Planner`` (``Nf1Params.route_keep_ratio`` / ``route_keep_m``): the route
+"""Route hysteresis of ``Nf1Planner`` (``RouteParams.route_keep_ratio`` / ``route_keep_m``): the route
 returned last is kept while it is free and not clearly worse than this tick's NF1 route."""
 
 from __future__ import annotations
@@ -11,13 +11,14 @@ from numpy.typing import NDArray
 
 from gndreplay.pipeline.cspace import free_cspace
 from gndreplay.pipeline.model import FREE, OCCUPIED, shift_cells
-from gndreplay.pipeline.nf1 import Nf1Params, Nf1Planner, PlanResult, plan, route_cost
+from gndreplay.pipeline.nf1 import Nf1Params, Nf1Planner, plan, route_cost
+from gndreplay.pipeline.planner import PlanResult, RouteParams
 from gndreplay.types import Flag
 
 CELL_M = 0.05
 INFLATE_M = 0.15
-HELD = Nf1Params()
-PURE = Nf1Params(route_keep_ratio=0.0, route_keep_m=0.0)
+HELD = RouteParams()
+PURE = RouteParams(route_keep_ratio=0.0, route_keep_m=0.0)
 GOAL = (60.5, 150.5)
 
 
@@ -35,13 +36,13 @@ def side(res: PlanResult) -> str:
     return "top" if rows.max() < 60 else "bottom"
 
 
-def planner(params: Nf1Params = HELD) -> Nf1Planner:
-    return Nf1Planner(params, cell_m=CELL_M, inflate_m=INFLATE_M, unknown_is_free=True)
+def planner(route: RouteParams = HELD) -> Nf1Planner:
+    return Nf1Planner(Nf1Params(), cell_m=CELL_M, inflate_m=INFLATE_M, unknown_is_free=True, route=route)
 
 
 def pure_plan(cells: NDArray[np.uint8], start: tuple[int, int], goal: tuple[float, float]) -> PlanResult:
     free = free_cspace(cells, cell_m=CELL_M, inflate_m=INFLATE_M)
-    return plan(free, start, goal, cell_m=CELL_M, params=PURE)
+    return plan(free, start, goal, cell_m=CELL_M)
 
 
 def test_a_slightly_better_route_does_not_replace_the_current_one() -> None:
@@ -141,6 +142,6 @@ def test_route_cost_weights_unknown_cells() -> None:
 
 def test_bad_margins() -> None:
     with pytest.raises(ValueError, match="route_keep_ratio"):
-        Nf1Params(route_keep_ratio=-0.1)
+        RouteParams(route_keep_ratio=-0.1)
     with pytest.raises(ValueError, match="route_keep_m"):
-        Nf1Params(route_keep_m=-1.0)
+        RouteParams(route_keep_m=-1.0)

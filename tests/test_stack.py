@@ -213,7 +213,8 @@ def test_warm_up_compiles_what_real_ticks_need() -> None:
 def tunnel_params(cfg: Config) -> StackParams:
     import dataclasses
 
-    return dataclasses.replace(cfg.stack_params(), planner_kind="tunnel")
+    params = cfg.stack_params()
+    return dataclasses.replace(params, planner=dataclasses.replace(params.planner, kind="tunnel"))
 
 
 def test_make_planner_builds_the_kind_named() -> None:
@@ -224,9 +225,9 @@ def test_make_planner_builds_the_kind_named() -> None:
 
     base = PRESETS["wheelchair"].stack_params()
     assert isinstance(make_planner(base), Nf1Planner)  # the default
-    assert isinstance(make_planner(dataclasses.replace(base, planner_kind="tunnel")), TunnelPlanner)
-    with pytest.raises(ValueError, match="unknown planner kind 'rrt'"):
-        make_planner(dataclasses.replace(base, planner_kind="rrt"))  # type: ignore[arg-type]
+    assert isinstance(make_planner(tunnel_params(PRESETS["wheelchair"])), TunnelPlanner)
+    with pytest.raises(ValueError, match="unknown planner kind 'rrt'; known: nf1, tunnel"):
+        dataclasses.replace(base.planner, kind="rrt")
 
 
 @pytest.mark.parametrize("name", PRESET_NAMES)
@@ -298,7 +299,7 @@ def test_warm_up_compiles_what_the_tunnel_planner_needs() -> None:
 
     params = tunnel_params(PRESETS["wheelchair"])
     warm_up(PRESETS["wheelchair"].stack_params())
-    tunnel.warm_up_planners(params.tunnel)
+    tunnel.warm_up_planners(params.planner.tunnel)
     before = signatures()
     stack = NavigationStack(params)
     sample = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
@@ -613,7 +614,8 @@ def test_tunnel_fallback_is_flagged_per_tick(name: str) -> None:
     flags = []
     for complete in (True, False):
         base = tunnel_params(cfg)
-        params = dataclasses.replace(base, tunnel=TunnelParams(max_expansions=1, complete=complete))
+        planner = dataclasses.replace(base.planner, tunnel=TunnelParams(max_expansions=1, complete=complete))
+        params = dataclasses.replace(base, planner=planner)
         flags.append(run(cfg, world, Pose2D(0, 0, 0), (4.0, 0.0), params=params)[-1].flags)
     assert flags[0] & Flag.PLANNER_FALLBACK and not flags[0] & Flag.PLANNER_TIMEOUT
     assert flags[1] & Flag.PLANNER_TIMEOUT and not flags[1] & Flag.PLANNER_FALLBACK

@@ -4,7 +4,9 @@ The multi-loop paper (seeds/002, section 3.2) moves the robot "with no given ref
 robot-centred occupancy map (its "perception maps", Fig. 4) and a simple strategy: "follow the free space",
 "follow the environment on the left/right" or "contour obstacles". It gives no laws for them (they are in its
 reference [7]); the laws below are ours, each stated where it is implemented. ND+ (``nd.nd_step``) stays the
-default local navigation; the stack calls it itself, and :func:`local_command` refuses ``"nd"``.
+default local navigation. Every strategy is an entry of :data:`STRATEGIES`, called alike
+(:class:`LocalStrategy`): "nd" through the caller's ND+ (which carries its commitment between ticks), the
+others on the polar map (:func:`local_command`, one law each in :data:`POLAR_LAWS`).
 
 Frames and sectors are ND+'s (``nd`` module docstring): robot frame x forward, y left, angles
 counter-clockwise in (-pi, pi], origin at the rotation centre; sector ``i`` of ``n`` has its bisector at
@@ -35,8 +37,9 @@ same way by the angle it can rotate before a corner comes within ``safety_m`` of
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 from numba import njit
@@ -45,15 +48,13 @@ from numpy.typing import ArrayLike, NDArray
 from .. import detmath as dm
 from ..errors import ConfigError
 from ..robot import RobotConfig
-from .nd import _drive, _sectorise, _wrap, robot_boundary_m, sector_angles, sector_of
+from ..types import Flag, Mode
+from .nd import NdResult, Situation, drive, robot_boundary_m, sector_angles, sector_of, sectorise, wrap
 
-__all__ = ["LOCAL_STRATEGIES", "LocalCommand", "LocalParams", "LocalStrategy", "PolarMap", "local_command",
-           "polar_map", "travel_m", "warm_up_local"]
+__all__ = ["LOCAL_STRATEGIES", "POLAR_LAWS", "STRATEGIES", "LocalCommand", "LocalParams", "LocalStrategy",
+           "NdCall", "PolarLaw", "PolarMap", "local_command", "polar_map", "travel_m", "warm_up_local"]
 
 F64 = NDArray[np.float64]
-
-LocalStrategy = Literal["nd", "free-space", "wall-left", "wall-right", "contour"]
-LOCAL_STRATEGIES: tuple[str, ...] = ("nd", "free-space", "wall-left", "wall-right", "contour")
 
 _TWO_PI = 2.0 * math.pi
 _HALF_PI = 0.5 * math.pi
@@ -68,8 +69,8 @@ class LocalParams:
     """Local navigation settings ([navigation.local]). Ranges: ``config.RANGES``.
 
     Attributes:
-        strategy: "nd" (ND+, the default; run by the stack), "free-space", "wall-left", "wall-right" or
-            "contour".
+        strategy: a key of :data:`STRATEGIES`: "nd" (ND+, the default), "free-space", "wall-left",
+            "wall-right" or "contour".
         n_sectors: sectors of the polar map over 360 deg (180: 2 deg, as ND+).
         max_range_m: obstacle points farther than this from the rotation centre are ignored; an empty
             sector has free distance ``max_range_m``, and travels are capped there.
@@ -106,7 +107,7 @@ class LocalParams:
             step; at 0.87 m, 0.5 deg is 8 mm, well inside ``safety_m``).
     """
 
-    strategy: LocalStrategy = "nd"
+    strategy: str = "nd"
     n_sectors: int = 180
     max_range_m: float = 5.0
     safety_m: float = 0.1
@@ -125,8 +126,8 @@ class LocalParams:
     rotation_step_rad: float = math.pi / 360.0
 
     def __post_init__(self) -> None:
-        if self.strategy not in LOCAL_STRATEGIES:
-            raise ConfigError(f"navigation.local.strategy must be one of {LOCAL_STRATEGIES}, "
+        if self.strategy not in STRATEGIES:
+            raise ConfigError(f"navigation.local.strategy must be one of {tuple(STRATEGIES)}, "
                               f"got {self.strategy!r}")
         if self.contour_side not in ("left", "right"):
             raise ConfigError(f"navigation.local.contour_side must be 'left' or 'right', "
@@ -183,6 +184,11 @@ class LocalCommand:
         direction_rad: the motion direction the strategy chose, before the speed law.
         side: the side the followed wall / contoured obstacle is kept on: +1 left, -1 right, 0 none (free
             space, or contour heading straight for its target). Pass it back as ``side_hint`` next tick.
+        mode: what the command is: Mode.LOCAL for the polar map strategies; ND+ reports Mode.MND, or
+            Mode.ROTATE without a free walking area (a turn in place towards the target whose rate the
+            caller sets: ``w_radps`` is 0).
+        situation: ND+'s situation (Situation.NONE for the others).
+        flag: ND+'s flag (REACTOR_NO_REGION); Flag.NONE for the others.
     """
 
     v_mps: float
@@ -190,6 +196,9 @@ class LocalCommand:
     w_radps: float
     direction_rad: float
     side: int = 0
+    mode: Mode = Mode.LOCAL
+    situation: Situation = Situation.NONE
+    flag: Flag = Flag.NONE
 
 
 # --------------------------------------------------------------------------------------------------
@@ -229,7 +238,7 @@ def polar_map(obstacles_xy: NDArray[np.float64], robot: RobotConfig, params: Loc
     pts = _points(obstacles_xy)
     n, cap = params.n_sectors, params.max_range_m
     bis = sector_angles(n)
-    range_m, _ = _sectorise(pts, bis, cap)  # nearest point per sector (nd's kernel, same sector rule)
+    range_m, _ = sectorise(pts, bis, cap)  # nearest point per sector (nd's kernel, same sector rule)
     free = np.full(n, cap)
     free_ang = bis.copy()
     r = np.hypot(pts[:, 0], pts[:, 1])
@@ -386,12 +395,12 @@ def _turn_limits(polar: PolarMap, robot: RobotConfig, params: LocalParams) -> tu
 
 def _limit(theta: float, polar: PolarMap, robot: RobotConfig, params: LocalParams, side: int,
            ) -> LocalCommand:
-    """Drive towards ``theta`` (ND+'s mapping, ``nd._drive``: turn rate proportional to the direction,
+    """Drive towards ``theta`` (ND+'s mapping, ``nd.drive``: turn rate proportional to the direction,
     differential speed falling to 0 at +-90 deg) at full speed, then apply the speed law: translation at
     most ``D / approach_s`` with D the travel in the motion direction of the footprint grown by
     ``safety_m`` (0 when an obstacle within ``safety_m`` would come closer), and a rectangle's turn rate at
     most what :func:`_turn_limits` allows."""
-    v, vy, w = _drive(theta, robot.vmax_mps, robot)
+    v, vy, w = drive(theta, robot.vmax_mps, robot)
     speed = math.hypot(v, vy)
     if speed > 0.0:
         motion = dm.atan2(vy, v)
@@ -429,7 +438,7 @@ def _boundary_direction(polar: PolarMap, side: int, distance_m: float, window: N
     err = float(polar.free_m[i]) - distance_m
     corr = min(max(dm.atan(params.distance_gain_per_m * err), -params.max_correction_rad),
                params.max_correction_rad)
-    return _wrap(bearing - side * _HALF_PI + side * corr)
+    return wrap(bearing - side * _HALF_PI + side * corr)
 
 
 def _side_window(polar: PolarMap, side: int, params: LocalParams) -> NDArray[np.bool_]:
@@ -447,6 +456,18 @@ def _wall(polar: PolarMap, side: int, robot: RobotConfig, params: LocalParams) -
     return _limit(0.0 if theta is None else theta, polar, robot, params, side if theta is not None else 0)
 
 
+def _wall_left(polar: PolarMap, target: tuple[float, float] | None, robot: RobotConfig,
+               params: LocalParams, side_hint: int) -> LocalCommand:
+    """Follow the environment on the left (:func:`_wall`); no target."""
+    return _wall(polar, 1, robot, params)
+
+
+def _wall_right(polar: PolarMap, target: tuple[float, float] | None, robot: RobotConfig,
+                params: LocalParams, side_hint: int) -> LocalCommand:
+    """Follow the environment on the right (:func:`_wall`); no target."""
+    return _wall(polar, -1, robot, params)
+
+
 def _target(target_xy: NDArray[np.float64] | None) -> tuple[float, float] | None:
     """(distance, bearing) of the target, None without one."""
     if target_xy is None:
@@ -454,7 +475,7 @@ def _target(target_xy: NDArray[np.float64] | None) -> tuple[float, float] | None
     t = np.asarray(target_xy, dtype=np.float64).reshape(-1)
     if t.shape != (2,) or not np.all(np.isfinite(t)):
         raise ValueError(f"target_xy must be two finite numbers or None, got {target_xy!r}")
-    return math.hypot(t[0], t[1]), _wrap(dm.atan2(t[1], t[0]))
+    return math.hypot(t[0], t[1]), wrap(dm.atan2(t[1], t[0]))
 
 
 def _contour(polar: PolarMap, target: tuple[float, float] | None, robot: RobotConfig, params: LocalParams,
@@ -498,7 +519,7 @@ def _contour(polar: PolarMap, target: tuple[float, float] | None, robot: RobotCo
 
 
 def _free_space(polar: PolarMap, target: tuple[float, float] | None, robot: RobotConfig,
-                params: LocalParams) -> LocalCommand:
+                params: LocalParams, side_hint: int) -> LocalCommand:
     """Follow the free space: head for the most open cluster of sectors.
 
     With a target the robot can reach straight (footprint grown by ``free_margin_m``, turned to face it
@@ -509,6 +530,7 @@ def _free_space(polar: PolarMap, target: tuple[float, float] | None, robot: Robo
     pi``, the preferred direction being the target's, else straight ahead. In the best cluster the robot
     takes the preferred direction clamped to keep ``width / 2 + free_margin_m`` laterally from the edge
     points (ND+'s way past a gap's corner), or the cluster's middle when nothing is left after the clamp.
+    No side is kept (``side_hint`` unused).
     """
     pref = 0.0
     if target is not None:
@@ -553,7 +575,7 @@ def _free_space(polar: PolarMap, target: tuple[float, float] | None, robot: Robo
     if off > width:  # outside: measure from the nearer end
         off = width if off - width < _TWO_PI - off else 0.0
     a, b = g_lo, width - g_hi
-    theta = _wrap(lo + (min(max(off, a), b) if a <= b else 0.5 * width))
+    theta = wrap(lo + (min(max(off, a), b) if a <= b else 0.5 * width))
     return _limit(_unblock(theta, polar, robot, params), polar, robot, params, 0)
 
 
@@ -574,10 +596,22 @@ def _unblock(theta: float, polar: PolarMap, robot: RobotConfig, params: LocalPar
     return float(polar.angles_rad[idx[np.argmin(dev[idx])]])
 
 
+PolarLaw = Callable[[PolarMap, tuple[float, float] | None, RobotConfig, LocalParams, int], LocalCommand]
+"""A strategy on the polar map: (map, target as (distance, bearing) or None, robot, settings, side hint)."""
+
+POLAR_LAWS: dict[str, PolarLaw] = {
+    "free-space": _free_space,
+    "wall-left": _wall_left,
+    "wall-right": _wall_right,
+    "contour": _contour,
+}
+"""The strategies on the polar map, by name (each also a :data:`STRATEGIES` entry)."""
+
+
 def local_command(polar: PolarMap, target_xy: NDArray[np.float64] | None, robot: RobotConfig,
                   params: LocalParams, *, side_hint: int = 0) -> LocalCommand:
-    """The motion the configured strategy (not "nd") chooses on ``polar``, biased towards ``target_xy``
-    (robot frame) when one is given.
+    """The motion the configured polar map strategy (:data:`POLAR_LAWS`, not "nd") chooses on ``polar``,
+    biased towards ``target_xy`` (robot frame) when one is given.
 
     "free-space" (:func:`_free_space`) and "contour" (:func:`_contour`) use the target; "wall-left" and
     "wall-right" (:func:`_wall`) ignore it. ``side_hint``: the previous command's ``side`` (contour keeps
@@ -587,24 +621,60 @@ def local_command(polar: PolarMap, target_xy: NDArray[np.float64] | None, robot:
     Raises
     ------
     ValueError
-        For strategy "nd" (the stack runs ``nd.nd_step``), or a target that is not two finite numbers.
+        For a strategy not on the polar map ("nd": ``nd.nd_step``, through :data:`STRATEGIES`), or a
+        target that is not two finite numbers.
     """
     target = _target(target_xy)
     s = params.strategy
-    if s == "free-space":
-        return _free_space(polar, target, robot, params)
-    if s in ("wall-left", "wall-right"):
-        return _wall(polar, 1 if s == "wall-left" else -1, robot, params)
-    if s == "contour":
-        return _contour(polar, target, robot, params, side_hint)
-    raise ValueError(f"local_command does not run strategy {s!r}: the stack calls nd.nd_step for it")
+    law = POLAR_LAWS.get(s)
+    if law is None:
+        raise ValueError(f"local_command runs the polar map strategies, not {s!r} (ND+: nd.nd_step, through "
+                         "STRATEGIES)")
+    return law(polar, target, robot, params, side_hint)
+
+
+NdCall = Callable[[F64, F64], NdResult]
+"""ND+ on obstacle points towards a target (both robot frame), with its caller's commitment."""
+
+
+class LocalStrategy(Protocol):
+    """A local navigation strategy (:data:`STRATEGIES`): the command towards ``target_xy`` among the
+    obstacle points ``obstacles_xy`` (both robot frame), told the side the previous command kept
+    (``side_hint``) and given the caller's ND+ (``nd``)."""
+
+    def __call__(self, obstacles_xy: F64, target_xy: F64, robot: RobotConfig, params: LocalParams, *,
+                 side_hint: int, nd: NdCall) -> LocalCommand: ...
+
+
+def _nd_plus(obstacles_xy: F64, target_xy: F64, robot: RobotConfig, params: LocalParams, *,
+             side_hint: int, nd: NdCall) -> LocalCommand:
+    """ND+ steering to the target itself (GND's mND); ROTATE towards it without a free walking area
+    (REACTOR_NO_REGION), the caller setting the turn rate. No side is kept."""
+    r = nd(obstacles_xy, target_xy)
+    if r.flag & Flag.REACTOR_NO_REGION:
+        return LocalCommand(0.0, 0.0, 0.0, r.direction_rad, 0, Mode.ROTATE, r.situation, r.flag)
+    return LocalCommand(r.v_mps, r.vy_mps, r.w_radps, r.direction_rad, 0, Mode.MND, r.situation, r.flag)
+
+
+def _on_polar_map(obstacles_xy: F64, target_xy: F64, robot: RobotConfig, params: LocalParams, *,
+                  side_hint: int, nd: NdCall) -> LocalCommand:
+    """A :data:`POLAR_LAWS` strategy: :func:`local_command` on the polar map of the obstacle points."""
+    polar = polar_map(obstacles_xy, robot, params)
+    return local_command(polar, target_xy, robot, params, side_hint=side_hint)
+
+
+STRATEGIES: dict[str, LocalStrategy] = {"nd": _nd_plus, **dict.fromkeys(POLAR_LAWS, _on_polar_map)}
+"""Local navigation strategies by name (``[navigation.local] strategy``, ``--local``)."""
+
+LOCAL_STRATEGIES: tuple[str, ...] = tuple(STRATEGIES)
+"""The strategies' names, "nd" first."""
 
 
 def warm_up_local(robot: RobotConfig | None = None) -> None:
-    """Run every strategy once on a small map: compiles ``nd``'s sector kernel and the travel kernel
-    (``_travel_kernel``) before the first tick."""
+    """Run every polar map strategy once on a small map: compiles ``nd``'s sector kernel and the travel
+    kernel (``_travel_kernel``) before the first tick."""
     rb = robot if robot is not None else RobotConfig()
     pts = np.array([[2.0, 0.0], [0.0, 1.5], [-1.0, -1.0]])
-    for s in LOCAL_STRATEGIES[1:]:
-        p = LocalParams(strategy=s)  # type: ignore[arg-type]
+    for s in POLAR_LAWS:
+        p = LocalParams(strategy=s)
         local_command(polar_map(pts, rb, p), np.array([3.0, 0.0]), rb, p)

@@ -38,7 +38,7 @@ Steps (ALGORITHMS.md section 5, ND+ code)
        HS direction and theta_b away from the closest dangerous obstacle, r its clearance ratio; LS2
        ``theta_p + (cl - cr)/(cl + cr) (theta_p + pi/2)`` if cl <= cr else ``... (pi/2 - theta_p)``.
     5. Speed ``v_ND = vmax * min(c_left, c_right)`` (1 for a side without dangerous obstacles), then the
-       mapping to the base (:func:`_drive`).
+       mapping to the base (:func:`drive`).
 
 Differences from ALGORITHMS.md / the released code, and why
     * LS2 uses the documented law when the region direction theta_p is ahead (|theta_p| <= pi/2). For a
@@ -120,11 +120,14 @@ __all__ = [
     "NdParams",
     "NdResult",
     "Situation",
+    "drive",
     "nd_step",
     "robot_boundary_m",
     "sector_angles",
     "sector_of",
+    "sectorise",
     "security_boundary_m",
+    "wrap",
 ]
 
 F64 = NDArray[np.float64]
@@ -378,7 +381,7 @@ def _geometry(robot: RobotConfig, params: NdParams) -> _Geometry:
 # Steps
 
 
-def _wrap(a: float) -> float:
+def wrap(a: float) -> float:
     """Wrap a scalar angle to (-pi, pi]."""
     w = (a + math.pi) % (2.0 * math.pi) - math.pi
     return math.pi if w <= -math.pi else w
@@ -407,7 +410,7 @@ def _sectorise_kernel(points: F64, scale: float, max_range_m: float, dist: F64, 
             dist[i] = math.sqrt(dist[i])
 
 
-def _sectorise(points: F64, bisectors: F64, max_range_m: float) -> tuple[F64, F64]:
+def sectorise(points: F64, bisectors: F64, max_range_m: float) -> tuple[F64, F64]:
     """Per sector the distance and angle of the closest point (inf / bisector when none within range)."""
     n = bisectors.size
     dist = np.full(n, np.inf)
@@ -522,14 +525,14 @@ def _select_region(dist: F64, ang: F64, bisectors: F64, goal_r: float, goal_a: f
         j = (i + 1) % n
         far, near = (j, i) if dist[j] > dist[i] else (i, j)
         if np.isinf(dist[far]):
-            a_sub = ang[near] + 0.5 * _wrap(float(bisectors[far] - ang[near]))
+            a_sub = ang[near] + 0.5 * wrap(float(bisectors[far] - ang[near]))
             r_sub = dist[near] + _FAR_M
         else:
             x = 0.5 * (dist[i] * dm.cos(ang[i]) + dist[j] * dm.cos(ang[j]))
             y = 0.5 * (dist[i] * dm.sin(ang[i]) + dist[j] * dm.sin(ang[j]))
             a_sub, r_sub = dm.atan2(y, x), math.hypot(x, y)
-        a_sub = _wrap(float(a_sub))
-        kept = prev_rad is not None and abs(_wrap(a_sub - prev_rad)) <= 0.5 * commit_rad
+        a_sub = wrap(float(a_sub))
+        kept = prev_rad is not None and abs(wrap(a_sub - prev_rad)) <= 0.5 * commit_rad
         if best is not None and not kept:
             continue
         if not _navigable(px, py, float(r_sub), a_sub, gap_m):
@@ -553,22 +556,22 @@ def _ls2_direction(theta_p: float, c_left: float, c_right: float) -> float:
     applied in the frame turned by pi so that it still steers away from the closer side.
     """
     behind = abs(theta_p) > _HALF_PI
-    tp = _wrap(theta_p - math.pi) if behind else theta_p
+    tp = wrap(theta_p - math.pi) if behind else theta_p
     k = (c_left - c_right) / (c_left + c_right) if c_left + c_right > 0.0 else 0.0
     th = tp + k * (tp + _HALF_PI) if c_left <= c_right else tp + k * (_HALF_PI - tp)
-    return _wrap(th + math.pi) if behind else _wrap(th)
+    return wrap(th + math.pi) if behind else wrap(th)
 
 
 def _blend_away(theta_p: float, obstacle_a: float, ratio: float) -> float:
     """LS1 / LSG law: r * theta_p + (1 - r) * theta_b, theta_b pointing away from the obstacle (unwrapped
     next to theta_p); clamped to +-(pi - 0.01) if it leaves (-pi, pi], keeping the turning side."""
-    theta_b = _wrap(obstacle_a + math.pi - theta_p) + theta_p
+    theta_b = wrap(obstacle_a + math.pi - theta_p) + theta_p
     th = ratio * theta_p + (1.0 - ratio) * theta_b
     if th > math.pi:
         th = _LS_CLAMP
     elif th < -math.pi:
         th = -_LS_CLAMP
-    return _wrap(th)
+    return wrap(th)
 
 
 def _passage_axis(dist: F64, ang: F64, left: NDArray[np.bool_], right: NDArray[np.bool_], beta: float, *,
@@ -636,10 +639,10 @@ def _follow_axis(axis: tuple[float, float, float, float], lookahead_m: float) ->
     cx, cy, nx, ny = axis
     along = -(cx * nx + cy * ny)  # the rotation centre's coordinate along the axis, from the midpoint
     tx, ty = cx + (along + lookahead_m) * nx, cy + (along + lookahead_m) * ny
-    return _wrap(dm.atan2(ty, tx))
+    return wrap(dm.atan2(ty, tx))
 
 
-def _drive(theta: float, v_nd: float, robot: RobotConfig) -> tuple[float, float, float]:
+def drive(theta: float, v_nd: float, robot: RobotConfig) -> tuple[float, float, float]:
     """(v, vy, w) for the base.
 
     Differential (the paper law): theta clamped to [-pi/2, pi/2], w = wmax * theta / (pi/2),
@@ -672,14 +675,14 @@ def _admissible_drive(theta: float, v_nd: float, robot: RobotConfig, points: F64
     shape / kinematics abstraction in its simplest form: the turn a rectangle cannot make here (its
     corners would sweep a jamb or a wall) is not commanded; it drives on until it can, or backs out.
     Nothing admissible: the paper law, left to the reflexive check."""
-    law_v, _, law_w = _drive(theta, v_nd, robot)
+    law_v, _, law_w = drive(theta, v_nd, robot)
     if points.shape[0] == 0:
         return law_v, law_w
     turn = abs(min(max(theta, -math.pi), math.pi))
     sign = 1.0 if theta >= 0.0 else -1.0
     candidates: list[tuple[float, float, bool]] = [(law_v, law_w, False)]
     for f in (0.5, 0.25):
-        v, _, w = _drive(theta * f, v_nd, robot)
+        v, _, w = drive(theta * f, v_nd, robot)
         candidates.append((v, w, True))
     w_turn = 0.5 * robot.wmax_radps
     v_back = -_REVERSE_FRAC * robot.vmax_mps
@@ -779,12 +782,12 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
 
     geo = _geometry(robot, params)
     n = params.n_sectors
-    dist, ang = _sectorise(pts, geo.angles, params.max_range_m)
+    dist, ang = sectorise(pts, geo.angles, params.max_range_m)
     occ = np.isfinite(dist)
     min_clearance = _footprint_clearance(pts, robot, params.max_range_m) if occ.any() else math.inf
     dist = np.where(occ, np.maximum(dist, geo.boundary + params.contact_m), dist)
 
-    goal_r, goal_a = math.hypot(goal[0], goal[1]), _wrap(dm.atan2(goal[1], goal[0]))  # -0.0 y: pi
+    goal_r, goal_a = math.hypot(goal[0], goal[1]), wrap(dm.atan2(goal[1], goal[0]))  # -0.0 y: pi
     region = _select_region(dist, ang, geo.angles, goal_r, goal_a, geo.gap_m,
                             None if prev is None else prev.subgoal_rad, params.commit_rad)
     if region is None:
@@ -809,9 +812,9 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
     elif wide:  # pass the discontinuity's corner at (r_c, a_c), towards the inside of the region
         off = dm.atan2(0.5 * geo.gap_m + params.security_m, float(dist[region.corner]))
         a_c = float(ang[region.corner])
-        theta_p = _wrap(a_c + off if region.kind is _Kind.FIRST_EDGE else a_c - off)
+        theta_p = wrap(a_c + off if region.kind is _Kind.FIRST_EDGE else a_c - off)
     else:  # bisector of the region
-        theta_p = _wrap((region.first + 0.5 * span) * (2.0 * math.pi / n))
+        theta_p = wrap((region.first + 0.5 * span) * (2.0 * math.pi / n))
 
     if obs_l < 0 and obs_r < 0:
         if region.kind is _Kind.GOAL:
@@ -843,7 +846,7 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
         v, w = _admissible_drive(theta, v_nd, robot, pts)
         vy = 0.0
     else:
-        v, vy, w = _drive(theta, v_nd, robot)
+        v, vy, w = drive(theta, v_nd, robot)
     memory = None if region.kind is _Kind.GOAL else NdMemory(region.direction_rad)
     return NdResult(situation, Flag.NONE, theta, v, vy, w, (region.first, region.last), min_clearance, memory)
 

@@ -49,7 +49,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Literal
 
 import numpy as np
 from numba import njit
@@ -60,12 +60,11 @@ from ..geometry import wrap_angle
 from ..types import Flag
 from .cspace import free_cspace
 from .model import UNKNOWN
+from .planner import PlanResult, RouteParams
 
 __all__ = [
     "Nf1Params",
     "Nf1Planner",
-    "PlanResult",
-    "Planner",
     "descend",
     "frontier_seeds",
     "keep_route",
@@ -83,6 +82,9 @@ __all__ = [
 DIAG_LEN = math.sqrt(2.0)
 """Length of a diagonal step [cells]."""
 
+_ROUTE = RouteParams()
+"""The default ``[planner]`` look-ahead and route hysteresis."""
+
 # Neighbour order: 4 orthogonal (-row, +row, -col, +col), then 4 diagonal.
 _DR = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)
 _DC = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
@@ -90,13 +92,12 @@ _DC = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
 
 @dataclass(frozen=True, slots=True)
 class Nf1Params:
-    """Settings of the NF1 planner.
+    """Settings of the NF1 planner (``[planner.nf1]``; its look-ahead and route hysteresis are the
+    ``[planner]`` settings every planner shares, ``RouteParams``).
 
     Attributes:
         connectivity: 4 (Latombe's NF1, unit steps) or 8 (diagonal steps of sqrt(2)) for the wavefront.
             The descent always looks at the 8 neighbours.
-        lookahead_m: the instantaneous direction points at the point this far along the tightened path
-            [m] (GND: "the first metre").
         escape_m: how far the path may run straight out of C-obstacle when the robot cell and all its
             neighbours are C-obstacle [m]; 0 disables the escape. Keep it below robot inner radius +
             inflation radius (see the module notes); 0.5 m is safe for both presets.
@@ -120,111 +121,24 @@ class Nf1Params:
             free): 2.0 measured worse in closed loop (benchmarks/scenarios.py, 3 seeds: the wheelchair's
             u_trap 100 -> 0 %, the XR4000's gnd_exp1_three_traps 100 -> 0 %; the plan then switches
             between a known and an unseen route as cells get seen, and nothing holds a route yet).
-        route_keep_ratio, route_keep_m: hysteresis on the route (``Nf1Planner``, which remembers the route
-            it returned): the previous route, followed on from the robot, is kept while every segment of
-            it is still free, it still ends at the goal cell (or, for a goal beyond the grid, on a free
-            border cell) and its cost is at most ``(1 + route_keep_ratio) * new + route_keep_m`` where
-            ``new`` is the cost of this tick's NF1 route (both measured the same way: tightened polyline
-            length, steps into UNKNOWN cells weighted by ``unknown_cost``, plus the straight line from a
-            border cell to a goal beyond the grid). A new route must be clearly better to replace the
-            current one: two routes of nearly equal cost (round an obstacle on either side, through a
-            door or the next one) no longer alternate as cells change state. Both 0: the papers' NF1,
-            a pure function of the grid (**choice**: 0.1 and 0.3 m; measured: goal_in_obstacle, xr4000,
-            seed 1, the first-metre direction flipped by about 95 deg and back on 4 single ticks with both
-            0, on none with these).
     """
 
     connectivity: Literal[4, 8] = 4
-    lookahead_m: float = 1.0
     escape_m: float = 0.5
     frontier_goal: bool = True
     border_search_m: float = 1.0
     early_exit: bool = True
     unknown_cost: float = 1.0
-    route_keep_ratio: float = 0.1
-    route_keep_m: float = 0.3
 
     def __post_init__(self) -> None:
         if self.connectivity not in (4, 8):
             raise ValueError(f"connectivity must be 4 or 8, got {self.connectivity!r}")
-        if not self.lookahead_m > 0.0:
-            raise ValueError(f"lookahead_m must be > 0, got {self.lookahead_m!r}")
         if not self.escape_m >= 0.0:
             raise ValueError(f"escape_m must be >= 0, got {self.escape_m!r}")
         if not self.border_search_m >= 0.0:
             raise ValueError(f"border_search_m must be >= 0, got {self.border_search_m!r}")
         if not self.unknown_cost >= 1.0:
             raise ValueError(f"unknown_cost must be >= 1, got {self.unknown_cost!r}")
-        if not self.route_keep_ratio >= 0.0:
-            raise ValueError(f"route_keep_ratio must be >= 0, got {self.route_keep_ratio!r}")
-        if not self.route_keep_m >= 0.0:
-            raise ValueError(f"route_keep_m must be >= 0, got {self.route_keep_m!r}")
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class PlanResult:
-    """Outcome of one planning call, NF1's or the tunnel planner's (``Planner``). A failure is a value:
-    ``ok`` False, ``flag`` says why.
-
-    Attributes:
-        ok: a path from the robot cell to the goal cell exists.
-        flag: Flag.NONE, Flag.GOAL_IN_OBSTACLE or Flag.PLANNER_NO_PATH (the tunnel planner also
-            Flag.PLANNER_TIMEOUT when its expansion budget ran out).
-        goal_cell: (row, col) of the goal cell planned to: the cell containing the goal, or for a goal
-            outside the grid the free border cell chosen (``Nf1Params.frontier_goal``; with it off, the
-            projection onto the border, moved to a free border cell nearby, ``border_search_m``); on
-            PLANNER_NO_PATH for a goal outside the grid, the projection.
-        goal_projected: the goal lay outside the grid (planned to a border cell). With ``frontier_goal``,
-            PLANNER_NO_PATH and goal_projected together mean the robot reaches no free border cell
-            (``reaches_border`` is False): the goal is unreachable in the model.
-        path_cells: (K, 2) int32 (row, col), raw path from the robot cell to the goal cell, consecutive
-            cells 8-adjacent (tunnel planner: the chain of graph nodes, robot first, goal last); empty when
-            not ok.
-        n_escape: how many leading cells of ``path_cells`` may be outside free C-space: 0 when the robot
-            cell is free, 1 when it is C-obstacle but the wave reached it from a free neighbour, more when
-            the path escapes on a straight segment (see the module notes).
-        waypoints_cells: (M, 2) float64 tightened path in index coordinates (cell centres), robot cell
-            first, goal cell last (M >= 2: two equal rows when robot and goal share a cell), consecutive
-            waypoints mutually visible through free cells (except on the escape segment); empty when
-            not ok.
-        direction_rad: instantaneous path direction in the grid/world frame (from the robot cell centre to
-            the point ``lookahead_m`` along the tightened path, or to the goal if the path is shorter);
-            nan when not ok.
-        length_m: length of the tightened path [m]; nan when not ok.
-        cost_m: NF1 value of the robot cell (the raw path length the wave measured, to the goal cell;
-            tunnel planner: the length of the node chain; a route kept by ``Nf1Planner``'s hysteresis:
-            its ``route_cost``) [m]; nan when not ok.
-        nodes_expanded: search effort: cells the NF1 wave labelled, or nodes the tunnel planner expanded
-            (also on failure).
-        width_m: width of the free tunnel around ``waypoints_cells`` (tunnel planner: robot width plus
-            margins); nan for NF1, whose C-space is a disc model and reports no width.
-    """
-
-    ok: bool
-    flag: Flag
-    goal_cell: tuple[int, int]
-    goal_projected: bool
-    path_cells: NDArray[np.int32]
-    n_escape: int
-    waypoints_cells: NDArray[np.float64]
-    direction_rad: float
-    length_m: float
-    cost_m: float
-    nodes_expanded: int = 0
-    width_m: float = math.nan
-
-
-class Planner(Protocol):
-    """What the stack needs from a planner: built once with its settings and the grid geometry, then
-    asked every tick. Both NF1 (``Nf1Planner``) and the tunnel planner (``tunnel.TunnelPlanner``)
-    implement it; ``stack.make_planner`` picks one by name."""
-
-    def plan(
-        self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike
-    ) -> PlanResult:
-        """Plan on the robot-centred grid (UNKNOWN / FREE / OCCUPIED cells) from the robot cell to the goal
-        (corner coordinates, see ``plan``)."""
-        ...
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -992,6 +906,7 @@ def plan(
     *,
     cell_m: float,
     params: Nf1Params = Nf1Params(),
+    lookahead_m: float = _ROUTE.lookahead_m,
     unknown: ArrayLike | None = None,
 ) -> PlanResult:
     """Plan from the robot cell to the goal: NF1 wave, steepest descent, string pulling, direction.
@@ -1004,6 +919,7 @@ def plan(
             or to its projection onto the border along the robot-goal line.
         cell_m: cell side [m].
         params: planner settings.
+        lookahead_m: the direction points at the point this far along the tightened path [m] (> 0).
         unknown: (H, W) bool, True on UNKNOWN cells: a step into one costs ``params.unknown_cost`` (None:
             every step into a free cell costs the same, the papers' NF1).
     Returns:
@@ -1011,10 +927,13 @@ def plan(
         from the goal does not reach the robot, even through the escape; for a goal beyond the grid with
         ``frontier_goal``: no free border cell does).
     Raises:
-        ValueError: bad array, robot cell outside the grid, non-finite goal or cell_m <= 0.
+        ValueError: bad array, robot cell outside the grid, non-finite goal, cell_m <= 0 or
+            lookahead_m <= 0.
     """
     if not cell_m > 0.0:
         raise ValueError(f"cell_m must be > 0, got {cell_m!r}")
+    if not lookahead_m > 0.0:
+        raise ValueError(f"lookahead_m must be > 0, got {lookahead_m!r}")
     f = _as_free(free)
     start = _check_cell("start_rc", start_rc, f.shape)
     g = np.asarray(goal_rc_float, dtype=np.float64).reshape(2)
@@ -1054,7 +973,7 @@ def plan(
     seg = np.diff(waypoints, axis=0)
     length_cells = float(np.hypot(seg[:, 0], seg[:, 1]).sum())
     if length_cells > 0.0:
-        direction = path_direction(waypoints, params.lookahead_m / cell_m)
+        direction = path_direction(waypoints, lookahead_m / cell_m)
     else:  # same cell: head for the goal point itself
         d = g - 0.5 - np.asarray(start, dtype=np.float64)
         direction = float(wrap_angle(dm.atan2(d[0], d[1])))
@@ -1118,7 +1037,7 @@ def _rejoin(
 
 def _route_result(
     raw: NDArray[np.int32], waypoints: NDArray[np.float64], cost_cells: float, new: PlanResult,
-    params: Nf1Params, cell_m: float,
+    lookahead_m: float, cell_m: float,
 ) -> PlanResult:
     """PlanResult of a held route followed on from the robot (``_rejoin``)."""
     seg = np.diff(waypoints, axis=0)
@@ -1130,7 +1049,7 @@ def _route_result(
         path_cells=raw,
         n_escape=0,
         waypoints_cells=waypoints,
-        direction_rad=path_direction(waypoints, params.lookahead_m / cell_m),
+        direction_rad=path_direction(waypoints, lookahead_m / cell_m),
         length_m=float(np.hypot(seg[:, 0], seg[:, 1]).sum()) * cell_m,
         cost_m=cost_cells * cell_m,
         nodes_expanded=new.nodes_expanded,
@@ -1145,15 +1064,17 @@ def keep_route(
     held: NDArray[np.int64],
     *,
     cell_m: float,
-    params: Nf1Params,
+    route: RouteParams,
+    unknown_cost: float = 1.0,
     costly: NDArray[np.bool_] | None = None,
 ) -> PlanResult:
-    """Route hysteresis: ``new`` (this tick's NF1 plan, ok) unless the ``held`` route (its path cells in
-    this grid, from the previous plan to the same goal) still holds and is not clearly worse: followed on
-    from the robot (``_rejoin``) it is in free cells, it ends on the goal cell (a goal beyond the grid: on a
-    free border cell), and its cost (``route_cost`` + the straight line beyond the grid) is at most
-    ``(1 + route_keep_ratio) * new cost + route_keep_m``. Then the held route's PlanResult (``cost_m`` its
-    ``route_cost``; the wave's effort in ``nodes_expanded``)."""
+    """Route hysteresis: ``new`` (this tick's plan, ok) unless the ``held`` route (its path cells in this
+    grid, from the previous plan to the same goal) still holds and is not clearly worse: followed on from
+    the robot (``_rejoin``) it is in free cells, it ends on the goal cell (a goal beyond the grid: on a free
+    border cell), and its cost (``route_cost`` with ``costly`` cells at ``unknown_cost`` + the straight line
+    beyond the grid) is at most ``(1 + route.route_keep_ratio) * new cost + route.route_keep_m``. Then the
+    held route's PlanResult (``cost_m`` its ``route_cost``; the wave's effort in ``nodes_expanded``; its
+    direction ``route.lookahead_m`` along it)."""
     h, w = free.shape
     end = held[-1]
     if new.n_escape or held.shape[0] < 2 or not free[end[0], end[1]]:
@@ -1167,14 +1088,14 @@ def keep_route(
     if joined is None:
         return new
     raw, wp = joined
-    cost = params.unknown_cost
+    cost = unknown_cost
     kept = route_cost(wp, costly, cost) + _beyond(wp[-1], goal_rc_float, new.goal_projected)
     best = route_cost(new.waypoints_cells, costly, cost) + _beyond(
         new.waypoints_cells[-1], goal_rc_float, new.goal_projected)
-    if kept > (1.0 + params.route_keep_ratio) * best + params.route_keep_m / cell_m:
+    if kept > (1.0 + route.route_keep_ratio) * best + route.route_keep_m / cell_m:
         return new
-    return _route_result(raw, wp, kept - _beyond(wp[-1], goal_rc_float, new.goal_projected), new, params,
-                         cell_m)
+    return _route_result(raw, wp, kept - _beyond(wp[-1], goal_rc_float, new.goal_projected), new,
+                         route.lookahead_m, cell_m)
 
 
 def shifted_route(
@@ -1198,24 +1119,34 @@ def shifted_route(
 
 
 class Nf1Planner:
-    """NF1 behind the ``Planner`` protocol: C-space of the grid (a disc of the robot's inner radius plus
-    ``margin_m``, ``cspace.free_cspace``), then ``plan``, then the route hysteresis (``keep_route``,
-    ``Nf1Params.route_keep_ratio`` / ``route_keep_m``): the planner holds the route it returned last, so its
-    result is a function of the inputs and that route (both margins 0: of the inputs alone, the papers' NF1).
+    """NF1 behind the ``planner.Planner`` protocol: C-space of the grid (a disc of the robot's inner radius
+    plus ``margin_m``, ``cspace.free_cspace``), then ``plan``, then the route hysteresis (``keep_route``,
+    ``RouteParams.route_keep_ratio`` / ``route_keep_m``): the planner holds the route it returned last, so
+    its result is a function of the inputs and that route (both margins 0: of the inputs alone, the papers'
+    NF1).
 
     Args:
         params: NF1 settings.
         cell_m: cell side [m].
         inflate_m: C-space dilation radius [m] (robot inner radius + C-space margin).
         unknown_is_free: plan through UNKNOWN cells.
+        route: the look-ahead of the direction and the route hysteresis' margins.
     """
 
-    def __init__(self, params: Nf1Params, *, cell_m: float, inflate_m: float, unknown_is_free: bool) -> None:
+    def __init__(self, params: Nf1Params, *, cell_m: float, inflate_m: float, unknown_is_free: bool,
+                 route: RouteParams = _ROUTE) -> None:
         self.params = params
         self.cell_m = cell_m
         self.inflate_m = inflate_m
         self.unknown_is_free = unknown_is_free
+        self.route = route
         self._held: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # path cells, its goal
+
+    @property
+    def no_path_is_no_border(self) -> bool:
+        """With ``frontier_goal`` NF1 plans to the best reachable free border cell: no path to a goal beyond
+        the grid means none is reachable."""
+        return self.params.frontier_goal
 
     def reset(self) -> None:
         """Forget the held route (a new run or a new goal; a changed goal is also detected by itself)."""
@@ -1233,16 +1164,19 @@ class Nf1Planner:
         p = self.params
         weighted = self.unknown_is_free and p.unknown_cost != 1.0
         unknown = (grid_cells == UNKNOWN) if weighted else None
-        new = plan(free, start_rc, goal_rc_float, cell_m=self.cell_m, params=p, unknown=unknown)
+        new = plan(free, start_rc, goal_rc_float, cell_m=self.cell_m, params=p,
+                   lookahead_m=self.route.lookahead_m, unknown=unknown)
         goal = np.asarray(goal_rc_float, dtype=np.float64).reshape(2)
         held = self._held_route(goal, free.shape)
         self._held = None
         if not new.ok:
             return new
         out = new
-        if held is not None and (p.route_keep_ratio > 0.0 or p.route_keep_m > 0.0):
+        route = self.route
+        if held is not None and (route.route_keep_ratio > 0.0 or route.route_keep_m > 0.0):
             start = (int(start_rc[0]), int(start_rc[1]))
-            out = keep_route(free, start, goal, new, held, cell_m=self.cell_m, params=p, costly=unknown)
+            out = keep_route(free, start, goal, new, held, cell_m=self.cell_m, route=route,
+                             unknown_cost=p.unknown_cost, costly=unknown)
         if out.n_escape == 0:
             self._held = (out.path_cells.astype(np.int64), goal)
         return out

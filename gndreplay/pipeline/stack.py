@@ -26,11 +26,13 @@ from ..robot import RobotConfig
 from ..types import Command, Flag, Mode, Pose2D, Scan, Subgoal, Tick
 from .cspace import free_cspace
 from .follow import FollowParams, PathFollower, first_free_point
-from .local import LocalParams, local_command, polar_map, warm_up_local
+from .local import STRATEGIES, LocalParams, warm_up_local
 from .manoeuvre import ManoeuvreParams, Primitive, Speeds, end_poses, plan_manoeuvre, warm_up_manoeuvre
 from .model import OCCUPIED, UNKNOWN, GridParams, RobotCentredGrid
 from .nd import NdMemory, NdParams, NdResult, Situation, nd_step
-from .nf1 import Nf1Params, Nf1Planner, Planner, PlanResult, reaches_border
+from .nf1 import reaches_border
+from .planner import Planner, PlanResult
+from .planners import PLANNERS, PlannerGeometry, PlannerParams
 from .selector import Takeover, arbitrate, intention_xy, look_hold, swept_area_occupied, turned_first
 from .supervisor import (
     SafeCommand,
@@ -49,17 +51,13 @@ from .supervisor import (
     seen_through,
     unconfirmed_cells,
 )
-from .tunnel import TunnelParams, TunnelPlanner, TunnelResult, warm_up_planners
 
 __all__ = [
-    "MODULES", "NAV_MODES", "PLANNERS", "NavMode", "NavigationStack", "StackParams", "TickResult",
-    "make_planner", "teleop_command", "warm_up",
+    "MODULES", "NAV_MODES", "NavMode", "NavigationStack", "StackParams", "TickResult", "make_planner",
+    "teleop_command", "warm_up",
 ]
 
 MODULES = ("match", "model", "planner", "reactor")
-
-PLANNERS = ("nf1", "tunnel")
-"""Planner kinds ``make_planner`` builds."""
 
 NavMode = Literal["gnd", "teleop", "follow", "local"]
 NAV_MODES: tuple[str, ...] = ("gnd", "teleop", "follow", "local")
@@ -71,8 +69,8 @@ subgoals, local navigation alone."""
 class StackParams:
     """Everything the stack needs, one frozen section per stage (see ``gndreplay.config``).
 
-    ``planner_kind`` chooses the planner ("nf1": ``planner`` settings and the [cspace] margin; "tunnel":
-    ``tunnel`` settings, its own margin); ``planner.lookahead_m`` places the reactor's target for both,
+    ``planner`` chooses the planner and holds its settings (``planners.PlannerParams``: NF1 dilates by the
+    [cspace] margin, the tunnel planner by its own); ``planner.lookahead_m`` places the reactor's target,
     and local navigation's target ahead of a teleoperation command when the mode selector takes over.
     ``nav_mode``, ``selector``, ``selector_margin_m``, ``cmd_timeout_s``, ``selector_hold_s``, ``local``
     and ``follow``: the multi-loop architecture (``NavigationConfig``; see ``NavigationStack``).
@@ -80,13 +78,11 @@ class StackParams:
 
     robot: RobotConfig
     grid: GridParams
-    planner: Nf1Params
+    planner: PlannerParams
     reactor: NdParams
     supervisor: SupervisorParams
     cspace_margin_m: float = 0.05
     unknown_is_free: bool = True
-    planner_kind: Literal["nf1", "tunnel"] = "nf1"
-    tunnel: TunnelParams = TunnelParams()
     nav_mode: NavMode = "gnd"
     selector: bool = True
     local: LocalParams = LocalParams()
@@ -146,19 +142,13 @@ class TickResult:
 
 
 def make_planner(params: StackParams) -> Planner:
-    """The planner ``params.planner_kind`` names, built with its own settings and the grid geometry."""
+    """The planner ``params.planner.kind`` names (``planners.PLANNERS``), built from its own settings and
+    the grid geometry."""
     p = params
-    if p.planner_kind == "tunnel":
-        return TunnelPlanner(
-            p.tunnel, cell_m=p.grid.cell_m, inner_radius_m=p.robot.inner_radius_m,
-            unknown_is_free=p.unknown_is_free, lookahead_m=p.planner.lookahead_m, hysteresis=p.planner,
-        )
-    if p.planner_kind == "nf1":
-        return Nf1Planner(
-            p.planner, cell_m=p.grid.cell_m, inflate_m=p.robot.inner_radius_m + p.cspace_margin_m,
-            unknown_is_free=p.unknown_is_free,
-        )
-    raise ValueError(f"unknown planner kind {p.planner_kind!r}; known: {', '.join(PLANNERS)}")
+    geometry = PlannerGeometry(cell_m=p.grid.cell_m, inner_radius_m=p.robot.inner_radius_m,
+                               cspace_margin_m=p.cspace_margin_m, unknown_is_free=p.unknown_is_free,
+                               route=p.planner)
+    return PLANNERS[p.planner.kind].build(p.planner.settings, geometry)
 
 
 def _ms(t0: int) -> float:
@@ -183,9 +173,9 @@ class NavigationStack:
       time): stand still, the reason recorded.
     - "follow": ``PathFollower.step`` over ``subgoals``; once it reports the final subgoal reached, GOAL:
       stop, Flag.GOAL_REACHED.
-    - "local": local navigation alone towards the goal: strategy "nd" is ND+ to the goal itself (GND's
-      mND, and ROTATE towards it without a free walking area), the others ``local.local_command`` on the
-      polar map of the grid's occupied cells.
+    - "local": local navigation alone towards the goal with the strategy ``local.STRATEGIES`` names: "nd"
+      is ND+ to the goal itself (GND's mND, and ROTATE towards it without a free walking area), the others
+      work on the polar map of the grid's occupied cells.
 
     With ``params.selector`` (teleop and follow) the mode selector (``selector``) arbitrates every tick:
     when the area the desired command sweeps over the braking horizon holds a raw scan hit or an occupied
@@ -215,7 +205,7 @@ class NavigationStack:
             self._follower = PathFollower(
                 subgoals, params.follow, params.robot,
                 inflate_m=params.robot.inner_radius_m + params.cspace_margin_m,
-                unknown_is_free=params.unknown_is_free, escape_m=params.planner.escape_m,
+                unknown_is_free=params.unknown_is_free, escape_m=params.planner.nf1.escape_m,
             )
         self.grid = RobotCentredGrid(params.grid)
         self._planner = make_planner(params)
@@ -232,7 +222,7 @@ class NavigationStack:
         self._prev_t_ns: int | None = None
         self._no_path = 0  # consecutive PLANNER_NO_PATH ticks
         # the planner's no path to a goal beyond the grid means no free border cell is reachable
-        self._no_path_is_no_border = params.planner_kind == "nf1" and params.planner.frontier_goal
+        self._no_path_is_no_border = self._planner.no_path_is_no_border
         self._looked_rad = 0.0  # turned in place since the goal was held unreachable
         self._prev_theta: float | None = None
         self._rotate_sign = 0.0  # turn direction of the previous tick's ROTATE (0: not rotating)
@@ -315,7 +305,7 @@ class NavigationStack:
         over = budget_flags({k: v / 1e3 for k, v in timings.items()}, p.supervisor)
         flags |= over
         planner_ok = planned.ok
-        if isinstance(planned, TunnelResult) and planned.fallback:
+        if planned.fallback:
             flags |= Flag.PLANNER_FALLBACK
         if p.supervisor.enforce_budgets and over & Flag.PLANNER_OVER_BUDGET:
             planner_ok = False
@@ -496,22 +486,17 @@ class NavigationStack:
     def _local(
         self, pose: Pose2D, target: NDArray[np.float64]
     ) -> tuple[Mode, float, float, float, Situation, float, Flag]:
-        """Local navigation towards ``target`` (robot frame) with the configured strategy, on the grid's
-        occupied cells: (mode, v, vy, w, ND+ situation, direction, flag). Strategy "nd": ND+ steering to the
-        target itself (GND's mND), ROTATE towards it without a free walking area (REACTOR_NO_REGION). The
-        others: ``local.local_command`` on the polar map, told the side it kept last time."""
+        """Local navigation towards ``target`` (robot frame) with the configured strategy
+        (``local.STRATEGIES``) on the grid's occupied cells, told the side it kept last time and given ND+
+        with its commitment for local navigation (``_nd``): (mode, v, vy, w, ND+ situation, direction,
+        flag). A strategy's ROTATE turns towards the target at ROTATE's rate (``_rotate_w``)."""
         p = self.params
         obstacles = self.grid.occupied_points(pose, p.reactor.max_range_m)
-        if p.local.strategy == "nd":
-            nd = self._nd("local", pose, obstacles, target)
-            if nd.flag & Flag.REACTOR_NO_REGION:
-                return Mode.ROTATE, 0.0, 0.0, self._rotate_w(target), nd.situation, nd.direction_rad, nd.flag
-            return Mode.MND, nd.v_mps, nd.vy_mps, nd.w_radps, nd.situation, nd.direction_rad, nd.flag
-        lc = local_command(polar_map(obstacles, p.robot, p.local), target, p.robot, p.local,
-                           side_hint=self._local_side)
+        lc = STRATEGIES[p.local.strategy](obstacles, target, p.robot, p.local, side_hint=self._local_side,
+                                          nd=partial(self._nd, "local", pose))
         self._local_side = lc.side
-        mode = _MODULE_MODE["local"]
-        return mode, lc.v_mps, lc.vy_mps, lc.w_radps, Situation.NONE, lc.direction_rad, Flag.NONE
+        w = self._rotate_w(target) if lc.mode is Mode.ROTATE else lc.w_radps
+        return lc.mode, lc.v_mps, lc.vy_mps, w, lc.situation, lc.direction_rad, lc.flag
 
     def _nd(self, user: str, pose: Pose2D, obstacles: NDArray[np.float64],
             target: NDArray[np.float64]) -> NdResult:
@@ -932,8 +917,7 @@ def _warm_up_gnd(params: StackParams) -> None:
         pose = Pose2D(0.0, 0.0, 0.0)
         stack.step(Tick(index=k, t_ns=k, scan=scan, odom=pose), pose, goal)
         k += 1
-    if params.planner_kind == "tunnel":  # its search kernels, on cases the synthetic scans above may miss
-        warm_up_planners(params.tunnel, size_cells=params.grid.size_cells)
+    PLANNERS[params.planner.kind].warm_up(params.planner.settings, params.grid.size_cells)
 
 
 def _view_rad(scan: Scan) -> tuple[float, float]:

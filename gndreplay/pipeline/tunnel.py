@@ -7,9 +7,9 @@ a node places new nodes where the free space seen from it has a discontinuity or
 keeps those joined to it by a free tunnel, and the search stops when the goal is accessible from the node
 being expanded. No public implementation exists; every choice below is ours and marked **choice**.
 
-Coordinates as in ``nf1`` (which this module shares its result type, goal handling and line-of-sight walk
-with): ``free[row, col]``, row along world y, col along world x; the goal in corner coordinates, nodes and
-the polyline in index coordinates (cell centres); angles counter-clockwise from +col towards +row.
+Coordinates as in ``nf1`` (which this module shares its goal handling, line-of-sight walk and route
+hysteresis with): ``free[row, col]``, row along world y, col along world x; the goal in corner coordinates,
+nodes and the polyline in index coordinates (cell centres); angles counter-clockwise from +col towards +row.
 
 Choices:
 
@@ -97,7 +97,7 @@ Choices:
   check found them apart), the plan is NF1's on the same C-space (4-connected wave, the connectivity
   check's, from the goal cell the search planned to), whose string-pulled waypoints are mutually visible
   through free C-space: a chain of free tunnels, turned into the course as below. The result says so
-  (``TunnelResult.fallback``). Why: the failing class is a chain of one-cell waists not in line, e.g. two
+  (``PlanResult.fallback``). Why: the failing class is a chain of one-cell waists not in line, e.g. two
   tight doors 1 m apart and 0.3 m aside of each other (tests/test_tunnel.py): a node must stand exactly
   where a straight tunnel threads both, which neither the passage nodes (one waist each) nor the rays
   find, and the search exhausted its 338-357 nodes (11 ms) to answer PLANNER_NO_PATH wrongly. The budget
@@ -140,7 +140,6 @@ from .cspace import free_cspace
 from .model import FREE, OCCUPIED, UNKNOWN
 from .nf1 import (
     Nf1Params,
-    PlanResult,
     _line_cells,
     _visible,
     keep_route,
@@ -150,15 +149,17 @@ from .nf1 import (
     shifted_route,
 )
 from .nf1 import plan as nf1_plan
+from .planner import PlanResult, RouteParams
 
-__all__ = ["TunnelParams", "TunnelPlanner", "TunnelResult", "tunnel_plan", "warm_up_planners"]
+__all__ = ["TunnelParams", "TunnelPlanner", "tunnel_plan", "warm_up_planners"]
 
 # search outcomes of the kernel (_DISCONNECTED: the connectivity check found start and goal apart)
 _FOUND, _EXHAUSTED, _BUDGET, _DISCONNECTED = 0, 1, 2, 3
 # expansions without the goal before the search asks whether start and goal are connected at all
 _CHECK_AFTER = 16
-# the course looks this far along the tunnel polyline by default: NF1's default
-_LOOKAHEAD_M = Nf1Params().lookahead_m
+# the course looks this far along the tunnel polyline, and a held tunnel keeps, by every planner's default
+_ROUTE = RouteParams()
+_LOOKAHEAD_M = _ROUTE.lookahead_m
 
 
 @dataclass(frozen=True, slots=True)
@@ -185,7 +186,7 @@ class TunnelParams:
             cell within this distance [m] (as ``Nf1Params.border_search_m``).
         complete: when the node search fails (open list empty, or ``max_expansions`` reached) although
             the free C-space joins robot and goal, the tunnel polyline is NF1's string-pulled path on the
-            same C-space (``TunnelResult.fallback``); False: the paper's node search alone.
+            same C-space (``PlanResult.fallback``); False: the paper's node search alone.
         hold_route: ``TunnelPlanner`` keeps the tunnel it returned last unless this tick's is clearly
             shorter (NF1's route hysteresis, ``nf1.keep_route``); False: every tick plans afresh, the paper's.
     """
@@ -665,25 +666,12 @@ def _rays(
 # public functions
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class TunnelResult(PlanResult):
-    """The tunnel planner's ``PlanResult``.
-
-    Attributes:
-        fallback: the node search failed where the free C-space joins robot and goal, and the tunnel
-            polyline is NF1's string-pulled path on the same C-space (``TunnelParams.complete``);
-            ``path_cells`` is then NF1's raw path, ``nodes_expanded`` still the node search's effort.
-    """
-
-    fallback: bool = False
-
-
 def _result(
     ok: bool, flag: Flag, goal: tuple[int, int], projected: bool, *, expanded: int, width_m: float,
     chain: NDArray[np.int32] | None = None, n_escape: int = 0, waypoints: NDArray[np.float64] | None = None,
     direction: float = math.nan, length_m: float = math.nan, cost_m: float = math.nan,
-) -> TunnelResult:
-    return TunnelResult(
+) -> PlanResult:
+    return PlanResult(
         ok=ok,
         flag=flag,
         goal_cell=goal,
@@ -702,15 +690,16 @@ def _result(
 def _complete(
     free: NDArray[np.bool_], start: tuple[int, int], goal: tuple[int, int], projected: bool, expanded: int,
     width_m: float, cell_m: float, params: TunnelParams, lookahead_m: float,
-) -> TunnelResult:
+) -> PlanResult:
     """The complete fallback: NF1 (4-connected wave, as the connectivity check, from the goal cell the
     node search planned to; its own escape when the robot is in C-obstacle) on the same C-space. Its
     string-pulled waypoints are mutually visible through free C-space: a chain of free tunnels."""
-    nf1 = Nf1Params(connectivity=4, lookahead_m=lookahead_m, escape_m=params.escape_m, frontier_goal=False)
-    nf = nf1_plan(free, start, (goal[0] + 0.5, goal[1] + 0.5), cell_m=cell_m, params=nf1)
+    nf1 = Nf1Params(connectivity=4, escape_m=params.escape_m, frontier_goal=False)
+    nf = nf1_plan(free, start, (goal[0] + 0.5, goal[1] + 0.5), cell_m=cell_m, params=nf1,
+                  lookahead_m=lookahead_m)
     if not nf.ok:
         return _result(False, Flag.PLANNER_NO_PATH, goal, projected, expanded=expanded, width_m=width_m)
-    return TunnelResult(
+    return PlanResult(
         ok=True, flag=Flag.NONE, goal_cell=goal, goal_projected=projected, path_cells=nf.path_cells,
         n_escape=nf.n_escape, waypoints_cells=nf.waypoints_cells, direction_rad=nf.direction_rad,
         length_m=nf.length_m, cost_m=nf.cost_m, nodes_expanded=expanded, width_m=width_m, fallback=True,
@@ -727,7 +716,7 @@ def tunnel_plan(
     unknown_is_free: bool = True,
     params: TunnelParams = TunnelParams(),
     lookahead_m: float = _LOOKAHEAD_M,
-) -> TunnelResult:
+) -> PlanResult:
     """Search a chain of free tunnels from the robot cell to the goal (see the module notes).
 
     Args:
@@ -742,7 +731,7 @@ def tunnel_plan(
         params: planner settings.
         lookahead_m: the course looks this far along the tunnel polyline [m] (> 0).
     Returns:
-        TunnelResult: ``waypoints_cells`` the string-pulled tunnel polyline (robot cell first, goal cell
+        PlanResult: ``waypoints_cells`` the string-pulled tunnel polyline (robot cell first, goal cell
         last), ``direction_rad`` the course (bearing of the point ``lookahead_m`` along it), ``width_m`` the
         tunnel width, ``nodes_expanded``, ``fallback`` (the polyline is NF1's, ``params.complete``);
         ``ok`` False with GOAL_IN_OBSTACLE, PLANNER_NO_PATH (no tunnel joins robot and goal) or, without
@@ -777,7 +766,7 @@ def _spaces(
 def _plan_on(
     f: NDArray[np.bool_], clear: NDArray[np.bool_], start_rc: tuple[int, int], goal_rc_float: ArrayLike, *,
     cell_m: float, radius_m: float, params: TunnelParams, lookahead_m: float,
-) -> TunnelResult:
+) -> PlanResult:
     """``tunnel_plan`` on its C-space ``f`` and clear cells ``clear`` (``_spaces``)."""
     start = (int(start_rc[0]), int(start_rc[1]))
     if not (0 <= start[0] < f.shape[0] and 0 <= start[1] < f.shape[1]):
@@ -838,37 +827,38 @@ def _dense(waypoints: NDArray[np.float64]) -> NDArray[np.int64]:
 
 
 class TunnelPlanner:
-    """The tunnel planner behind the ``nf1.Planner`` protocol: ``tunnel_plan`` on its own C-space (a disc of
-    the robot's inner radius plus ``params.margin_m``), then, with ``params.hold_route``, NF1's route
-    hysteresis (``nf1.keep_route``, its margins from ``hysteresis``: the tunnel returned last is kept,
-    followed on from the robot and string-pulled, while its cells stay free and it is at most 10 % + 0.3 m
-    longer than this tick's, by default; lengths only, UNKNOWN cells cost as free ones, as in the node
-    search). Why: two ways of nearly equal length (into a U through unseen cells, or back out) and a sparse
-    node search that one-cell changes of the grid tip from one to the other; the course flipped between
-    them from tick to tick (u_trap, wheelchair). The result is a function of the inputs
-    and the held tunnel.
+    """The tunnel planner behind the ``planner.Planner`` protocol: ``tunnel_plan`` on its own C-space (a
+    disc of the robot's inner radius plus ``params.margin_m``), then, with ``params.hold_route``, NF1's route
+    hysteresis (``nf1.keep_route``, its margins from ``route``: the tunnel returned last is kept, followed on
+    from the robot and string-pulled, while its cells stay free and it is at most 10 % + 0.3 m longer than
+    this tick's, by default; lengths only, UNKNOWN cells cost as free ones, as in the node search). Why:
+    two ways of nearly equal length (into a U through unseen cells, or back out) and a sparse node search
+    that one-cell changes of the grid tip from one to the other; the course flipped between them from tick
+    to tick (u_trap, wheelchair). The result is a function of the inputs and the held tunnel.
 
     Args:
         params: tunnel planner settings.
         cell_m: cell side [m].
         inner_radius_m: the robot's inner radius (half its width for a rectangle) [m].
         unknown_is_free: plan through UNKNOWN cells.
-        lookahead_m: the course is the bearing of the point this far along the tunnel polyline [m] (the
-            stack's ``planner.lookahead_m``, as NF1's).
-        hysteresis: NF1 settings whose ``route_keep_ratio`` / ``route_keep_m`` the held tunnel uses (the
-            stack's ``planner``, so both planners hold alike); None: ``Nf1Params``' defaults.
+        route: the course is the bearing of the point ``route.lookahead_m`` along the tunnel polyline [m];
+            the held tunnel keeps by ``route.route_keep_ratio`` / ``route_keep_m`` (the stack's
+            ``[planner]`` settings, as NF1's, so both planners look and hold alike).
     """
+
+    no_path_is_no_border = False
+    """It plans to one border cell for a goal beyond the grid (``planner.Planner``)."""
 
     def __init__(
         self, params: TunnelParams, *, cell_m: float, inner_radius_m: float, unknown_is_free: bool,
-        lookahead_m: float = _LOOKAHEAD_M, hysteresis: Nf1Params | None = None,
+        route: RouteParams = _ROUTE,
     ) -> None:
         self.params = params
         self.cell_m = cell_m
         self.radius_m = inner_radius_m + params.margin_m
         self.unknown_is_free = unknown_is_free
-        self.lookahead_m = lookahead_m
-        self._keep = replace(hysteresis or Nf1Params(), lookahead_m=lookahead_m)
+        self.lookahead_m = route.lookahead_m
+        self.route = route
         self._held: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # route cells, its goal
 
     def reset(self) -> None:
@@ -877,7 +867,7 @@ class TunnelPlanner:
 
     def plan(
         self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike
-    ) -> TunnelResult:
+    ) -> PlanResult:
         f, clear = _spaces(grid_cells, self.cell_m, self.radius_m, self.unknown_is_free, self.lookahead_m)
         new = _plan_on(f, clear, start_rc, goal_rc_float, cell_m=self.cell_m, radius_m=self.radius_m,
                        params=self.params, lookahead_m=self.lookahead_m)
@@ -889,9 +879,9 @@ class TunnelPlanner:
         out = new
         if held is not None:
             start = (int(start_rc[0]), int(start_rc[1]))
-            kept = keep_route(f, start, goal, new, held, cell_m=self.cell_m, params=self._keep)
+            kept = keep_route(f, start, goal, new, held, cell_m=self.cell_m, route=self.route)
             if kept is not new:
-                out = TunnelResult(
+                out = PlanResult(
                     ok=True, flag=Flag.NONE, goal_cell=kept.goal_cell, goal_projected=kept.goal_projected,
                     path_cells=kept.path_cells, n_escape=0, waypoints_cells=kept.waypoints_cells,
                     direction_rad=kept.direction_rad, length_m=kept.length_m, cost_m=kept.cost_m,

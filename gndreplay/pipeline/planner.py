@@ -1,0 +1,131 @@
+"""What a global planner is to the stack: the ``Planner`` protocol, the ``PlanResult`` it returns every tick
+and the ``[planner]`` settings every planner shares (``RouteParams``).
+
+The planners themselves (``nf1.Nf1Planner``, ``tunnel.TunnelPlanner``) implement this module; which one
+runs is chosen by name in ``planners.PLANNERS``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..types import Flag
+
+__all__ = ["PlanResult", "Planner", "RouteParams"]
+
+
+@dataclass(frozen=True, slots=True)
+class RouteParams:
+    """The ``[planner]`` settings every planner shares: where its course looks, and how long it holds a
+    route.
+
+    Attributes:
+        lookahead_m: the instantaneous direction points at the point this far along the tightened path
+            [m] (GND: "the first metre"); the stack puts the reactor's target this far along it.
+        route_keep_ratio, route_keep_m: hysteresis on the route (the planner remembers the route it
+            returned): the previous route, followed on from the robot, is kept while every segment of
+            it is still free, it still ends at the goal cell (or, for a goal beyond the grid, on a free
+            border cell) and its cost is at most ``(1 + route_keep_ratio) * new + route_keep_m`` where
+            ``new`` is the cost of this tick's route (both measured the same way: tightened polyline
+            length, NF1's steps into UNKNOWN cells weighted by ``Nf1Params.unknown_cost``, plus the
+            straight line from a border cell to a goal beyond the grid; ``nf1.keep_route``). A new route
+            must be clearly better to replace the current one: two routes of nearly equal cost (round an
+            obstacle on either side, through a door or the next one) no longer alternate as cells change
+            state. Both 0: the papers' NF1, a pure function of the grid (**choice**: 0.1 and 0.3 m;
+            measured: goal_in_obstacle, xr4000, seed 1, the first-metre direction flipped by about 95 deg
+            and back on 4 single ticks with both 0, on none with these).
+    """
+
+    lookahead_m: float = 1.0
+    route_keep_ratio: float = 0.1
+    route_keep_m: float = 0.3
+
+    def __post_init__(self) -> None:
+        if not self.lookahead_m > 0.0:
+            raise ValueError(f"lookahead_m must be > 0, got {self.lookahead_m!r}")
+        if not self.route_keep_ratio >= 0.0:
+            raise ValueError(f"route_keep_ratio must be >= 0, got {self.route_keep_ratio!r}")
+        if not self.route_keep_m >= 0.0:
+            raise ValueError(f"route_keep_m must be >= 0, got {self.route_keep_m!r}")
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PlanResult:
+    """Outcome of one planning call, NF1's or the tunnel planner's (``Planner``). A failure is a value:
+    ``ok`` False, ``flag`` says why.
+
+    Attributes:
+        ok: a path from the robot cell to the goal cell exists.
+        flag: Flag.NONE, Flag.GOAL_IN_OBSTACLE or Flag.PLANNER_NO_PATH (the tunnel planner also
+            Flag.PLANNER_TIMEOUT when its expansion budget ran out).
+        goal_cell: (row, col) of the goal cell planned to: the cell containing the goal, or for a goal
+            outside the grid the free border cell chosen (``Nf1Params.frontier_goal``; with it off, the
+            projection onto the border, moved to a free border cell nearby, ``border_search_m``); on
+            PLANNER_NO_PATH for a goal outside the grid, the projection.
+        goal_projected: the goal lay outside the grid (planned to a border cell). With ``frontier_goal``,
+            PLANNER_NO_PATH and goal_projected together mean the robot reaches no free border cell
+            (``reaches_border`` is False): the goal is unreachable in the model.
+        path_cells: (K, 2) int32 (row, col), raw path from the robot cell to the goal cell, consecutive
+            cells 8-adjacent (tunnel planner: the chain of graph nodes, robot first, goal last); empty when
+            not ok.
+        n_escape: how many leading cells of ``path_cells`` may be outside free C-space: 0 when the robot
+            cell is free, 1 when it is C-obstacle but the wave reached it from a free neighbour, more when
+            the path escapes on a straight segment (see the ``nf1`` module notes).
+        waypoints_cells: (M, 2) float64 tightened path in index coordinates (cell centres), robot cell
+            first, goal cell last (M >= 2: two equal rows when robot and goal share a cell), consecutive
+            waypoints mutually visible through free cells (except on the escape segment); empty when
+            not ok.
+        direction_rad: instantaneous path direction in the grid/world frame (from the robot cell centre to
+            the point ``lookahead_m`` along the tightened path, or to the goal if the path is shorter);
+            nan when not ok.
+        length_m: length of the tightened path [m]; nan when not ok.
+        cost_m: NF1 value of the robot cell (the raw path length the wave measured, to the goal cell;
+            tunnel planner: the length of the node chain; a route kept by the route hysteresis: its
+            ``route_cost``) [m]; nan when not ok.
+        nodes_expanded: search effort: cells the NF1 wave labelled, or nodes the tunnel planner expanded
+            (also on failure).
+        width_m: width of the free tunnel around ``waypoints_cells`` (tunnel planner: robot width plus
+            margins); nan for NF1, whose C-space is a disc model and reports no width.
+        fallback: the planner's own search failed where the free C-space joins robot and goal, and the
+            path is a complete planner's stand-in (the tunnel planner: NF1's string-pulled path on the
+            same C-space, ``TunnelParams.complete``; ``path_cells`` is then NF1's raw path,
+            ``nodes_expanded`` still the node search's effort). The stack flags it PLANNER_FALLBACK.
+    """
+
+    ok: bool
+    flag: Flag
+    goal_cell: tuple[int, int]
+    goal_projected: bool
+    path_cells: NDArray[np.int32]
+    n_escape: int
+    waypoints_cells: NDArray[np.float64]
+    direction_rad: float
+    length_m: float
+    cost_m: float
+    nodes_expanded: int = 0
+    width_m: float = math.nan
+    fallback: bool = False
+
+
+class Planner(Protocol):
+    """What the stack needs from a planner: built once with its settings and the grid geometry
+    (``planners.PLANNERS``), then asked every tick."""
+
+    @property
+    def no_path_is_no_border(self) -> bool:
+        """Its PLANNER_NO_PATH for a goal beyond the grid already says the robot reaches no free border
+        cell (NF1 with ``frontier_goal`` plans to the best reachable one). False: it plans to one border
+        cell, and the stack asks the C-space whether the border is reachable at all."""
+        ...
+
+    def plan(
+        self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike
+    ) -> PlanResult:
+        """Plan on the robot-centred grid (UNKNOWN / FREE / OCCUPIED cells) from the robot cell to the goal
+        (corner coordinates, see ``nf1.plan``)."""
+        ...
