@@ -39,7 +39,7 @@ from .evaluation import write_tum
 from .fsutil import check_output_dir, format_stamp, resolve_output_dir, staging_dir
 from .geometry import relative, wrap_angle
 from .pipeline.model import RobotCentredGrid
-from .pipeline.stack import MODULES, NavigationStack, TickResult, warm_up
+from .pipeline.stack import MODULES, MatchInfo, NavigationStack, TickResult, warm_up
 from .scanmatch import Matcher, make_matcher
 from .types import BUDGET_FLAGS, REFLEXIVE_MODES, Flag, Pose2D, Scan, Subgoal, Tick
 
@@ -260,7 +260,7 @@ def _csv_text(text: str) -> str:
 def _command_row(r: TickResult, enforce_budgets: bool) -> str:
     flags = "|".join(recorded_flags(r.flags, enforce_budgets=enforce_budgets).names())
     return (
-        f"{format_stamp(r.t_ns)},{r.v_mps:.6f},{r.vy_mps:.6f},{r.w_radps:.6f},"
+        f"{format_stamp(r.t_ns)},{r.command.v_mps:.6f},{r.command.vy_mps:.6f},{r.command.w_radps:.6f},"
         f"{r.mode.value},{r.situation.name},{flags},"
         f"{_csv_text(r.desired_mode)},{_csv_text(r.active_mode)},{_csv_text(r.takeover_reason)},"
         f"{r.subgoal_index}\n"
@@ -319,7 +319,7 @@ class _Recorder:
         self.audit.append((r.desired_mode, r.active_mode, _csv_text(r.takeover_reason), r.mode.value))
         p = r.pose_corrected
         self.pose.append((p.x, p.y, p.theta))
-        self.cmd.append((r.v_mps, r.w_radps, r.direction_rad))
+        self.cmd.append((r.command.v_mps, r.command.w_radps, r.direction_rad))
         self.timing.append([r.timings_ms.get(m, 0.0) for m in MODULES])
         self.modes[r.mode.value] += 1
         self.situations[r.situation.name] += 1
@@ -674,7 +674,8 @@ def run_replay(
                         sink.add_scan(m.tick, m.pose)
                     if k % options.every:
                         continue
-                    r = stack.step(m.tick, m.pose, goal, match_ms=m.match_ms, match_failed=m.failed)
+                    r = stack.step(m.tick.scan, m.pose, goal, odom=m.tick.odom, cmd=m.tick.cmd,
+                                   match=MatchInfo(m.match_ms, m.failed))
                     for sink in sinks:
                         sink.add_result(m.tick, r, stack.grid)
                     f_cmd.write(_command_row(r, enforce))
