@@ -217,7 +217,7 @@ def dev_log(log: Path, n_ticks: int, repeat: int) -> None:
     ticks = itertools.islice(read_ticks(log), n_ticks)
     n = 0
     for m, goal in assign_goals(corrected_stream(ticks, cfg, RunOptions()), RunOptions()):
-        stack.step(m.tick, m.pose, goal)
+        stack.step(m.tick.scan, m.pose, goal, odom=m.tick.odom, cmd=m.tick.cmd)
         start = stack.grid.robot_cell(m.pose)
         goal_rc = stack.grid.world_to_cell_float(np.asarray([goal]))[0]
         res = {}

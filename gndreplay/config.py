@@ -580,6 +580,16 @@ def _check_value(value: Any, tp: Any, where: str, allowed: Range | None) -> Any:
 MAX_KEYS_LISTED = 20
 
 
+def _sub_table_of(obj: Any, key: str, prefix: str) -> str:
+    """`` (a key of [section.table])`` when ``key`` is not a key of section ``obj`` but of one of its tables
+    (``[planner] connectivity`` is NF1's: ``[planner.nf1]``), else ``""``."""
+    for f in dataclasses.fields(obj):
+        sub = getattr(obj, f.name)
+        if dataclasses.is_dataclass(sub) and key in {g.name for g in dataclasses.fields(sub)}:
+            return f" (a key of [{prefix}.{f.name}])" if prefix else f" (a key of [{f.name}])"
+    return ""
+
+
 def _override(obj: Any, table: dict[str, Any], prefix: str) -> Any:
     """A copy of dataclass ``obj`` with the keys of ``table`` replaced, validated recursively."""
     hints = get_type_hints(type(obj))
@@ -591,7 +601,8 @@ def _override(obj: Any, table: dict[str, Any], prefix: str) -> Any:
             known = sorted(names)
             listed = ", ".join(known[:MAX_KEYS_LISTED]) + (
                 f", ... ({len(known) - MAX_KEYS_LISTED} more)" if len(known) > MAX_KEYS_LISTED else "")
-            raise ConfigError(f"unknown key {brief(where)}{did_you_mean(key, known)} "
+            hint = did_you_mean(key, known) or _sub_table_of(obj, key, prefix)
+            raise ConfigError(f"unknown key {brief(where)}{hint} "
                               f"(known in [{prefix or 'top level'}]: {listed})")
         tp = hints[key]
         checked = _check_value(value, tp, where, range_of(type(obj), key))

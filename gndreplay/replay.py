@@ -28,7 +28,7 @@ from .config import Config
 from .errors import FOLLOW_NEEDS_SUBGOALS, ConfigError, LogFormatError
 from .fsutil import check_output_dir, resolve_output_dir, staging_dir
 from .io import DEFAULT_READ, ReadOptions
-from .pipeline.stack import NavigationStack, TickResult, warm_up
+from .pipeline.stack import MatchInfo, NavigationStack, TickResult, warm_up
 from .report.rundir import RunSink, StagedSink, TrajectoryWriter, tick_tables, write_config, write_summary
 from .report.summary import SummaryRecorder, summarise
 from .scanmatch import Matcher, make_matcher
@@ -300,7 +300,8 @@ def run_replay(
                         sink.add_scan(m.tick, m.pose)
                     if k % options.every:
                         continue
-                    r = stack.step(m.tick, m.pose, goal, match_ms=m.match_ms, match_failed=m.failed)
+                    r = stack.step(m.tick.scan, m.pose, goal, odom=m.tick.odom, cmd=m.tick.cmd,
+                                   match=MatchInfo(m.match_ms, m.failed))
                     for sink in sinks:
                         sink.add_result(m.tick, r, stack.grid)
                     write_tick(r)

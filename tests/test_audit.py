@@ -24,7 +24,7 @@ from gndreplay.report.rundir import (
     tick_edges,
 )
 from gndreplay.report.summary import SummaryRecorder, command_gap_warning, interventions, summarise
-from gndreplay.types import REFLEXIVE_MODES, Flag, Mode, Pose2D
+from gndreplay.types import REFLEXIVE_MODES, Command, Flag, Mode, Pose2D
 
 T0 = 1_000_000_000_000
 DT = 200_000_000  # 5 Hz
@@ -33,7 +33,7 @@ DT = 200_000_000  # 5 Hz
 def result(k: int, desired: str, active: str, reason: str = "", mode: Mode = Mode.MPND,
            subgoal: int = -1) -> TickResult:
     return TickResult(
-        t_ns=T0 + k * DT, pose_corrected=Pose2D(0.1 * k, 0.0, 0.0), v_mps=0.2, vy_mps=0.0, w_radps=0.0,
+        t_ns=T0 + k * DT, pose_corrected=Pose2D(0.1 * k, 0.0, 0.0), command=Command(T0 + k * DT, 0.2, 0.0),
         mode=mode, situation=Situation.HSGR, flags=Flag.NONE, direction_rad=0.0, goal=(5.0, 0.0),
         path_xy=np.zeros((0, 2)), timings_ms={"match": 1.0, "model": 1.0, "planner": 1.0, "reactor": 1.0},
         desired_mode=desired, active_mode=active, takeover_reason=reason, subgoal_index=subgoal)

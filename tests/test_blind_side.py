@@ -22,7 +22,7 @@ from gndreplay.pipeline.supervisor import (
     safety_reach_m,
 )
 from gndreplay.robot import WHEELCHAIR_ROBOT, XR4000_ROBOT, RobotConfig
-from gndreplay.types import Command, Pose2D, Scan, Tick
+from gndreplay.types import Command, Pose2D, Scan
 
 P = SupervisorParams()
 CELL = 0.05
@@ -158,13 +158,14 @@ def test_stack_replaces_a_teleop_reverse_into_stale_space() -> None:
     stack = NavigationStack(params)
     goal = (5.0, 0.0)
 
-    def step(k: int, t: float, th: float, cmd: Command | None = None):
+    def step(t: float, th: float, cmd: Command | None = None):
         pose = Pose2D(0.0, 0.0, th)
-        return stack.step(Tick(k, round(t * S), _scan(t), pose, cmd), pose, goal)
+        return stack.step(_scan(t), pose, goal, cmd=cmd)
 
     for k, t in enumerate((7.0, 7.5, 8.0, 8.5, 9.0, 9.5)):  # looking back, then turning round (no command)
-        step(k, t, math.pi * (1.0 - k / 5.0))
-    back = step(6, 10.0, 0.0, Command(10 * S, -0.4, 0.0))
-    assert back.mode is Mode.SAFE_TURN and back.v_mps == 0.0 and back.vy_mps == 0.0 and back.w_radps != 0.0
-    ahead = step(7, 10.1, 0.0, Command(10 * S, 0.4, 0.0))
-    assert ahead.mode is Mode.TELEOP and ahead.v_mps == 0.4
+        step(t, math.pi * (1.0 - k / 5.0))
+    back = step(10.0, 0.0, Command(10 * S, -0.4, 0.0))
+    assert back.mode is Mode.SAFE_TURN and back.command.v_mps == 0.0 and back.command.vy_mps == 0.0
+    assert back.command.w_radps != 0.0
+    ahead = step(10.1, 0.0, Command(10 * S, 0.4, 0.0))
+    assert ahead.mode is Mode.TELEOP and ahead.command.v_mps == 0.4

@@ -102,7 +102,8 @@ def test_preset_from_file_and_from_option(tmp_path: Path) -> None:
         ("[robot]\nshape = 'oval'\n", r"robot.shape: expected one of 'circle', 'rectangle', got 'oval'"),
         ("[planner.nf1]\nconnectivity = 6\n", r"planner.nf1.connectivity: expected one of 4, 8, got 6"),
         # NF1's own settings are in its table, not in [planner]
-        ("[planner]\nconnectivity = 8\n", r"cfg.toml: unknown key 'planner.connectivity' \(known in "),
+        ("[planner]\nconnectivity = 8\n",
+         r"cfg.toml: unknown key 'planner.connectivity' \(a key of \[planner.nf1\]\) \(known in "),
         ("[planner]\nkind = 'rrt'\n", r"\[planner\] unknown planner kind 'rrt'; known: nf1, tunnel"),
         ("robot = 3\n", r"robot: expected a table"),
         ("[grid]\ncell_m = -1.0\n", r"cfg.toml: grid.cell_m must be in \[0.001, 10\], got -1.0"),

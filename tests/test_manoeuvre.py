@@ -161,7 +161,7 @@ def test_a_planned_manoeuvre_driven_tick_by_tick_passes_the_reflexive_check(
     ends, todo = list(end_poses(sequence)), list(sequence)
     pose, dt = np.zeros(3), 0.2
     for _ in range(600):
-        while todo:  # the stack's completion rule (NavigationStack._manoeuvre_step)
+        while todo:  # the stack's completion rule (Supervisor._manoeuvre_step)
             rest = relative(pose, ends[0])
             left = math.copysign(1.0, todo[0].dth_rad) * rest[2] if todo[0].ds_m == 0.0 else (
                 math.copysign(1.0, todo[0].ds_m) * rest[0])

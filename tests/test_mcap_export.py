@@ -17,7 +17,7 @@ from gndreplay.pipeline.model import FREE, OCCUPIED, UNKNOWN, GridParams, RobotC
 from gndreplay.pipeline.nd import Situation
 from gndreplay.pipeline.stack import TickResult
 from gndreplay.report import McapSink, grid_to_occupancy
-from gndreplay.types import Flag, Mode, Pose2D, Scan, Tick
+from gndreplay.types import Command, Flag, Mode, Pose2D, Scan, Tick
 
 PERIOD_NS = 200_000_000  # 5 Hz
 T0_NS = 1_700_000_000_123_456_789
@@ -42,8 +42,9 @@ def tick(k: int) -> Tick:
 def result(k: int) -> TickResult:
     p = corrected(k)
     path = np.column_stack([p.x + np.arange(k % 4 + 2) * 0.5, np.full(k % 4 + 2, p.y)])
+    t = T0_NS + k * PERIOD_NS
     return TickResult(
-        t_ns=T0_NS + k * PERIOD_NS, pose_corrected=p, v_mps=0.01 * k, vy_mps=0.0, w_radps=-0.02 * k,
+        t_ns=t, pose_corrected=p, command=Command(t, 0.01 * k, -0.02 * k),
         mode=Mode.MND if k % 5 == 0 else Mode.MPND, situation=Situation.LS2 if k % 3 else Situation.HSWR,
         flags=Flag.PLANNER_NO_PATH | Flag.EMERGENCY_STOP if k == 7 else Flag.NONE, direction_rad=0.1,
         goal=(p.x + 5.0, p.y - 1.0), path_xy=path,

@@ -21,7 +21,7 @@ from gndreplay.pipeline.planners import PlannerGeometry, PlannerSpec
 from gndreplay.pipeline.stack import NavigationStack, StackParams, TickResult
 from gndreplay.robot import RobotConfig
 from gndreplay.sim.world import cast_rays, polygon
-from gndreplay.types import BUDGET_FLAGS, Flag, Mode, Pose2D, Scan, Tick
+from gndreplay.types import BUDGET_FLAGS, Flag, Mode, Pose2D, Scan
 
 ROOM = polygon([(-6, -6), (12, -6), (12, 6), (-6, 6)])
 BEAMS = np.linspace(-math.pi / 2, math.pi / 2, 361)
@@ -78,7 +78,7 @@ def ticks(params: StackParams, n: int = 3) -> tuple[NavigationStack, list[TickRe
         t = 1_000_000_000 + i * 200_000_000
         ranges = cast_rays(laser[:2], BEAMS + laser[2], ROOM, max_range_m=8.0)
         scan = Scan(t_ns=t, ranges_m=ranges, angles_rad=BEAMS, max_range_m=8.0, sensor_pose=sensor)
-        out.append(stack.step(Tick(index=i, t_ns=t, scan=scan, odom=pose), pose, GOAL))
+        out.append(stack.step(scan, pose, GOAL, odom=pose))
     return stack, out
 
 
@@ -146,7 +146,8 @@ def test_a_registered_local_strategy_drives_the_tick(monkeypatch: pytest.MonkeyP
     assert [h for _, h in calls] == [0, 1, 1]  # told the side it kept the tick before
     for r in results:
         assert r.active_mode == "local" and r.mode is Mode.LOCAL
-        assert (r.v_mps, r.w_radps, r.direction_rad) == (STUB_COMMAND.v_mps, STUB_COMMAND.w_radps, 0.3)
+        c = r.command
+        assert (c.v_mps, c.w_radps, r.direction_rad) == (STUB_COMMAND.v_mps, STUB_COMMAND.w_radps, 0.3)
 
 
 def test_an_unknown_local_strategy_is_a_config_error() -> None:

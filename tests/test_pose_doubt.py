@@ -11,7 +11,8 @@ import numpy as np
 
 from gndreplay.config import PRESETS
 from gndreplay.geometry import compose
-from gndreplay.pipeline.stack import NavigationStack
+from gndreplay.pipeline.stack import MatchInfo, NavigationStack
+from gndreplay.pipeline.supervision import Proposal
 from gndreplay.pipeline.supervisor import (
     Mode,
     SupervisorParams,
@@ -19,7 +20,7 @@ from gndreplay.pipeline.supervisor import (
     doubted_cells,
     seen_through,
 )
-from gndreplay.types import Flag, Pose2D, Scan, Tick
+from gndreplay.types import Command, Pose2D, Scan
 
 P = SupervisorParams()
 S = 1_000_000_000  # ns per s
@@ -120,11 +121,11 @@ def _reverse_check(doubt_window_s: float, w: float = 0.0, v_frac: float = -1.0) 
     for k in range(11):
         t = 1.0 + 0.2 * k
         odom = Pose2D.from_array(compose(ODOM0, [-0.115 * k, 0.0, 0.0]))
-        tick = Tick(index=k, t_ns=round(t * S), scan=_scan(t, -1.6, here), odom=odom)
-        stack._model(tick, here, 0.0, False)  # the cycle's start: the scan into the grid, the track
+        scan = _scan(t, -1.6, here)
+        stack._model(scan, here, odom, MatchInfo())  # the cycle's start: the scan into the grid, the track
     v = v_frac * sup.escape_v_frac * CHAIR.robot.vmax_mps
-    mode, v_out, _, w_out, _ = stack._reflexive(tick, here, Mode.MPND, v, 0.0, w, Flag.NONE)
-    return None if mode is Mode.MPND and (v_out, w_out) == (v, w) else mode
+    out = stack.supervisor.supervise(Proposal(Mode.MPND, Command(scan.t_ns, v, w)))
+    return None if out.mode is Mode.MPND and (out.command.v_mps, out.command.w_radps) == (v, w) else out.mode
 
 
 def test_backing_towards_a_remembered_wall_stops_when_the_matcher_holds_the_pose() -> None:

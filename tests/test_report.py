@@ -29,7 +29,7 @@ from gndreplay.report import (
 from gndreplay.report.markdown import trajectory_gap
 from gndreplay.report.plots import hit_image, plot_bands
 from gndreplay.report.rundir import runs
-from gndreplay.types import Flag, Mode, Pose2D, Scan, Tick
+from gndreplay.types import Command, Flag, Mode, Pose2D, Scan, Tick
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 ROOM = (-2.0, 8.0, -3.0, 3.0)  # x0, x1, y0, y1 of a rectangular room [m]
@@ -81,8 +81,9 @@ def make_result(tick: Tick, pose: Pose2D) -> TickResult:
         flags |= Flag.EMERGENCY_STOP | Flag.MATCH_FAILED
     path = np.column_stack([np.linspace(pose.x, pose.x + 2.0, 9), np.full(9, pose.y)])
     return TickResult(
-        t_ns=tick.t_ns, pose_corrected=pose, v_mps=0.3 * math.cos(0.05 * k), vy_mps=0.0,
-        w_radps=0.2 * math.sin(0.05 * k), mode=MODES[(k // 10) % 5], situation=SITUATIONS[(k // 8) % 5],
+        t_ns=tick.t_ns, pose_corrected=pose, command=Command(tick.t_ns, 0.3 * math.cos(0.05 * k),
+                                                             0.2 * math.sin(0.05 * k)),
+        mode=MODES[(k // 10) % 5], situation=SITUATIONS[(k // 8) % 5],
         flags=flags, direction_rad=0.0, goal=(pose.x + 3.0, pose.y), path_xy=path,
         timings_ms={"match": 1.0 + 0.01 * k, "model": 0.5, "planner": 2.0 + (k % 5), "reactor": 0.3},
     )
@@ -115,7 +116,8 @@ def write_run(run_dir: Path, n: int = 120, sinks: tuple = ()) -> dict:
             s.add_result(tick, r, grid)
         ms = [r.timings_ms[m] for m in ("match", "model", "planner", "reactor")]
         planner.append(ms[2])
-        cmd.append(f"{r.t_ns / 1e9:.9f},{r.v_mps:.6f},{r.vy_mps:.6f},{r.w_radps:.6f},{r.mode.value},"
+        c = r.command
+        cmd.append(f"{r.t_ns / 1e9:.9f},{c.v_mps:.6f},{c.vy_mps:.6f},{c.w_radps:.6f},{r.mode.value},"
                    f"{r.situation.name},{'|'.join(r.flags.names())}\n")
         tim.append(f"{r.t_ns / 1e9:.9f}," + ",".join(f"{x:.4f}" for x in ms) + f",{sum(ms):.4f}\n")
         modes[r.mode.value] = modes.get(r.mode.value, 0) + 1

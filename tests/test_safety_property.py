@@ -24,7 +24,7 @@ from gndreplay.geometry import transform_points
 from gndreplay.pipeline.model import FREE, OCCUPIED
 from gndreplay.pipeline.stack import NavigationStack, TickResult
 from gndreplay.pipeline.supervisor import swept_collision, unconfirmed_cells
-from gndreplay.types import Command, Pose2D, Scan, Subgoal, Tick
+from gndreplay.types import Command, Pose2D, Scan, Subgoal
 
 BEAMS = 48  # all around: obstacles beside and behind the robot too (a 360 deg laser)
 ANGLES = np.linspace(-math.pi, math.pi, BEAMS, endpoint=False)
@@ -35,22 +35,23 @@ STRATEGIES = ("nd", "free-space", "wall-left", "wall-right", "contour")
 
 def _touches(r: TickResult, stack: NavigationStack, scan: Scan, pose: Pose2D) -> str:
     """"" when the command is a stop or sweeps clear, else what it touches."""
-    if (r.v_mps, r.vy_mps, r.w_radps) == (0.0, 0.0, 0.0):
+    c = r.command
+    if (c.v_mps, c.vy_mps, c.w_radps) == (0.0, 0.0, 0.0):
         return ""
     p = stack.params
     hits = transform_points(scan.sensor_pose.as_array(), scan.points())
     cells = stack.grid.occupied_points(pose, 50.0)  # every occupied cell of the grid the stack used
     cells = unconfirmed_cells(cells, hits, p.grid.cell_m)
-    if swept_collision(hits, r.v_mps, r.w_radps, p.robot, p.supervisor, vy_mps=r.vy_mps):
+    if swept_collision(hits, c.v_mps, c.w_radps, p.robot, p.supervisor, vy_mps=c.vy_mps):
         return "scan"
-    if swept_collision(cells, r.v_mps, r.w_radps, p.robot, p.supervisor, vy_mps=r.vy_mps,
+    if swept_collision(cells, c.v_mps, c.w_radps, p.robot, p.supervisor, vy_mps=c.vy_mps,
                        grow_m=0.5 * p.grid.cell_m):
         return "grid"
     # the literal reading for the cells: no overlap with an unconfirmed cell's whole square (its
     # circumscribed disc, no margin), which the check above implies while emergency_margin_m is at least
     # (sqrt(2) - 1) / 2 of a cell; asserted so that the two cannot drift apart
     bare = dataclasses.replace(p.supervisor, emergency_margin_m=0.0)
-    if swept_collision(cells, r.v_mps, r.w_radps, p.robot, bare, vy_mps=r.vy_mps,
+    if swept_collision(cells, c.v_mps, c.w_radps, p.robot, bare, vy_mps=c.vy_mps,
                        grow_m=0.5 * math.sqrt(2.0) * p.grid.cell_m):
         return "grid square"
     return ""
@@ -104,6 +105,6 @@ def test_no_command_leaving_the_stack_sweeps_into_an_obstacle(
         t = 1_000_000_000 + k * 200_000_000
         cmd = Command(t, v * robot.vmax_mps, w * robot.wmax_radps, vy * robot.vmax_mps)
         scan = Scan(t_ns=t, ranges_m=scan_ranges, angles_rad=ANGLES, max_range_m=8.0, sensor_pose=sensor)
-        r = stack.step(Tick(index=k, t_ns=t, scan=scan, odom=pose, cmd=cmd), pose, (5.0, 0.0))
+        r = stack.step(scan, pose, (5.0, 0.0), cmd=cmd)
         assert r.desired_mode == mode
-        assert _touches(r, stack, scan, pose) == "", (r.mode, r.active_mode, r.v_mps, r.vy_mps, r.w_radps)
+        assert _touches(r, stack, scan, pose) == "", (r.mode, r.active_mode, r.command)

@@ -20,13 +20,14 @@ from gndreplay.pipeline.selector import (
     look_hold,
     select_mode,
     swept_area_occupied,
+    teleop_command,
     turned_first,
 )
-from gndreplay.pipeline.stack import NavigationStack, StackParams, TickResult, teleop_command
+from gndreplay.pipeline.stack import NavigationStack, StackParams, TickResult
 from gndreplay.pipeline.supervisor import braking_time_s, footprint_signed_distance
 from gndreplay.sim.closedloop import arc_step
 from gndreplay.sim.world import box, cast_rays, polygon, wall
-from gndreplay.types import Command, Flag, Mode, Pose2D, Scan, Subgoal, Tick
+from gndreplay.types import Command, Flag, Mode, Pose2D, Scan, Subgoal
 
 FRONT = np.linspace(-math.pi / 2, math.pi / 2, 361)  # the papers' SICK: 180 deg, 0.5 deg
 ROOM = polygon([(-6, -6), (14, -6), (14, 6), (-6, 6)])
@@ -76,10 +77,10 @@ def drive(
         scan = Scan(t_ns=t, ranges_m=ranges, angles_rad=FRONT, max_range_m=8.0, sensor_pose=sensor)
         p = Pose2D.from_array(pose)
         cmd = None if command is None else dataclasses.replace(command, t_ns=t)  # the driver holds it
-        r = stack.step(Tick(index=i, t_ns=t, scan=scan, odom=p, cmd=cmd), p, goal)
+        r = stack.step(scan, p, goal, cmd=cmd)
         results.append(r)
         poses.append(pose)
-        pose = arc_step(pose, r.v_mps, r.vy_mps, r.w_radps, dt)
+        pose = arc_step(pose, r.command.v_mps, r.command.vy_mps, r.command.w_radps, dt)
     return results, poses
 
 
@@ -232,7 +233,7 @@ def test_teleop_parallel_to_a_wall_is_never_taken_over(name: str) -> None:
     results, poses = drive(cfg, world, (0.0, 0.0, 0.0), Command(0, cfg.robot.vmax_mps, 0.0), 40,
                            teleop_params(cfg))
     assert all(r.active_mode == "teleop" and r.takeover_reason == "" for r in results)
-    assert all(r.v_mps == cfg.robot.vmax_mps and r.w_radps == 0.0 for r in results)
+    assert all(r.command.v_mps == cfg.robot.vmax_mps and r.command.w_radps == 0.0 for r in results)
     assert poses[-1][0] > 0.9 * 39 * cfg.robot.vmax_mps * cfg.laser.period_s
 
 
@@ -246,7 +247,7 @@ def test_without_the_selector_the_command_goes_out_unchanged_and_collides(name: 
     world = np.vstack([ROOM, wall(x_wall, -3.0, x_wall, 3.0)])
     results, poses = drive(cfg, world, (0.0, 0.0, 0.0), Command(0, v, 0.0), 60,
                            teleop_params(cfg, selector=False))
-    assert all((r.v_mps, r.vy_mps, r.w_radps) == (v, 0.0, 0.0) for r in results)
+    assert all((r.command.v_mps, r.command.vy_mps, r.command.w_radps) == (v, 0.0, 0.0) for r in results)
     assert all(r.active_mode == "teleop" and r.desired_mode == "teleop" for r in results)
     assert min(clearance(world, q, cfg) for q in poses) < 0.0
 
@@ -275,7 +276,7 @@ def test_teleop_resumes_once_the_obstacle_is_passed(name: str) -> None:
 def test_no_teleop_command_stands_still_with_the_reason() -> None:
     cfg = PRESETS["wheelchair"]
     results, _ = drive(cfg, ROOM, (0.0, 0.0, 0.0), None, 3, teleop_params(cfg))
-    assert all((r.v_mps, r.w_radps) == (0.0, 0.0) for r in results)
+    assert all((r.command.v_mps, r.command.w_radps) == (0.0, 0.0) for r in results)
     assert all(r.takeover_reason == "teleop: no command" and r.active_mode == "teleop" for r in results)
 
 
@@ -305,7 +306,8 @@ def test_follow_reaches_the_final_subgoal_and_stops(name: str) -> None:
     done = [i for i, r in enumerate(results) if r.flags & Flag.GOAL_REACHED]
     assert done, f"final subgoal not reached; last subgoal index {results[-1].subgoal_index}"
     k = done[0]
-    assert results[k].mode is Mode.GOAL and (results[k].v_mps, results[k].w_radps) == (0.0, 0.0)
+    assert results[k].mode is Mode.GOAL
+    assert (results[k].command.v_mps, results[k].command.w_radps) == (0.0, 0.0)
     assert results[k].subgoal_index == len(subgoals)
     assert [r.subgoal_index for r in results[:k]] == sorted(r.subgoal_index for r in results[:k])
     _at_the_final_stop(cfg, results, poses, k, subgoals[-1])
@@ -321,8 +323,9 @@ def _at_the_final_stop(cfg: Config, results: list[TickResult], poses: list[np.nd
     last = poses[k]
     assert math.hypot(last[0] - goal.x, last[1] - goal.y) <= follow.reach_m + 1e-9
     assert abs(math.remainder(last[2] - goal.theta, math.tau)) <= follow.heading_tol_rad
-    assert abs(results[k - 1].v_mps) <= follow.stop_v_mps
-    assert all((r.v_mps, r.w_radps) == (0.0, 0.0) and r.mode is Mode.GOAL for r in results[k:])
+    assert abs(results[k - 1].command.v_mps) <= follow.stop_v_mps
+    assert all((r.command.v_mps, r.command.w_radps) == (0.0, 0.0) for r in results[k:])
+    assert all(r.mode is Mode.GOAL for r in results[k:])
 
 
 @pytest.mark.parametrize("name", PRESET_NAMES)

@@ -20,7 +20,7 @@ from gndreplay.sim import ClosedLoop, resolve_scenario, simulate_scenario
 from gndreplay.sim.closedloop import navigation_config
 from gndreplay.sim.scenario_file import parse_scenario
 from gndreplay.sim.teleop import TeleopDriver, TeleopSpec
-from gndreplay.types import Flag, Mode, Tick
+from gndreplay.types import Command, Flag, Mode, Tick
 
 WHEELCHAIR = preset("wheelchair")
 HALL = {"walls": {"n": [-2.0, 3.0, 13.0, 3.0], "s": [-2.0, -3.0, 13.0, -3.0]}}
@@ -36,9 +36,9 @@ def echo(tick: Tick, *, desired: str = "teleop", active: str = "teleop", reason:
          subgoal: int = -1, flags: Flag = Flag.NONE) -> TickResult:
     """What a stack passing the operator's command straight out would return."""
     assert tick.cmd is not None and tick.truth is not None
-    return TickResult(tick.t_ns, tick.truth, tick.cmd.v_mps, 0.0, tick.cmd.w_radps, Mode.MPND, Situation.NONE,
-                      flags, math.nan, (0.0, 0.0), np.zeros((0, 2)), desired_mode=desired, active_mode=active,
-                      takeover_reason=reason, subgoal_index=subgoal)
+    return TickResult(tick.t_ns, tick.truth, Command(tick.t_ns, tick.cmd.v_mps, tick.cmd.w_radps), Mode.MPND,
+                      Situation.NONE, flags, math.nan, (0.0, 0.0), np.zeros((0, 2)), desired_mode=desired,
+                      active_mode=active, takeover_reason=reason, subgoal_index=subgoal)
 
 
 def run_echo(loop: ClosedLoop, **kw: Any) -> list[Tick]:
@@ -254,7 +254,7 @@ def creep_to_goal(loop: ClosedLoop, error_m: float) -> None:
         believed = tick.truth.x + error_m
         at_goal = math.hypot(loop.goal[0] - believed, loop.goal[1] - tick.truth.y) <= loop.goal_tol
         r = echo(tick, desired="gnd", active="gnd", flags=Flag.GOAL_REACHED if at_goal else Flag.NONE)
-        loop.on_tick(dataclasses.replace(r, v_mps=0.0 if at_goal else 0.05, w_radps=0.0,
+        loop.on_tick(dataclasses.replace(r, command=Command(tick.t_ns, 0.0 if at_goal else 0.05, 0.0),
                                          mode=Mode.GOAL if at_goal else Mode.MPND))
 
 

@@ -11,16 +11,10 @@ import pytest
 from gndreplay.config import PRESETS, Config
 from gndreplay.geometry import compose
 from gndreplay.pipeline.nd import Situation
-from gndreplay.pipeline.selector import intention_xy
-from gndreplay.pipeline.stack import (
-    NavigationStack,
-    StackParams,
-    TickResult,
-    _intention_changed,
-    make_planner,
-)
+from gndreplay.pipeline.selector import _intention_changed, intention_xy
+from gndreplay.pipeline.stack import NavigationStack, StackParams, TickResult, make_planner
 from gndreplay.sim.world import box, cast_rays, polygon, regular_polygon, wall
-from gndreplay.types import Flag, Mode, Pose2D, Scan, Tick
+from gndreplay.types import Command, Flag, Mode, Pose2D, Scan
 
 FRONT = np.linspace(-math.pi / 2, math.pi / 2, 361)  # a SICK-like 180 deg laser
 AROUND = np.linspace(-math.pi, math.pi, 720, endpoint=False)  # 360 deg: the robot sees it is enclosed
@@ -50,8 +44,7 @@ def run(
     out = []
     for i in range(n):
         t = 1_000_000_000 + int(i * dt_s * 1e9)
-        tick = Tick(index=i, t_ns=t, scan=scan_of(segments, pose, sensor, t, beams), odom=pose)
-        out.append(stack.step(tick, pose, goal))
+        out.append(stack.step(scan_of(segments, pose, sensor, t, beams), pose, goal))
     return out
 
 
@@ -65,8 +58,8 @@ def test_open_room_goal_ahead_drives_straight(name: str) -> None:
     r = run(cfg, ROOM, Pose2D(0, 0, 0), (4.0, 0.0))[-1]
     assert r.mode is Mode.MPND
     assert r.situation is Situation.HSGR
-    assert r.v_mps == pytest.approx(cfg.robot.vmax_mps, rel=1e-6)
-    assert abs(r.w_radps) < 1e-6
+    assert r.command.v_mps == pytest.approx(cfg.robot.vmax_mps, rel=1e-6)
+    assert abs(r.command.w_radps) < 1e-6
     assert r.flags == Flag.NONE
     assert set(r.timings_ms) == {"match", "model", "planner", "reactor"}
     assert r.path_xy.shape[1] == 2 and np.allclose(r.path_xy[-1], (4.0, 0.0), atol=0.06)
@@ -92,8 +85,8 @@ def test_enclosed_robot_stops_and_rotates(name: str) -> None:
         assert r.flags & Flag.PLANNER_NO_PATH
         assert r.flags & Flag.REACTOR_NO_REGION
         assert r.mode is Mode.ROTATE  # GND: no free walking area -> stop and rotate
-        assert r.v_mps == 0.0 and r.vy_mps == 0.0
-        assert r.w_radps == pytest.approx(cfg.supervisor.rotate_w_frac * cfg.robot.wmax_radps)
+        assert r.command.v_mps == 0.0 and r.command.vy_mps == 0.0
+        assert r.command.w_radps == pytest.approx(cfg.supervisor.rotate_w_frac * cfg.robot.wmax_radps)
 
 
 def test_half_seen_enclosure_plans_through_the_unknown_side() -> None:
@@ -102,7 +95,7 @@ def test_half_seen_enclosure_plans_through_the_unknown_side() -> None:
     ring = regular_polygon(0.0, 0.0, cfg.robot.outer_radius_m + 0.15, sides=24)
     r = run(cfg, np.vstack([ROOM, ring]), Pose2D(0, 0, 0), (4.0, 0.0))[-1]
     assert not r.flags & Flag.PLANNER_NO_PATH
-    assert r.v_mps == pytest.approx(0.0, abs=0.05)
+    assert r.command.v_mps == pytest.approx(0.0, abs=0.05)
 
 
 def test_wall_close_ahead_makes_nd_turn_in_place() -> None:
@@ -111,7 +104,7 @@ def test_wall_close_ahead_makes_nd_turn_in_place() -> None:
     world = np.vstack([ROOM, wall(0.95, -3.0, 0.95, 3.0)])
     r = run(cfg, world, Pose2D(0, 0, 0), (4.0, 0.0))[-1]
     assert r.situation in (Situation.LS1, Situation.LSG, Situation.LS2)
-    assert r.v_mps == pytest.approx(0.0, abs=1e-6) and r.w_radps != 0.0
+    assert r.command.v_mps == pytest.approx(0.0, abs=1e-6) and r.command.w_radps != 0.0
     assert not r.flags & Flag.EMERGENCY_STOP  # turning in place sweeps nothing of the wall
 
 
@@ -132,11 +125,11 @@ def test_reflexive_brake_overrides_a_colliding_reactor_command(monkeypatch: pyte
     world = np.vstack([ROOM, wall(0.84, -3.0, 0.84, 3.0)])
     r = run(cfg, world, Pose2D(0, 0, 0), (4.0, 0.0))[-1]
     assert r.mode is Mode.EMERGENCY and r.flags & Flag.EMERGENCY_STOP
-    assert (r.v_mps, r.w_radps) == (0.0, 0.0)
+    assert (r.command.v_mps, r.command.w_radps) == (0.0, 0.0)
     # 0.15 m beyond it, half speed still stops in time: the command is slowed, not replaced by a stop
     world = np.vstack([ROOM, wall(0.95, -3.0, 0.95, 3.0)])
     r = run(cfg, world, Pose2D(0, 0, 0), (4.0, 0.0))[-1]
-    assert r.mode is Mode.SAFE_SLOW and r.v_mps == pytest.approx(cfg.robot.vmax_mps / 2)
+    assert r.mode is Mode.SAFE_SLOW and r.command.v_mps == pytest.approx(cfg.robot.vmax_mps / 2)
 
 
 def test_stale_scan_stops_the_robot() -> None:
@@ -144,19 +137,19 @@ def test_stale_scan_stops_the_robot() -> None:
     results = run(cfg, ROOM, Pose2D(0, 0, 0), (4.0, 0.0), n=2, dt_s=cfg.supervisor.stale_scan_s + 0.5)
     assert results[0].mode is Mode.MPND
     assert results[1].mode is Mode.STALE and results[1].flags & Flag.STALE_SCAN
-    assert (results[1].v_mps, results[1].w_radps) == (0.0, 0.0)
+    assert (results[1].command.v_mps, results[1].command.w_radps) == (0.0, 0.0)
 
 
 def test_goal_reached_stops() -> None:
     r = run(PRESETS["wheelchair"], ROOM, Pose2D(1.0, 1.0, 0.3), (1.1, 1.0))[-1]
     assert r.mode is Mode.GOAL and r.flags & Flag.GOAL_REACHED
-    assert (r.v_mps, r.vy_mps, r.w_radps) == (0.0, 0.0, 0.0)
+    assert (r.command.v_mps, r.command.vy_mps, r.command.w_radps) == (0.0, 0.0, 0.0)
 
 
 def test_goal_behind_turns_in_place_differential() -> None:
     r = run(PRESETS["wheelchair"], ROOM, Pose2D(0, 0, 0), (-4.0, 0.5))[-1]
-    assert r.v_mps == pytest.approx(0.0, abs=1e-9)
-    assert r.w_radps > 0.0
+    assert r.command.v_mps == pytest.approx(0.0, abs=1e-9)
+    assert r.command.w_radps > 0.0
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -166,9 +159,9 @@ def test_random_clutter_never_produces_nan(seed: int) -> None:
     cfg = PRESETS["wheelchair" if seed % 2 else "xr4000"]
     goal = tuple(rng.uniform(-10, 10, 2))
     for r in run(cfg, np.vstack([ROOM, *boxes]), Pose2D(0, 0, rng.uniform(-3, 3)), goal, n=3):
-        assert all(math.isfinite(x) for x in (r.v_mps, r.vy_mps, r.w_radps))
-        assert abs(r.v_mps) <= cfg.robot.vmax_mps + 1e-9
-        assert abs(r.w_radps) <= cfg.robot.wmax_radps + 1e-9
+        assert all(math.isfinite(x) for x in (r.command.v_mps, r.command.vy_mps, r.command.w_radps))
+        assert abs(r.command.v_mps) <= cfg.robot.vmax_mps + 1e-9
+        assert abs(r.command.w_radps) <= cfg.robot.wmax_radps + 1e-9
 
 
 def test_enforced_planner_budget_falls_back_to_mnd() -> None:
@@ -206,7 +199,7 @@ def test_warm_up_compiles_what_real_ticks_need() -> None:
     stack = NavigationStack(cfg.stack_params())
     sample = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
     for tick, _ in zip(read_ticks(sample), range(5), strict=False):
-        stack.step(tick, tick.odom, (tick.odom.x + 3.0, tick.odom.y))
+        stack.step(tick.scan, tick.odom, (tick.odom.x + 3.0, tick.odom.y))
     assert _numba_signatures() == before
 
 
@@ -244,7 +237,8 @@ def test_planner_statistics_per_tick(name: str) -> None:
         assert r.mode is Mode.MPND and r.situation is Situation.HSGR
         assert np.allclose(r.path_xy[-1], (4.0, 0.0), atol=0.06)
     assert tunnel.path_xy.shape == (2, 2)  # one straight tunnel
-    assert (tunnel.v_mps, tunnel.w_radps) == pytest.approx((nf1.v_mps, nf1.w_radps), abs=1e-6)
+    assert (tunnel.command.v_mps, tunnel.command.w_radps) == pytest.approx(
+        (nf1.command.v_mps, nf1.command.w_radps), abs=1e-6)
 
 
 @pytest.mark.parametrize("name", PRESET_NAMES)
@@ -259,8 +253,7 @@ def test_tunnel_planner_enclosed_goal_goes_to_mnd(name: str) -> None:
     for i, a in enumerate(np.linspace(-math.pi, math.pi, 9)):  # look at the box from all around it
         pose = Pose2D(4.0 + 3.0 * math.cos(a), 3.0 * math.sin(a), a + math.pi / 2)
         t = 1_000_000_000 + i * 100_000_000
-        tick = Tick(index=i, t_ns=t, scan=scan_of(world, pose, sensor, t, AROUND), odom=pose)
-        results.append(stack.step(tick, pose, (4.0, 0.0)))
+        results.append(stack.step(scan_of(world, pose, sensor, t, AROUND), pose, (4.0, 0.0)))
     r = results[-1]
     assert r.flags & Flag.PLANNER_NO_PATH and not r.flags & Flag.GOAL_IN_OBSTACLE
     assert r.mode is Mode.MND
@@ -305,7 +298,7 @@ def test_warm_up_compiles_what_the_tunnel_planner_needs() -> None:
     sample = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
     for i, (tick, _) in enumerate(zip(read_ticks(sample), range(40), strict=False)):
         goal = (tick.odom.x + 3.0, tick.odom.y) if i % 2 else (tick.odom.x - 4.0, tick.odom.y + 6.0)
-        stack.step(tick, tick.odom, goal)
+        stack.step(tick.scan, tick.odom, goal)
     assert signatures() == before
 
 
@@ -326,8 +319,7 @@ def test_goal_in_enclosed_box_is_held_unreachable(name: str) -> None:
     def step(pose: Pose2D, goal: tuple[float, float]) -> TickResult:
         nonlocal t
         t += 200_000_000
-        scan = scan_of(world, pose, sensor, t, AROUND)
-        return stack.step(Tick(index=0, t_ns=t, scan=scan, odom=pose), pose, goal)
+        return stack.step(scan_of(world, pose, sensor, t, AROUND), pose, goal)
 
     for a in np.linspace(-math.pi, math.pi, 9):  # look at the box from all around it
         step(Pose2D(4.0 + 3.0 * math.cos(a), 3.0 * math.sin(a), a + math.pi / 2), (4.0, 0.0))
@@ -336,16 +328,16 @@ def test_goal_in_enclosed_box_is_held_unreachable(name: str) -> None:
     for _ in range(150):  # the robot turns as commanded
         r = step(pose, (4.0, 0.0))
         results.append(r)
-        pose = Pose2D(pose.x, pose.y, pose.theta + r.w_radps * 0.2)
+        pose = Pose2D(pose.x, pose.y, pose.theta + r.command.w_radps * 0.2)
     assert all(r.flags & Flag.PLANNER_NO_PATH for r in results)
     assert not any(r.flags & Flag.TRAP_DETECTED for r in results)
     held = [i for i, r in enumerate(results) if r.mode is Mode.ROTATE]
     assert held and held == list(range(held[0], len(results)))  # once held, held for good
     assert all(r.mode is Mode.MND for r in results[: held[0]])
-    assert all(r.v_mps == 0.0 and r.vy_mps == 0.0 for r in results[held[0]:])
-    turned = sum(abs(r.w_radps) * 0.2 for r in results)
+    assert all(r.command.v_mps == 0.0 and r.command.vy_mps == 0.0 for r in results[held[0]:])
+    turned = sum(abs(r.command.w_radps) * 0.2 for r in results)
     assert turned == pytest.approx(2.0 * math.pi, abs=0.2 * cfg.robot.wmax_radps)  # one full look around
-    assert results[-1].w_radps == 0.0 and results[-10].w_radps == 0.0
+    assert results[-1].command.w_radps == 0.0 and results[-10].command.w_radps == 0.0
     assert step(pose, (0.0, 3.0)).mode is Mode.MPND  # a reachable goal: planning again at once
 
 
@@ -364,16 +356,15 @@ def test_enclosed_robot_with_goal_beyond_the_grid_stops_after_one_turn(name: str
     pose, results = Pose2D(0.0, 0.0, 0.0), []
     for i in range(160):
         t = 1_000_000_000 + i * 200_000_000
-        tick = Tick(index=i, t_ns=t, scan=scan_of(world, pose, sensor, t, AROUND), odom=pose)
-        r = stack.step(tick, pose, (100.0, 3.0))
+        r = stack.step(scan_of(world, pose, sensor, t, AROUND), pose, (100.0, 3.0))
         results.append(r)
-        pose = Pose2D(0.0, 0.0, pose.theta + r.w_radps * 0.2)
-    assert all(r.mode is Mode.ROTATE and r.v_mps == 0.0 for r in results)
-    assert all(r.w_radps >= 0.0 for r in results)  # one direction, no dithering
+        pose = Pose2D(0.0, 0.0, pose.theta + r.command.w_radps * 0.2)
+    assert all(r.mode is Mode.ROTATE and r.command.v_mps == 0.0 for r in results)
+    assert all(r.command.w_radps >= 0.0 for r in results)  # one direction, no dithering
     step = 0.2 * cfg.supervisor.rotate_w_frac * cfg.robot.wmax_radps  # one tick's turn
-    turned = sum(r.w_radps * 0.2 for r in results)  # the ticks before the hold turn too (NO_REGION)
+    turned = sum(r.command.w_radps * 0.2 for r in results)  # the ticks before the hold turn too (NO_REGION)
     assert 2.0 * math.pi - step <= turned <= 2.0 * math.pi + (params.supervisor.unreachable_ticks + 3) * step
-    assert results[-1].w_radps == 0.0
+    assert results[-1].command.w_radps == 0.0
 
 
 @pytest.mark.parametrize(("mode", "strategy"),
@@ -386,7 +377,7 @@ def test_warm_up_compiles_what_the_multi_loop_modes_need(mode: str, strategy: st
     from gndreplay.io import read_ticks
     from gndreplay.pipeline import cspace, follow, local, model, nd, nf1, selector, supervisor
     from gndreplay.pipeline.stack import warm_up
-    from gndreplay.types import Command, Subgoal
+    from gndreplay.types import Subgoal
 
     def signatures() -> dict[str, int]:
         return {
@@ -406,16 +397,15 @@ def test_warm_up_compiles_what_the_multi_loop_modes_need(mode: str, strategy: st
     stack = NavigationStack(params, subgoals)
     sample = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
     for tick, _ in zip(read_ticks(sample), range(5), strict=False):
-        tick = dataclasses.replace(tick, cmd=Command(tick.t_ns, cfg.robot.vmax_mps, 0.1))
-        stack.step(tick, tick.odom, (tick.odom.x + 3.0, tick.odom.y))
+        stack.step(tick.scan, tick.odom, (tick.odom.x + 3.0, tick.odom.y),
+                   cmd=Command(tick.t_ns, cfg.robot.vmax_mps, 0.1))
     world = np.vstack([ROOM, wall(cfg.robot.front_m + 0.15, -3.0, cfg.robot.front_m + 0.15, 3.0)])
     stack = NavigationStack(dataclasses.replace(params, nav_mode="teleop"))
     sensor, pose = Pose2D(cfg.robot.laser_x_m, 0.0, 0.0), Pose2D(0.0, 0.0, 0.0)
     for i in range(2):
         t = 1_000_000_000 + i * 200_000_000
-        tick = Tick(index=i, t_ns=t, scan=scan_of(world, pose, sensor, t, FRONT), odom=pose,
-                    cmd=Command(t, cfg.robot.vmax_mps, 0.0))
-        r = stack.step(tick, pose, (4.0, 0.0))
+        r = stack.step(scan_of(world, pose, sensor, t, FRONT), pose, (4.0, 0.0),
+                       cmd=Command(t, cfg.robot.vmax_mps, 0.0))
     assert r.active_mode == "local"
     assert signatures() == before
 
@@ -427,63 +417,56 @@ def _multi(cfg: Config, mode: str, **changes: object) -> StackParams:
     return dataclasses.replace(cfg.stack_params(), nav_mode=mode, **changes)  # type: ignore[arg-type]
 
 
-def _tick(cfg: Config, segments: np.ndarray, pose: Pose2D, i: int, t_ns: int, cmd: object = None) -> Tick:
+def _scan(cfg: Config, segments: np.ndarray, pose: Pose2D, t_ns: int) -> Scan:
     sensor = Pose2D(cfg.robot.laser_x_m, cfg.robot.laser_y_m, cfg.robot.laser_theta_rad)
-    return Tick(index=i, t_ns=t_ns, scan=scan_of(segments, pose, sensor, t_ns, FRONT), odom=pose,
-                cmd=cmd)  # type: ignore[arg-type]
+    return scan_of(segments, pose, sensor, t_ns, FRONT)
 
 
 @pytest.mark.parametrize("age_s", [0.0, 0.3, 0.5, 0.6, 60.0])
 def test_teleop_command_older_than_the_timeout_stands_still(age_s: float) -> None:
-    from gndreplay.types import Command
-
     cfg = PRESETS["wheelchair"]
     params = _multi(cfg, "teleop", cmd_timeout_s=0.5)
     stack, pose = NavigationStack(params), Pose2D(0.0, 0.0, 0.0)
     t = 100_000_000_000
     cmd = Command(t - round(age_s * 1e9), 0.3, 0.1)
-    r = stack.step(_tick(cfg, ROOM, pose, 0, t, cmd), pose, (5.0, 0.0))
+    r = stack.step(_scan(cfg, ROOM, pose, t), pose, (5.0, 0.0), cmd=cmd)
     assert r.active_mode == "teleop"
     if age_s > params.cmd_timeout_s:
-        assert (r.v_mps, r.vy_mps, r.w_radps) == (0.0, 0.0, 0.0)
+        assert (r.command.v_mps, r.command.vy_mps, r.command.w_radps) == (0.0, 0.0, 0.0)
         assert r.takeover_reason == "teleop: command stale"
     else:
-        assert (r.v_mps, r.w_radps) == (0.3, 0.1) and r.takeover_reason == ""
+        assert (r.command.v_mps, r.command.w_radps) == (0.3, 0.1) and r.takeover_reason == ""
 
 
 def test_no_trap_escape_for_a_driver_but_for_local_navigation(monkeypatch: pytest.MonkeyPatch) -> None:
     """Whatever the trap detector says, a teleop command is never replaced by the escape (the driver's
     dithering is the driver's); under local navigation the escape runs and the mode column says so."""
-    from gndreplay.types import Command
-
     cfg = PRESETS["wheelchair"]
     pose, w = Pose2D(0.0, 0.0, 0.0), 0.5 * cfg.robot.wmax_radps
     for mode in ("teleop", "local"):
         stack = NavigationStack(_multi(cfg, mode))
-        monkeypatch.setattr(stack._trap, "update", lambda *_a: True)  # a trap every tick
+        monkeypatch.setattr(stack.supervisor._trap, "update", lambda *_a: True)  # a trap every tick
         out = []
         for k in range(6):
             t = 1_000_000_000 + k * 200_000_000
             cmd = Command(t, 0.0, w if k % 2 == 0 else -w)  # turning left and right in place
-            out.append(stack.step(_tick(cfg, ROOM, pose, k, t, cmd), pose, (4.0, 0.5)))
+            out.append(stack.step(_scan(cfg, ROOM, pose, t), pose, (4.0, 0.5), cmd=cmd))
         if mode == "teleop":
-            assert all(r.mode is not Mode.ESCAPE and r.v_mps == 0.0 for r in out)
+            assert all(r.mode is not Mode.ESCAPE and r.command.v_mps == 0.0 for r in out)
             assert all(not r.flags & Flag.TRAP_DETECTED for r in out)
-            assert [r.w_radps for r in out] == [w if k % 2 == 0 else -w for k in range(6)]
+            assert [r.command.w_radps for r in out] == [w if k % 2 == 0 else -w for k in range(6)]
         else:
             assert any(r.mode is Mode.ESCAPE and r.flags & Flag.TRAP_DETECTED for r in out)
             assert all(r.active_mode == "local" for r in out)
 
 
 def test_an_escape_begun_under_local_navigation_ends_when_the_driver_has_the_robot() -> None:
-    from gndreplay.types import Command
-
     cfg = PRESETS["wheelchair"]
     stack, pose = NavigationStack(_multi(cfg, "teleop")), Pose2D(0.0, 0.0, 0.0)
-    stack._escape_left, stack._escape_v = 5, 0.1  # an escape in progress
+    stack.supervisor._escape_left, stack.supervisor._escape_v = 5, 0.1  # an escape in progress
     t = 1_000_000_000
-    r = stack.step(_tick(cfg, ROOM, pose, 0, t, Command(t, 0.0, 0.2)), pose, (4.0, 0.0))
-    assert r.mode is not Mode.ESCAPE and (r.v_mps, r.w_radps) == (0.0, 0.2)
+    r = stack.step(_scan(cfg, ROOM, pose, t), pose, (4.0, 0.0), cmd=Command(t, 0.0, 0.2))
+    assert r.mode is not Mode.ESCAPE and (r.command.v_mps, r.command.w_radps) == (0.0, 0.2)
 
 
 @pytest.mark.parametrize("selector", [True, False])
@@ -493,24 +476,23 @@ def test_local_mode_keeps_the_reflexive_loop_without_the_selector(selector: bool
     cfg = PRESETS["wheelchair"]
     stack = NavigationStack(_multi(cfg, "local", selector=selector))
     pose = Pose2D(0.0, 0.0, 0.0)
-    r0 = stack.step(_tick(cfg, ROOM, pose, 0, 1_000_000_000), pose, (5.0, 0.0))
+    r0 = stack.step(_scan(cfg, ROOM, pose, 1_000_000_000), pose, (5.0, 0.0))
     assert r0.mode is not Mode.STALE
-    r1 = stack.step(_tick(cfg, ROOM, pose, 1, 6_000_000_000), pose, (5.0, 0.0))  # 5 s later
-    assert r1.mode is Mode.STALE and r1.flags & Flag.STALE_SCAN and (r1.v_mps, r1.w_radps) == (0.0, 0.0)
+    r1 = stack.step(_scan(cfg, ROOM, pose, 6_000_000_000), pose, (5.0, 0.0))  # 5 s later
+    assert r1.mode is Mode.STALE and r1.flags & Flag.STALE_SCAN
+    assert (r1.command.v_mps, r1.command.w_radps) == (0.0, 0.0)
 
 
 def test_multi_loop_tick_gathers_the_safety_points_once(monkeypatch: pytest.MonkeyPatch) -> None:
-    from gndreplay.types import Command
-
     cfg = PRESETS["wheelchair"]
     stack, pose = NavigationStack(_multi(cfg, "teleop")), Pose2D(0.0, 0.0, 0.0)
     calls = []
-    orig = stack._safety_points
-    monkeypatch.setattr(stack, "_safety_points", lambda *a: calls.append(1) or orig(*a))
+    orig = stack.supervisor._points
+    monkeypatch.setattr(stack.supervisor, "_points", lambda *a: calls.append(1) or orig(*a))
     world = np.vstack([ROOM, wall(cfg.robot.front_m + 0.15, -3.0, cfg.robot.front_m + 0.15, 3.0)])
     for k in range(3):
         t = 1_000_000_000 + k * 200_000_000
-        r = stack.step(_tick(cfg, world, pose, k, t, Command(t, cfg.robot.vmax_mps, 0.0)), pose, (4.0, 0.0))
+        r = stack.step(_scan(cfg, world, pose, t), pose, (4.0, 0.0), cmd=Command(t, cfg.robot.vmax_mps, 0.0))
         assert len(calls) == k + 1
     assert r.active_mode == "local"  # the selector and the reflexive loop both ran on them
 
@@ -542,16 +524,16 @@ def test_follower_is_told_the_command_executed_last_tick() -> None:
     pose, out = Pose2D(0.0, 0.0, 0.0), []
     for k in range(4):
         t = 1_000_000_000 + k * 200_000_000
-        out.append(stack.step(_tick(cfg, ROOM, pose, k, t), pose, (0.0, 0.0)))
+        out.append(stack.step(_scan(cfg, ROOM, pose, t), pose, (0.0, 0.0)))
         pose = Pose2D(pose.x + 0.05, pose.y, pose.theta)
     assert seen[0] == (0.0, 0.0)
-    assert seen[1:] == [(r.v_mps, r.w_radps) for r in out[:-1]]
+    assert seen[1:] == [(r.command.v_mps, r.command.w_radps) for r in out[:-1]]
     # ... and whether that command was its own (not taken over nor replaced by the reflexive loop)
     assert told == [False] + [r.active_mode != "follow" or r.mode is not Mode.FOLLOW for r in out[:-1]]
     # a push off the trajectory: the new one starts with the executed curvature (w / v, within kappa_max)
     stack._v_out, stack._w_out = 0.4, 0.2
     t = 1_000_000_000 + 4 * 200_000_000
-    stack.step(_tick(cfg, ROOM, Pose2D(0.2, 1.0, 0.0), 4, t), Pose2D(0.2, 1.0, 0.0), (0.0, 0.0))
+    stack.step(_scan(cfg, ROOM, Pose2D(0.2, 1.0, 0.0), t), Pose2D(0.2, 1.0, 0.0), (0.0, 0.0))
     assert follower.trajectory is not None and follower.trajectory.kappa[0] == pytest.approx(0.5)
 
 
@@ -594,11 +576,10 @@ def test_a_goal_nd_reaches_through_a_door_the_planner_closes_is_not_held_unreach
     pose, results = Pose2D(0.0, 0.0, 0.0), []
     for i in range(12):  # the robot stands still: the same view every tick
         t = 1_000_000_000 + i * 200_000_000
-        tick = Tick(index=i, t_ns=t, scan=scan_of(world, pose, sensor, t, AROUND), odom=pose)
-        results.append(stack.step(tick, pose, (x_wall + 2.0, 0.0)))
+        results.append(stack.step(scan_of(world, pose, sensor, t, AROUND), pose, (x_wall + 2.0, 0.0)))
     assert all(r.flags & Flag.PLANNER_NO_PATH for r in results), "the door is open to the planner"
     assert all(r.mode is Mode.MND and r.situation in (Situation.HSGR, Situation.LSG) for r in results)
-    assert all(r.v_mps > 0.0 for r in results)
+    assert all(r.command.v_mps > 0.0 for r in results)
 
 
 @pytest.mark.parametrize("name", PRESET_NAMES)

@@ -7,11 +7,11 @@ import pytest
 
 from gndreplay.pipeline.model import FREE, OCCUPIED, UNKNOWN, GridParams, RobotCentredGrid
 from gndreplay.pipeline.selector import swept_area_occupied
+from gndreplay.pipeline.supervision import TrapDetector
 from gndreplay.pipeline.supervisor import (
     Mode,
     SafeCommand,
     SupervisorParams,
-    TrapDetector,
     braking_time_s,
     budget_flags,
     escape_command,

@@ -523,7 +523,7 @@ class RobotCentredGrid:
                              radius_m: float) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """``occupied_points`` with the stamp of the scan that last saw each cell (NEVER_SEEN: none):
         how old the pose that placed it is (the reflexive loop's pose doubt,
-        ``NavigationStack._doubted_points``)."""
+        ``Supervisor._doubted_points``)."""
         return self._points(robot_pose, radius_m, OCCUPIED, None)
 
     def _points(self, robot_pose: Pose2D, radius_m: float, state: np.uint8 | None,

@@ -1,11 +1,13 @@
-"""The mode selector of the multi-loop architecture (the paper's section 3.4), as small pure functions.
+"""The mode selector of the multi-loop architecture (the paper's section 3.4): small pure functions, and
+``ModeSelector``, which carries a takeover and its target from tick to tick.
 
 The desired navigation mode (teleoperation or path following) proposes a command every tick. The selector
 estimates, "within certain tolerances", the area that command sweeps: the real footprint moved along the
 commanded arc over the braking horizon (``supervisor.swept_touch``, the very test the reflexive loop
 applies), grown by ``selector_margin_m``. If the raw scan or the grid's occupied cells lie in that area,
 local navigation wins the tick and steers towards the desired mode's intention (``intention_xy`` for
-teleoperation, the follower's target point for path following).
+teleoperation, the follower's target point for path following). The teleoperation module's own command is
+``teleop_command``: the driver's, clipped to the robot's limits.
 
 Handing back (``arbitrate``): the paper returns to the desired mode "as soon as the locally desired path is
 free". Taken tick by tick (``hold_s = 0``, that rule exactly) a hand-back often lasts a single tick: local
@@ -32,12 +34,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import detmath as dm
+from ..geometry import transform_points
 from ..robot import RobotConfig
+from ..types import Command, Pose2D
+from .follow import first_free_point
+from .model import RobotCentredGrid
 from .supervisor import SupervisorParams, swept_touch, unconfirmed_cells
 
 __all__ = [
-    "Hold", "Takeover", "arbitrate", "intention_xy", "look_hold", "select_mode", "swept_area_occupied",
-    "turned_first",
+    "TELEOP_REACH", "TELEOP_REAIM_RAD", "Hold", "ModeSelector", "Takeover", "arbitrate", "intention_xy",
+    "look_hold", "select_mode", "swept_area_occupied", "teleop_command", "turned_first",
 ]
 
 
@@ -176,3 +182,116 @@ def arbitrate(desired: str, occupied: str, *, t_ns: int, held: Takeover | None, 
         if math.hypot(xy[0] - x, xy[1] - y) < hold.look_m and t_ns - t_look <= round(hold.look_s * 1e9):
             return "local", f"{desired}: swept area clear since local navigation turned first (hold)", held
     return desired, "", None
+
+
+TELEOP_REACH = 4.0
+"""How far a takeover's target may lie along the driver's command, in look-ahead distances."""
+TELEOP_REAIM_RAD = 0.25 * math.pi
+"""A held takeover target is aimed again when the driver's intention points this far from it [rad]
+(**choice**: a quarter turn is a new request, a counter-steer is not)."""
+
+
+def teleop_command(cmd: Command | None, robot: RobotConfig, *, t_ns: int | None = None,
+                   timeout_s: float = math.inf) -> tuple[float, float, float, str]:
+    """(v, vy, w, reason) of a teleoperation command: clipped to the robot's velocity limits (vy only for
+    a holonomic base); none, one not finite, or one older than ``timeout_s`` at time ``t_ns`` (a driver who
+    let go, a log whose commands stopped: ``Tick.cmd`` is the last one at or before the tick) is standing
+    still with the reason ("teleop: no command", "teleop: command stale")."""
+    if cmd is None:
+        return 0.0, 0.0, 0.0, "teleop: no command"
+    if t_ns is not None and (t_ns - cmd.t_ns) / 1e9 > timeout_s:
+        return 0.0, 0.0, 0.0, "teleop: command stale"
+    if not (math.isfinite(cmd.v_mps) and math.isfinite(cmd.vy_mps) and math.isfinite(cmd.w_radps)):
+        return 0.0, 0.0, 0.0, "teleop: command not finite"
+    vmax, wmax = robot.vmax_mps, robot.wmax_radps
+    vy = min(max(cmd.vy_mps, -vmax), vmax) if robot.drive == "holonomic" else 0.0
+    return min(max(cmd.v_mps, -vmax), vmax), vy, min(max(cmd.w_radps, -wmax), wmax), ""
+
+
+def _intention_changed(a: tuple[float, float, float], b: tuple[float, float, float],
+                       held_rel: NDArray[np.float64], rel: NDArray[np.float64]) -> bool:
+    """The driver asked for something else: the direction of travel reversed (a sign of v or vy changed),
+    or the new command's intention (robot frame) points more than ``TELEOP_REAIM_RAD`` away from the held
+    target. Compared as bearings, not as commands: a driver who counter-steers while local navigation turns
+    the robot away from his line changes w, even its sign, yet still points at the same place; re-aiming
+    then would swing the target from side to side with the robot and ND+ would dither in front of the
+    obstacle (teleop_into_wall)."""
+    if any(np.sign(x) != np.sign(y) for x, y in zip(a[:2], b[:2], strict=True)):
+        return True
+    diff = dm.atan2(rel[1], rel[0]) - dm.atan2(held_rel[1], held_rel[0])
+    return abs(math.remainder(diff, math.tau)) > TELEOP_REAIM_RAD
+
+
+class ModeSelector:
+    """The mode selector from tick to tick: the takeover in progress (its hold) and, while local navigation
+    has taken over from the driver, the target it steers to (``teleop_target``).
+
+    ``select`` arbitrates a tick (``swept_area_occupied`` on the obstacles the reflexive loop checks too,
+    then ``arbitrate``); ``settle`` ends it once the reflexive loop has spoken (``turned_first``)."""
+
+    def __init__(self, robot: RobotConfig, params: SupervisorParams, *, cell_m: float, margin_m: float,
+                 hold_s: float, lookahead_m: float, inflate_m: float) -> None:
+        self._robot = robot
+        self._params = params
+        self._cell_m = cell_m
+        self._margin_m = margin_m  # the selector's tolerance on the swept area
+        self._hold_s = hold_s
+        self._lookahead_m = lookahead_m  # the driver's intention lies this far along his command
+        self._inflate_m = inflate_m  # the C-space growth a takeover's target must be free in
+        self._takeover: Takeover | None = None
+        self._intent: tuple[NDArray[np.float64], tuple[float, float, float]] | None = None  # held teleop
+        # target (world) of the takeover in progress, and the driver's command it was aimed from
+
+    def select(self, desired: str, cmd: tuple[float, float, float], near_xy: NDArray[np.float64],
+               grid_xy: NDArray[np.float64], *, t_ns: int, xy: tuple[float, float]) -> tuple[str, str]:
+        """(active mode, takeover reason) for the desired module's command ``cmd`` (v, vy, w) with the
+        raw hits ``near_xy`` and occupied cells ``grid_xy`` near the robot (robot frame), the robot at
+        ``xy`` (any fixed frame) at ``t_ns``."""
+        v, vy, w = cmd
+        p, robot = self._params, self._robot
+        where = swept_area_occupied(v, vy, w, near_xy, grid_xy, robot, p,
+                                    cell_m=self._cell_m, margin_m=self._margin_m)
+        active, why, self._takeover = arbitrate(
+            desired, where, t_ns=t_ns, held=self._takeover,
+            hold=look_hold(self._hold_s, robot, p),
+            moving=v != 0.0 or vy != 0.0 or w != 0.0, xy=xy)
+        return active, why
+
+    def settle(self, active: str, looking: bool, xy: tuple[float, float], t_ns: int) -> None:
+        """End the tick: with the desired mode active no takeover is held, nor a teleop target; under local
+        navigation a turn first of the reflexive loop (``looking``) is remembered (``turned_first``)."""
+        if active != "local":
+            self._takeover = None
+            self._intent = None
+        elif looking:
+            self._takeover = turned_first(self._takeover, xy, t_ns)
+
+    def teleop_target(self, pose: Pose2D, cmd: tuple[float, float, float],
+                      grid: RobotCentredGrid) -> NDArray[np.float64] | None:
+        """Local navigation's target (robot frame) while it has taken over from the driver.
+
+        Where the driver's command heads (``intention_xy``), searched along that bearing from the
+        look-ahead distance to ``TELEOP_REACH`` times it for the first point free in C-space with unknown
+        cells counted as blocked (known free space past the obstacle, not the obstacle's unseen inside),
+        else the far end. It is fixed in the world when the takeover starts and kept while it lasts: a
+        target in the robot frame turns with the robot, so local navigation, turning to pass the obstacle,
+        would never see it move aside and would only dither in front of it. It is aimed again when the
+        driver asks for something else (``_intention_changed``: travel reversed, or his intention points
+        away from the held target), not merely because he counter-steers."""
+        rel = intention_xy(*cmd, self._lookahead_m)
+        if rel is None:
+            self._intent = None
+            return None
+        to_robot = pose.inverse().as_array()
+        if self._intent is not None:
+            held = transform_points(to_robot, self._intent[0][None, :])[0]
+            if not _intention_changed(self._intent[1], cmd, held, rel):
+                return held
+        bearing = dm.atan2(rel[1], rel[0])
+        dists = np.arange(self._lookahead_m, TELEOP_REACH * self._lookahead_m + 1e-9, self._cell_m)
+        ray = np.column_stack([dists * dm.cos(bearing), dists * dm.sin(bearing)])
+        world = transform_points(pose.as_array(), ray)
+        i = first_free_point(world, grid, inflate_m=self._inflate_m, unknown_is_free=False)
+        target = world[-1 if i is None else i]
+        self._intent = (target, cmd)
+        return transform_points(to_robot, target[None, :])[0]

@@ -22,12 +22,14 @@ side must not approach cells the laser has not seen within ``blind_memory_s`` (U
 unseen space counts as not free for that motion (a holonomic base turns first to look; a differential one,
 which cannot look behind, creeps). The reactor (GND/ND) stays purely sensor-based; this is
 the reflexive loop refusing to move where the sensor has no recent word.
+
+These are the rules, as pure functions; the state they act on from tick to tick (the trap window, the
+escape and the manoeuvre in progress, the pose-doubt track, the stale-data timer) is ``supervision``'s.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -42,7 +44,6 @@ from ..types import Flag, Mode
 __all__ = [
     "SafeCommand",
     "SupervisorParams",
-    "TrapDetector",
     "arc_touches",
     "blind_points",
     "braking_time_s",
@@ -640,79 +641,12 @@ def escape_command(
     return 0.0, False
 
 
-class TrapDetector:
-    """Trap conditions over a sliding window of ticks.
-
-    The multi-loop paper's: repeated stopped rotations (ROTATE) to the left and right, or frequent
-    imminent collisions (EMERGENCY). And dithering, whatever the mode (mpND, mND, the safety rules):
-    within a full window, the turn direction (|w| >= trap_w_frac * wmax) and the direction of travel
-    (|v| >= trap_w_frac * vmax) reverse at least trap_count times together while the robot neither moved
-    trap_progress_m nor turned trap_turn_rad net. Rocking forward and back without turning (a chair wedged
-    between a wall ahead and obstacles beside it, w = 0) is the same stall as turning left and right.
-    ``update`` returns True when a trap holds and then starts a new window.
-    """
-
-    def __init__(self, params: SupervisorParams, wmax_radps: float = 1.0, vmax_mps: float = 1.0) -> None:
-        self._p = params
-        self._w_min = params.trap_w_frac * wmax_radps
-        self._v_min = params.trap_w_frac * vmax_mps
-        self._events: deque[int] = deque(maxlen=params.trap_window)  # -1/+1 rotation, 2 emergency, 0 else
-        self._turns: deque[int] = deque(maxlen=params.trap_window)  # -1/+1 turning in any mode, 0 else
-        self._drives: deque[int] = deque(maxlen=params.trap_window)  # -1/+1 driving back / forward, 0 else
-        self._poses: deque[tuple[float, float, float]] = deque(maxlen=params.trap_window)
-
-    def update(self, mode: Mode, w_radps: float, pose: tuple[float, float, float] | None = None,
-               v_mps: float = 0.0) -> bool:
-        """Record one tick (its final mode, turn rate and, for the dithering rule, the robot pose
-        (x, y, theta) in any fixed frame and the forward speed); True when the window holds a trap."""
-        if mode is Mode.ROTATE:
-            self._events.append(1 if w_radps >= 0 else -1)
-        elif mode is Mode.EMERGENCY:
-            self._events.append(2)
-        else:
-            self._events.append(0)
-        turning = abs(w_radps) >= self._w_min and mode is not Mode.GOAL
-        self._turns.append((1 if w_radps > 0 else -1) if turning else 0)
-        driving = abs(v_mps) >= self._v_min and mode is not Mode.GOAL
-        self._drives.append((1 if v_mps > 0 else -1) if driving else 0)
-        if pose is not None:
-            self._poses.append(pose)
-        ev = np.fromiter(self._events, dtype=np.int8)
-        emergencies = int(np.count_nonzero(ev == 2))
-        rot = ev[(ev == 1) | (ev == -1)]
-        sign_changes = int(np.count_nonzero(np.diff(rot) != 0)) if rot.size > 1 else 0
-        trapped = emergencies >= self._p.trap_count or (
-            rot.size >= self._p.trap_count and sign_changes >= 2
-        ) or self._dithering()
-        if trapped:
-            self._events.clear()
-            self._turns.clear()
-            self._drives.clear()
-            self._poses.clear()
-        return trapped
-
-    def _dithering(self) -> bool:
-        """A full window of poses with trap_count reversals of turn and travel direction and no progress."""
-        if len(self._poses) < self._p.trap_window:
-            return False
-        if _reversals(self._turns) + _reversals(self._drives) < self._p.trap_count:
-            return False
-        return no_progress(self._poses[0], self._poses[-1], self._p)
-
-
 def no_progress(a: tuple[float, float, float], b: tuple[float, float, float],
                 params: SupervisorParams) -> bool:
     """Whether between poses a and b (x, y, theta) the robot neither moved trap_progress_m nor turned
     trap_turn_rad net: the stall of the trap detector's dithering rule and of the manoeuvre's trigger."""
     net_turn = abs(math.remainder(b[2] - a[2], math.tau))
     return math.hypot(b[0] - a[0], b[1] - a[1]) < params.trap_progress_m and net_turn < params.trap_turn_rad
-
-
-def _reversals(signs: deque[int]) -> int:
-    """Sign changes in a sequence of -1 / 0 / +1, the zeros skipped."""
-    a = np.fromiter(signs, dtype=np.int8)
-    a = a[a != 0]
-    return int(np.count_nonzero(np.diff(a) != 0)) if a.size > 1 else 0
 
 
 def budget_flags(timings_s: dict[str, float], params: SupervisorParams) -> Flag:

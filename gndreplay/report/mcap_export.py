@@ -271,13 +271,13 @@ class McapSink:
             s = tick.scan.sensor_pose
             self._put("/tf_static", t, m.tf(t, (BASE, LASER, s.x, s.y, s.theta)))
             self._static_done = True
-        p = result.pose_corrected
+        p, c = result.pose_corrected, result.command
         correction = compose(p.as_array(), inverse(tick.odom.as_array()))  # map -> odom
         o = tick.odom
         self._put("/tf", t, m.tf(t, (MAP, ODOM, float(correction[0]), float(correction[1]),
                                      float(correction[2])), (ODOM, BASE, o.x, o.y, o.theta)))
-        self._put("/gndreplay/odom", t, m.odom(t, p, result.v_mps, result.vy_mps, result.w_radps))
-        twist = m.twist(result.v_mps, result.vy_mps, result.w_radps)
+        self._put("/gndreplay/odom", t, m.odom(t, p, c.v_mps, c.vy_mps, c.w_radps))
+        twist = m.twist(c.v_mps, c.vy_mps, c.w_radps)
         self._put("/cmd_vel", t, m["TwistStamped"](header=m.hdr(t, BASE), twist=twist))
         gx, gy = (float(v) for v in result.goal)
         goal = m["Point"](x=gx, y=gy, z=0.0)

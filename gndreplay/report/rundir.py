@@ -160,7 +160,7 @@ def command_row(r: TickResult, enforce_budgets: bool) -> str:
     """A tick's commands.csv row (``COMMAND_COLUMNS``)."""
     flags = "|".join(recorded_flags(r.flags, enforce_budgets=enforce_budgets).names())
     return (
-        f"{format_stamp(r.t_ns)},{r.v_mps:.6f},{r.vy_mps:.6f},{r.w_radps:.6f},"
+        f"{format_stamp(r.t_ns)},{r.command.v_mps:.6f},{r.command.vy_mps:.6f},{r.command.w_radps:.6f},"
         f"{r.mode.value},{r.situation.name},{flags},"
         f"{csv_text(r.desired_mode)},{csv_text(r.active_mode)},{csv_text(r.takeover_reason)},"
         f"{r.subgoal_index}\n"

@@ -83,7 +83,7 @@ class SummaryRecorder:
         self.audit.append((r.desired_mode, r.active_mode, csv_text(r.takeover_reason), r.mode.value))
         p = r.pose_corrected
         self.pose.append((p.x, p.y, p.theta))
-        self.cmd.append((r.v_mps, r.w_radps, r.direction_rad))
+        self.cmd.append((r.command.v_mps, r.command.w_radps, r.direction_rad))
         self.timing.append([r.timings_ms.get(m, 0.0) for m in MODULES])
         self.modes[r.mode.value] += 1
         self.situations[r.situation.name] += 1

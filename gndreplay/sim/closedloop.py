@@ -400,7 +400,7 @@ class ClosedLoop:
 
     def on_tick(self, r: TickResult) -> None:
         """The stack's command for the last tick: it takes effect after the latency."""
-        cmd = (r.v_mps, r.vy_mps if self.holonomic else 0.0, r.w_radps)
+        cmd = (r.command.v_mps, r.command.vy_mps if self.holonomic else 0.0, r.command.w_radps)
         ms = sum(r.timings_ms.values())
         lat_s = ms / 1e3 if self.latency_s is None else self.latency_s
         self.pending = (cmd, self.t_ns + round(lat_s * NS))
