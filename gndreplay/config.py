@@ -22,9 +22,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
-from .errors import ConfigError
+from .errors import ConfigError, did_you_mean
 from .io.base import MAX_BEAMS
-from .io.userfile import brief, check_number, did_you_mean, load_toml
+from .io.userfile import brief, check_number, load_toml
 from .pipeline.follow import FollowParams
 from .pipeline.local import LOCAL_STRATEGIES, LocalParams
 from .pipeline.model import GRID_400, GridParams

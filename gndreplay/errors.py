@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import difflib
+from collections.abc import Callable, Iterable
+from typing import Any
 
 __all__ = [
     "FOLLOW_NEEDS_SUBGOALS", "ConfigError", "GndReplayError", "LogFormatError", "OutputError",
-    "ScanMatchError", "find_cause", "one_line",
+    "ScanMatchError", "did_you_mean", "find_cause", "one_line",
 ]
 
 FOLLOW_NEEDS_SUBGOALS = "navigation mode follow needs subgoals"
@@ -59,3 +61,14 @@ def find_cause(err: BaseException, match: Callable[[BaseException], bool]) -> Ba
         seen.add(id(e))
         e = e.__cause__ if e.__cause__ is not None else (None if e.__suppress_context__ else e.__context__)
     return None
+
+
+def did_you_mean(value: Any, choices: Iterable[str]) -> str:
+    """`` (did you mean 'x'?)`` when ``value`` is a string close to one of ``choices``, else ``""``: the
+    tail of a message refusing a misspelt name."""
+    if not isinstance(value, str) or not value or len(value) > 100:
+        return ""
+    names = list(choices)
+    within = [c for c in names if value.lower() in c]  # "icp" is kiss-icp more than idc
+    close = within if len(within) == 1 else difflib.get_close_matches(value.lower(), names, n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""

@@ -104,7 +104,7 @@ def test_preset_from_file_and_from_option(tmp_path: Path) -> None:
         # NF1's own settings are in its table, not in [planner]
         ("[planner]\nconnectivity = 8\n",
          r"cfg.toml: unknown key 'planner.connectivity' \(a key of \[planner.nf1\]\) \(known in "),
-        ("[planner]\nkind = 'rrt'\n", r"\[planner\] unknown planner kind 'rrt'; known: nf1, tunnel"),
+        ("[planner]\nkind = 'rrt'\n", r"\[planner\] kind: expected one of nf1, tunnel, got 'rrt'"),
         ("robot = 3\n", r"robot: expected a table"),
         ("[grid]\ncell_m = -1.0\n", r"cfg.toml: grid.cell_m must be in \[0.001, 10\], got -1.0"),
         ("[scanmatch.idc]\nnot_a_key = 1\n", r"unknown key 'scanmatch.idc.not_a_key'"),

@@ -117,7 +117,7 @@ def test_a_registered_planner_without_a_path_or_with_a_fallback(monkeypatch: pyt
 
 
 def test_an_unknown_planner_kind_is_a_one_line_config_error() -> None:
-    with pytest.raises(ConfigError, match=r"^\[planner\] unknown planner kind 'stub'; known: nf1, tunnel$"):
+    with pytest.raises(ConfigError, match=r"^\[planner\] kind: expected one of nf1, tunnel, got 'stub'$"):
         apply_overrides(PRESETS["wheelchair"], {"planner": {"kind": "stub"}})
 
 
@@ -151,6 +151,6 @@ def test_a_registered_local_strategy_drives_the_tick(monkeypatch: pytest.MonkeyP
 
 
 def test_an_unknown_local_strategy_is_a_config_error() -> None:
-    with pytest.raises(ConfigError, match=r"navigation\.local\.strategy must be one of \('nd', "):
+    with pytest.raises(ConfigError, match=r"\[navigation\.local\] strategy: expected one of nd, free-space, "):
         apply_overrides(PRESETS["wheelchair"], {"navigation": {"local": {"strategy": "stub"}}})
     assert tuple(local.STRATEGIES) == local.LOCAL_STRATEGIES

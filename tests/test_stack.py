@@ -219,7 +219,7 @@ def test_make_planner_builds_the_kind_named() -> None:
     base = PRESETS["wheelchair"].stack_params()
     assert isinstance(make_planner(base), Nf1Planner)  # the default
     assert isinstance(make_planner(tunnel_params(PRESETS["wheelchair"])), TunnelPlanner)
-    with pytest.raises(ValueError, match="unknown planner kind 'rrt'; known: nf1, tunnel"):
+    with pytest.raises(ValueError, match="kind: expected one of nf1, tunnel, got 'rrt'"):
         dataclasses.replace(base.planner, kind="rrt")
 
 

@@ -46,9 +46,9 @@ from fnmatch import fnmatchcase
 from pathlib import Path
 from typing import Any
 
-from ..errors import ConfigError
+from ..errors import ConfigError, did_you_mean
 from ..io.base import MAX_ABS_POSITION_M
-from ..io.userfile import brief, check_number, check_regular_file, did_you_mean, load_toml
+from ..io.userfile import brief, check_number, check_regular_file, load_toml
 from .jobs import Job
 from .metrics import COUNT_METRICS, LATENCY_METRICS, RELATION_METRICS, SCENARIO_METRICS
 

@@ -17,13 +17,12 @@ relations and a run folder's own files.
 
 from __future__ import annotations
 
-import difflib
 import functools
 import json
 import math
 import reprlib
 import tomllib
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +30,7 @@ from ..errors import ConfigError, one_line
 from .base import special_file_kind
 
 __all__ = [
-    "MAX_NESTING", "MAX_NODES", "brief", "check_number", "check_regular_file", "did_you_mean", "load_json",
+    "MAX_NESTING", "MAX_NODES", "brief", "check_number", "check_regular_file", "load_json",
     "load_toml", "load_yaml", "parse_yaml", "read_bytes", "read_text",
 ]
 
@@ -66,17 +65,6 @@ def _digits(n: int) -> int:
     """Decimal digits of n > 0 without str() (which refuses more than 4,300 digits)."""
     d = int(n.bit_length() * _LOG10_2) + 1  # right, or one too many
     return d - 1 if n < pow(10, d - 1) else d
-
-
-def did_you_mean(value: Any, choices: Iterable[str]) -> str:
-    """`` (did you mean 'x'?)`` when ``value`` is a string close to one of ``choices``, else ``""``: the
-    tail of a message refusing a misspelt name."""
-    if not isinstance(value, str) or not value or len(value) > 100:
-        return ""
-    names = list(choices)
-    within = [c for c in names if value.lower() in c]  # "icp" is kiss-icp more than idc
-    close = within if len(within) == 1 else difflib.get_close_matches(value.lower(), names, n=1)
-    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 def check_regular_file(path: Path, what: str, max_bytes: int) -> int:

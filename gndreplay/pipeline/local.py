@@ -46,7 +46,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from .. import detmath as dm
-from ..errors import ConfigError
+from ..errors import ConfigError, did_you_mean
 from ..robot import RobotConfig
 from ..types import Flag, Mode
 from .nd import NdResult, Situation, drive, robot_boundary_m, sector_angles, sector_of, sectorise, wrap
@@ -127,8 +127,8 @@ class LocalParams:
 
     def __post_init__(self) -> None:
         if self.strategy not in STRATEGIES:
-            raise ConfigError(f"navigation.local.strategy must be one of {tuple(STRATEGIES)}, "
-                              f"got {self.strategy!r}")
+            raise ConfigError(f"strategy: expected one of {', '.join(STRATEGIES)}, got {self.strategy!r}"
+                              f"{did_you_mean(self.strategy, STRATEGIES)}")
         if self.contour_side not in ("left", "right"):
             raise ConfigError(f"navigation.local.contour_side must be 'left' or 'right', "
                               f"got {self.contour_side!r}")

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from ..errors import did_you_mean
 from .nf1 import Nf1Params, Nf1Planner
 from .planner import Planner, RouteParams
 from .tunnel import TunnelParams, TunnelPlanner, warm_up_planners
@@ -105,7 +106,8 @@ class PlannerParams(RouteParams):
     def __post_init__(self) -> None:
         RouteParams.__post_init__(self)
         if self.kind not in PLANNERS:
-            raise ValueError(f"unknown planner kind {self.kind!r}; known: {', '.join(PLANNERS)}")
+            raise ValueError(f"kind: expected one of {', '.join(PLANNERS)}, got {self.kind!r}"
+                             f"{did_you_mean(self.kind, PLANNERS)}")
 
     @property
     def settings(self) -> Any:

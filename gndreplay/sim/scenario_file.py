@@ -65,9 +65,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import detmath as dm
-from ..errors import FOLLOW_NEEDS_SUBGOALS, ConfigError
+from ..errors import FOLLOW_NEEDS_SUBGOALS, ConfigError, did_you_mean
 from ..io.subgoals import MAX_ABS_SUBGOAL_M, MAX_ABS_THETA_RAD
-from ..io.userfile import brief, check_number, did_you_mean, load_yaml, parse_yaml
+from ..io.userfile import brief, check_number, load_yaml, parse_yaml
 from ..pipeline.local import LOCAL_STRATEGIES
 from ..pipeline.stack import NAV_MODES
 from ..types import Subgoal, SubgoalKind
