@@ -486,37 +486,16 @@ class Setup:
         )
 
 
-def _read_options(
-    fmt: str | None,
-    scan_topic: str | None,
-    odom_topic: str | None,
-    cmd_topic: str | None,
-    truth_topic: str | None,
-    strict: bool,
-) -> ReadOptions:
-    """The log-reading options as one value."""
+def _read_options(**given: Any) -> ReadOptions:
+    """The log-reading options (``_LOG_OPTIONS``, named as ``io.ReadOptions``' fields) as one value."""
     from .io import ReadOptions
 
-    return ReadOptions(
-        fmt=fmt,
-        scan_topic=scan_topic,
-        odom_topic=odom_topic,
-        cmd_topic=cmd_topic,
-        truth_topic=truth_topic,
-        strict=strict,
-    )
+    return ReadOptions(**given)
 
 
-def _setup(
-    preset_name: str | None,
-    config: Path | None,
-    sets: list[str] | None,
-    planner: str | None = None,
-    mode: str | None = None,
-    local: str | None = None,
-    subgoals: Path | None = None,
-    no_selector: bool = False,
-) -> Setup:
+def _setup(preset_name: str | None, config: Path | None, sets: list[str] | None, planner: str | None = None,
+           mode: str | None = None, local: str | None = None, subgoals: Path | None = None,
+           no_selector: bool = False) -> Setup:
     """The configuration options as one value; an unknown preset and a bad subgoals file are refused here,
     before any log is read."""
     from .config import PRESETS, CliOverrides, choose
@@ -796,30 +775,13 @@ def run(
     cfg = setup.config(matcher=matcher, enforce_budgets=enforce_budgets)
     log_path = log if log is not None else sample_log()
     out_dir = out if out is not None else Path("out") / _log_stem(log_path)
-    options = RunOptions(
-        goal_xy=goal_xy,
-        goal_ahead_m=5.0 if goal_ahead is None else goal_ahead,
-        until_s=until,
-        every=every,
-        subgoals=setup.subgoals,
-    )
+    options = RunOptions(goal_xy=goal_xy, goal_ahead_m=5.0 if goal_ahead is None else goal_ahead,
+                         until_s=until, every=every, subgoals=setup.subgoals)
     with _RunProgress(enabled=not (quiet or json_out), label=log_path.name, until_s=until) as progress:
-        sinks = default_sinks(
-            figures=figures,
-            mcap=mcap,
-            enforce_budgets=cfg.supervisor.enforce_budgets,
-            on_draw=progress.on_draw,
-        )
-        summary = run_log(
-            log_path,
-            cfg,
-            out_dir,
-            options=options,
-            read=read,
-            sinks=sinks,
-            overwrite=overwrite,
-            **progress.callbacks(),
-        )
+        sinks = default_sinks(figures=figures, mcap=mcap, enforce_budgets=cfg.supervisor.enforce_budgets,
+                              on_draw=progress.on_draw)
+        summary = run_log(log_path, cfg, out_dir, options=options, read=read, sinks=sinks,
+                          overwrite=overwrite, **progress.callbacks())
     _said_moved(out_dir, summary.out_dir, silent=quiet or json_out)
     if (gap := command_gap_warning(summary.data)) is not None:
         typer.echo(f"gndreplay: warning: {gap}", err=True)

@@ -148,18 +148,9 @@ def summary_csv(results: Sequence[InputResult]) -> str:
         CSV_COLUMNS,
         (
             [
-                r.name,
-                r.status,
-                r.ticks,
-                r.group,
-                r.seed if r.group else "",
-                r.outcome,
-                *(_cell(m, r.metrics.get(m)) for m in METRIC_COLUMNS),
-                f"{r.wall_s:.3f}",
-                "; ".join(r.failures),
-                r.error,
-                r.path,
-                "" if r.run_dir is None else str(r.run_dir),
+                r.name, r.status, r.ticks, r.group, r.seed if r.group else "", r.outcome,
+                *(_cell(m, r.metrics.get(m)) for m in METRIC_COLUMNS), f"{r.wall_s:.3f}",
+                "; ".join(r.failures), r.error, r.path, "" if r.run_dir is None else str(r.run_dir)
             ]
             for r in results
         ),
@@ -243,18 +234,9 @@ def scenarios_csv(aggregates: Sequence[ScenarioAggregate]) -> str:
         SCENARIO_CSV_COLUMNS,
         (
             [
-                a.scenario,
-                a.status,
-                a.runs,
-                a.errors,
-                a.successes,
-                a.collisions,
-                a.goal_missed,
-                a.timeouts,
-                *(_cell(m, a.metrics.get(m)) for m in _AGGREGATE_COLUMNS),
-                " ".join(str(s) for s in a.seeds),
-                "; ".join(a.failures),
-                a.path,
+                a.scenario, a.status, a.runs, a.errors, a.successes, a.collisions, a.goal_missed, a.timeouts,
+                *(_cell(m, a.metrics.get(m)) for m in _AGGREGATE_COLUMNS), " ".join(str(s) for s in a.seeds),
+                "; ".join(a.failures), a.path
             ]
             for a in aggregates
         ),

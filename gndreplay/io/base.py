@@ -26,6 +26,7 @@ __all__ = [
     "MAX_BEAMS",
     "MAX_RANGE_LIMIT_M",
     "MAX_SPEED",
+    "Closing",
     "LogDescription",
     "LogReader",
     "ReadReport",
@@ -235,6 +236,22 @@ class ReadReport:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict of every field (tuples become lists)."""
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+
+class Closing:
+    """A reader's context manager: ``with`` closes it on the way out (the reader defines ``close``)."""
+
+    def close(self) -> None:
+        """Release the file handles."""
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
 
 
 class LogReader(Protocol):

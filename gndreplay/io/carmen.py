@@ -60,8 +60,7 @@ from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
-from typing import IO, Self
+from typing import IO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -76,6 +75,7 @@ from .base import (
     MAX_ABS_TIME_NS,
     MAX_BEAMS,
     MAX_RANGE_LIMIT_M,
+    Closing,
     LogDescription,
     ReadReport,
     SensorPoseSource,
@@ -600,7 +600,7 @@ def _laser_config(
 # the reader
 
 
-class CarmenReader:
+class CarmenReader(Closing):
     """Streams a CARMEN log as time-ordered Ticks (see the module docstring for the rules).
 
     Args:
@@ -670,20 +670,9 @@ class CarmenReader:
             )
         self.scan_stream = scan_topic
         embeds_odom = not scan_topic.startswith("RAWLASER")
-        odom_candidates = (["ODOM"] if "ODOM" in head.names else []) + ([scan_topic] if embeds_odom else [])
-        if odom_topic is None:
-            self._odom_mode: PoseMode = (
-                "stream" if "ODOM" in head.names else ("embedded" if embeds_odom else "none")
-            )
-        elif odom_topic == "ODOM" and "ODOM" in head.names:
-            self._odom_mode = "stream"
-        elif odom_topic == scan_topic and embeds_odom:
-            self._odom_mode = "embedded"
-        else:
-            raise LogFormatError(
-                f"{self.path}: no odometry stream {odom_topic!r}; candidates: "
-                f"{', '.join(odom_candidates) or 'none'}"
-            )
+        odom_default: PoseMode = "stream" if "ODOM" in head.names else ("embedded" if embeds_odom else "none")
+        self._odom_mode = self._pose_mode(odom_topic, "ODOM", scan_topic, embeds_odom, "odometry",
+                                          odom_default)
         if cmd_topic is not None:
             if cmd_topic != "ODOM" or "ODOM" not in head.names:
                 raise LogFormatError(
@@ -695,30 +684,30 @@ class CarmenReader:
                     f"{self.path}: no command stream 'ODOM': every ODOM tv and rv is 0 (the log recorded "
                     "no velocity commands)"
                 )
-        truth_candidates = (["TRUEPOS"] if "TRUEPOS" in head.names else []) + (
-            [scan_topic] if embeds_odom else []
-        )
-        if truth_topic is None:
-            self._truth_mode: PoseMode = "stream" if "TRUEPOS" in head.names else "none"
-        elif truth_topic == "TRUEPOS" and "TRUEPOS" in head.names:
-            self._truth_mode = "stream"
-        elif truth_topic == scan_topic and embeds_odom:
-            self._truth_mode = "embedded"
-        else:
-            raise LogFormatError(
-                f"{self.path}: no ground-truth stream {truth_topic!r}; candidates: "
-                f"{', '.join(truth_candidates) or 'none'}"
-            )
+        truth_default: PoseMode = "stream" if "TRUEPOS" in head.names else "none"
+        self._truth_mode = self._pose_mode(truth_topic, "TRUEPOS", scan_topic, embeds_odom, "ground-truth",
+                                           truth_default)
 
-    # -- context manager ---------------------------------------------------------------------------
-    def __enter__(self) -> Self:
-        return self
+    def _pose_mode(self, asked: str | None, message: str, scan_topic: str, embeds: bool, what: str,
+                   default: PoseMode) -> PoseMode:
+        """Where a pose stream (odometry, ground truth) is read from: ``default`` when none is asked, else
+        its own ``message`` ("stream") or the poses embedded in the scan messages ("embedded").
 
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
+        Raises:
+            LogFormatError: the asked stream is neither (the message lists the candidates).
+        """
+        names = self._head.names
+        if asked is None:
+            return default
+        if asked == message and message in names:
+            return "stream"
+        if asked == scan_topic and embeds:
+            return "embedded"
+        candidates = ([message] if message in names else []) + ([scan_topic] if embeds else [])
+        raise LogFormatError(f"{self.path}: no {what} stream {asked!r}; candidates: "
+                             f"{', '.join(candidates) or 'none'}")
 
+    # -- closing (the context manager is base.Closing) -----------------------------------------
     def close(self) -> None:
         """Close the file (of a pass in progress, or kept open since the reader was opened)."""
         self._close_pass()

@@ -38,7 +38,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Literal, Self
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -49,6 +49,7 @@ from ..types import NS_PER_S, Command, Odometry, Pose2D, Scan, Tick
 from . import rosraw
 from .base import (
     MAX_RANGE_LIMIT_M,
+    Closing,
     LogDescription,
     ReadReport,
     SensorPoseSource,
@@ -244,7 +245,7 @@ def check_index(path: Path, reader: Any) -> None:
             raise LogFormatError(f"{where}: topic {c.topic}: message_count {str(n)[:40]!r} is not a count")
 
 
-class RosbagReader:
+class RosbagReader(Closing):
     """Streams a ROS1 bag, a ROS2 bag folder or a bare MCAP file as time-ordered Ticks.
 
     Args:
@@ -462,14 +463,9 @@ class RosbagReader:
             return rosraw.decode_tfmessage(raw, not self._ros1)
         m = self._slow(raw, TFMESSAGE)
         return [
-            rosraw.TransformFields(
-                _stamp(t.header),
-                t.header.frame_id,
-                t.child_frame_id,
-                t.transform.translation.x,
-                t.transform.translation.y,
-                _quat(t.transform.rotation),
-            )
+            rosraw.TransformFields(_stamp(t.header), t.transform.translation.x, t.transform.translation.y,
+                                   _quat(t.transform.rotation), parent=t.header.frame_id,
+                                   child=t.child_frame_id)
             for t in m.transforms
         ]
 
@@ -492,15 +488,7 @@ class RosbagReader:
         p = m.pose.pose if msgtype == POSE_COV_STAMPED else m.pose
         return rosraw.PoseFields(_stamp(m.header), p.position.x, p.position.y, _quat(p.orientation))
 
-    # -- context manager --------------------------------------------------------------------------------
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
-
+    # -- closing (the context manager is base.Closing) -----------------------------------------
     def close(self) -> None:
         """Close the bag (idempotent)."""
         if self._reader is not None:
@@ -548,16 +536,9 @@ class RosbagReader:
         except (ValueError, TypeError):  # an empty or damaged index: the span is unknown
             start = end = None
         return LogDescription(
-            path=self.path,
-            format=self.format_name,
-            streams=streams,
-            scan_stream=self.scan_topic,
-            odom_source=self.odom_source,
-            cmd_stream=self.cmd_topic,
-            truth_stream=self.truth_topic,
-            start_ns=start,
-            end_ns=end,
-            notes=(f"laser mounting: {self._pose_note}",),
+            path=self.path, format=self.format_name, streams=streams, scan_stream=self.scan_topic,
+            odom_source=self.odom_source, cmd_stream=self.cmd_topic, truth_stream=self.truth_topic,
+            start_ns=start, end_ns=end, notes=(f"laser mounting: {self._pose_note}",)
         )
 
     @property

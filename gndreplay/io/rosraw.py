@@ -95,15 +95,12 @@ class PoseFields:
 
 
 @dataclass(frozen=True, slots=True)
-class TransformFields:
-    """One geometry_msgs/TransformStamped of a tf2_msgs/TFMessage."""
+class TransformFields(PoseFields):
+    """One geometry_msgs/TransformStamped of a tf2_msgs/TFMessage: the stamped pose of frame ``child`` in
+    frame ``parent``."""
 
-    stamp_ns: int
     parent: str
     child: str
-    x: float
-    y: float
-    q: tuple[float, float, float, float]
 
 
 @dataclass(frozen=True, slots=True)
@@ -254,7 +251,7 @@ def decode_tfmessage(raw: bytes | memoryview, cdr: bool) -> list[TransformFields
         parent = r.frame
         child = r.string()
         x, y, _z, qx, qy, qz, qw = r.f64s(_F64X7)
-        out.append(TransformFields(stamp, parent, child, x, y, (qx, qy, qz, qw)))
+        out.append(TransformFields(stamp, x, y, (qx, qy, qz, qw), parent=parent, child=child))
     return out
 
 

@@ -245,19 +245,9 @@ def _protected_tail(
 
 @njit(cache=True)
 def _integrate_kernel(
-    cells: NDArray[np.uint8],
-    seen: NDArray[np.int64],
-    stamp: int,
-    ranges: NDArray[np.float64],
-    angles: NDArray[np.float64],
-    sx: float,
-    sy: float,
-    sth: float,
-    inv_cell: float,
-    min_range: float,
-    max_range: float,
-    clear_range: float,
-    invalid_clears: bool,
+    cells: NDArray[np.uint8], seen: NDArray[np.int64], stamp: int, ranges: NDArray[np.float64],
+    angles: NDArray[np.float64], sx: float, sy: float, sth: float, inv_cell: float, min_range: float,
+    max_range: float, clear_range: float, invalid_clears: bool
 ) -> tuple[int, int]:
     """Trace every beam from the laser at (sx, sy) [cell units, local grid] with heading sth [rad].
 

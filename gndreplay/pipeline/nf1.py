@@ -886,16 +886,10 @@ def resolve_goal(
 
 def _fail(flag: Flag, goal: tuple[int, int], projected: bool) -> PlanResult:
     return PlanResult(
-        ok=False,
-        flag=flag,
-        goal_cell=goal,
-        goal_projected=projected,
-        path_cells=np.zeros((0, 2), dtype=np.int32),
-        n_escape=0,
-        waypoints_cells=np.zeros((0, 2), dtype=np.float64),
-        direction_rad=math.nan,
-        length_m=math.nan,
-        cost_m=math.nan,
+        ok=False, flag=flag, goal_cell=goal, goal_projected=projected,
+        path_cells=np.zeros((0, 2), dtype=np.int32), n_escape=0,
+        waypoints_cells=np.zeros((0, 2), dtype=np.float64), direction_rad=math.nan, length_m=math.nan,
+        cost_m=math.nan
     )
 
 
@@ -979,17 +973,9 @@ def plan(
         direction = float(wrap_angle(dm.atan2(d[0], d[1])))
     cost_cells = float(nf[entry]) + float(np.hypot(*(np.subtract(entry, start))))
     return PlanResult(
-        ok=True,
-        flag=Flag.NONE,
-        goal_cell=goal,
-        goal_projected=projected,
-        path_cells=path,
-        n_escape=n_escape,
-        waypoints_cells=waypoints,
-        direction_rad=direction,
-        length_m=length_cells * cell_m,
-        cost_m=cost_cells * cell_m,
-        nodes_expanded=int(np.count_nonzero(nf < np.inf)),
+        ok=True, flag=Flag.NONE, goal_cell=goal, goal_projected=projected, path_cells=path, n_escape=n_escape,
+        waypoints_cells=waypoints, direction_rad=direction, length_m=length_cells * cell_m,
+        cost_m=cost_cells * cell_m, nodes_expanded=int(np.count_nonzero(nf < np.inf))
     )
 
 
@@ -1042,17 +1028,11 @@ def _route_result(
     """PlanResult of a held route followed on from the robot (``_rejoin``)."""
     seg = np.diff(waypoints, axis=0)
     return PlanResult(
-        ok=True,
-        flag=Flag.NONE,
-        goal_cell=(int(raw[-1, 0]), int(raw[-1, 1])),
-        goal_projected=new.goal_projected,
-        path_cells=raw,
-        n_escape=0,
-        waypoints_cells=waypoints,
+        ok=True, flag=Flag.NONE, goal_cell=(int(raw[-1, 0]), int(raw[-1, 1])),
+        goal_projected=new.goal_projected, path_cells=raw, n_escape=0, waypoints_cells=waypoints,
         direction_rad=path_direction(waypoints, lookahead_m / cell_m),
-        length_m=float(np.hypot(seg[:, 0], seg[:, 1]).sum()) * cell_m,
-        cost_m=cost_cells * cell_m,
-        nodes_expanded=new.nodes_expanded,
+        length_m=float(np.hypot(seg[:, 0], seg[:, 1]).sum()) * cell_m, cost_m=cost_cells * cell_m,
+        nodes_expanded=new.nodes_expanded
     )
 
 

@@ -48,16 +48,8 @@ __all__ = [
 
 
 def swept_area_occupied(
-    v_mps: float,
-    vy_mps: float,
-    w_radps: float,
-    scan_xy: NDArray[np.float64],
-    grid_xy: NDArray[np.float64],
-    robot: RobotConfig,
-    params: SupervisorParams,
-    *,
-    cell_m: float,
-    margin_m: float,
+    v_mps: float, vy_mps: float, w_radps: float, scan_xy: NDArray[np.float64], grid_xy: NDArray[np.float64],
+    robot: RobotConfig, params: SupervisorParams, *, cell_m: float, margin_m: float
 ) -> str:
     """Where the area the command sweeps is occupied: "scan" (a raw hit of the current scan), "grid" (an
     OCCUPIED cell, grown by half a cell: the obstacle lies anywhere in it) or "" (clear).

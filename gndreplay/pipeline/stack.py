@@ -289,19 +289,11 @@ class NavigationStack:
         path = planned.waypoints_cells
         path_xy = self.grid.cells_to_world(path) if path.shape[0] else np.zeros((0, 2))
         return TickResult(
-            t_ns=scan.t_ns,
-            pose_corrected=pose,
-            command=verdict.command,
-            mode=verdict.mode,
-            situation=nd.situation,
-            flags=verdict.flags,
-            direction_rad=nd.direction_rad,
-            goal=(float(goal[0]), float(goal[1])),
-            path_xy=path_xy,
-            timings_ms=timings,
-            planner_nodes=planned.nodes_expanded,
-            planner_length_m=planned.length_m,
-            tunnel_width_m=planned.width_m if planned.ok else math.nan,
+            t_ns=scan.t_ns, pose_corrected=pose, command=verdict.command, mode=verdict.mode,
+            situation=nd.situation, flags=verdict.flags, direction_rad=nd.direction_rad,
+            goal=(float(goal[0]), float(goal[1])), path_xy=path_xy, timings_ms=timings,
+            planner_nodes=planned.nodes_expanded, planner_length_m=planned.length_m,
+            tunnel_width_m=planned.width_m if planned.ok else math.nan
         )
 
     def _multi_loop_step(self, scan: Scan, pose: Pose2D, goal_xy: tuple[float, float], odom: Pose2D,
@@ -370,20 +362,10 @@ class NavigationStack:
         self._v_out, self._w_out = verdict.command.v_mps, verdict.command.w_radps
         self._follow_overridden = active != "follow" or verdict.mode is not Mode.FOLLOW
         return TickResult(
-            t_ns=scan.t_ns,
-            pose_corrected=pose,
-            command=verdict.command,
-            mode=verdict.mode,
-            situation=situation,
-            flags=verdict.flags,
-            direction_rad=direction,
-            goal=(float(goal[0]), float(goal[1])),
-            path_xy=path_xy,
-            timings_ms=timings,
-            desired_mode=desired,
-            active_mode=active,
-            takeover_reason=reason,
-            subgoal_index=subgoal_index,
+            t_ns=scan.t_ns, pose_corrected=pose, command=verdict.command, mode=verdict.mode,
+            situation=situation, flags=verdict.flags, direction_rad=direction,
+            goal=(float(goal[0]), float(goal[1])), path_xy=path_xy, timings_ms=timings, desired_mode=desired,
+            active_mode=active, takeover_reason=reason, subgoal_index=subgoal_index
         )
 
     def _local(

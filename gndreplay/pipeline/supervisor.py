@@ -288,7 +288,7 @@ _SWEEP_MAX_POSES = 48
 
 def arc_touches(
     points_xy: NDArray[np.float64], v_mps: float, vy_mps: float, w_radps: float, t_end_s: float,
-    robot: RobotConfig, margin_m: float,
+    robot: RobotConfig, margin_m: float
 ) -> bool:
     """True when the footprint, moved along the constant-twist arc for ``t_end_s``, comes within
     ``margin_m`` of a point *and closer than it is now* (a point beside a robot driving parallel to it,
@@ -324,14 +324,8 @@ def arc_touches(
 
 
 def swept_collision(
-    points_xy: NDArray[np.float64],
-    v_mps: float,
-    w_radps: float,
-    robot: RobotConfig,
-    params: SupervisorParams,
-    *,
-    vy_mps: float = 0.0,
-    grow_m: float = 0.0,
+    points_xy: NDArray[np.float64], v_mps: float, w_radps: float, robot: RobotConfig,
+    params: SupervisorParams, *, vy_mps: float = 0.0, grow_m: float = 0.0
 ) -> bool:
     """True when the footprint swept along the commanded motion over the braking horizon touches a point.
 
@@ -382,16 +376,8 @@ def unconfirmed_cells(grid_xy: NDArray[np.float64], scan_xy: NDArray[np.float64]
 
 
 def swept_touch(
-    v_mps: float,
-    vy_mps: float,
-    w_radps: float,
-    scan_xy: NDArray[np.float64],
-    cells_xy: NDArray[np.float64],
-    robot: RobotConfig,
-    params: SupervisorParams,
-    *,
-    cell_m: float,
-    margin_m: float = 0.0,
+    v_mps: float, vy_mps: float, w_radps: float, scan_xy: NDArray[np.float64], cells_xy: NDArray[np.float64],
+    robot: RobotConfig, params: SupervisorParams, *, cell_m: float, margin_m: float = 0.0
 ) -> str:
     """Which obstacles the command's swept footprint touches: "scan", "grid" or "" (none).
 
@@ -424,20 +410,12 @@ class SafeCommand:
 
 
 def safe_command(
-    v_mps: float,
-    vy_mps: float,
-    w_radps: float,
-    scan_xy: NDArray[np.float64],
-    grid_xy: NDArray[np.float64],
-    robot: RobotConfig,
-    params: SupervisorParams,
-    *,
-    cell_m: float,
+    v_mps: float, vy_mps: float, w_radps: float, scan_xy: NDArray[np.float64], grid_xy: NDArray[np.float64],
+    robot: RobotConfig, params: SupervisorParams, *, cell_m: float,
     unknown_xy: Callable[[], NDArray[np.float64]] | None = None,
     blind_xy: Callable[[], NDArray[np.float64]] | None = None,
     doubt_xy: Callable[[], NDArray[np.float64]] | None = None,
-    view_rad: tuple[float, float] = (-math.pi, math.pi),
-    cells_unconfirmed: bool = False,
+    view_rad: tuple[float, float] = (-math.pi, math.pi), cells_unconfirmed: bool = False
 ) -> SafeCommand:
     """The command if its swept footprint touches nothing, else the safest admissible replacement.
 

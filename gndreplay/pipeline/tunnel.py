@@ -672,18 +672,10 @@ def _result(
     direction: float = math.nan, length_m: float = math.nan, cost_m: float = math.nan,
 ) -> PlanResult:
     return PlanResult(
-        ok=ok,
-        flag=flag,
-        goal_cell=goal,
-        goal_projected=projected,
-        path_cells=np.zeros((0, 2), np.int32) if chain is None else chain,
-        n_escape=n_escape,
+        ok=ok, flag=flag, goal_cell=goal, goal_projected=projected,
+        path_cells=np.zeros((0, 2), np.int32) if chain is None else chain, n_escape=n_escape,
         waypoints_cells=np.zeros((0, 2), np.float64) if waypoints is None else waypoints,
-        direction_rad=direction,
-        length_m=length_m,
-        cost_m=cost_m,
-        nodes_expanded=expanded,
-        width_m=width_m,
+        direction_rad=direction, length_m=length_m, cost_m=cost_m, nodes_expanded=expanded, width_m=width_m
     )
 
 
@@ -702,7 +694,7 @@ def _complete(
     return PlanResult(
         ok=True, flag=Flag.NONE, goal_cell=goal, goal_projected=projected, path_cells=nf.path_cells,
         n_escape=nf.n_escape, waypoints_cells=nf.waypoints_cells, direction_rad=nf.direction_rad,
-        length_m=nf.length_m, cost_m=nf.cost_m, nodes_expanded=expanded, width_m=width_m, fallback=True,
+        length_m=nf.length_m, cost_m=nf.cost_m, nodes_expanded=expanded, width_m=width_m, fallback=True
     )
 
 
