@@ -837,6 +837,7 @@ def scanmatch(
     """
     from .config import choose
     from .evaluation import load_relations
+    from .replay import mounting_for
     from .scanmatch import METHODS, run_scanmatch
     from .scanmatch.run import log_ticks
 
@@ -847,7 +848,7 @@ def scanmatch(
     out_dir = out if out is not None else Path("out") / f"{_log_stem(log)}-scanmatch"
 
     rows = run_scanmatch(
-        log_ticks(log, read),
+        log_ticks(log, mounting_for(read, cfg)),
         methods,
         relations=refs,
         out_dir=out_dir,

@@ -12,6 +12,7 @@ change earlier ticks (the goal lookahead reads past it).
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import time
@@ -44,6 +45,7 @@ __all__ = [
     "assign_goals",
     "check_navigation",
     "corrected_stream",
+    "mounting_for",
     "run_replay",
     "warm_up_all",
 ]
@@ -236,6 +238,14 @@ def check_navigation(cfg: Config, options: RunOptions) -> None:
                           "give --mode follow or drop --subgoals")
 
 
+def mounting_for(read: ReadOptions, cfg: Config) -> ReadOptions:
+    """``read`` with the robot's laser pose as the fallback mounting of a log that records none, when the
+    configuration asks for it (``[robot] mounting_fallback``) and ``read`` gives none of its own."""
+    if not cfg.robot.mounting_fallback or read.default_sensor_pose is not None:
+        return read
+    return dataclasses.replace(read, default_sensor_pose=cfg.robot.laser_pose)
+
+
 #: Stages ``run_replay`` reports through ``on_stage``, in order.
 STAGES = ("warm-up", "replay", "write")
 
@@ -350,6 +360,7 @@ def run_log(
     """
     from .io import open_log
 
+    read = mounting_for(read, cfg)
     check_navigation(cfg, options)
     check_output_dir(Path(out_dir), inputs=(Path(log),), overwrite=overwrite)
     with open_log(Path(log), options=read) as reader:

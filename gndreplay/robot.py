@@ -25,7 +25,12 @@ class RobotConfig:
         vmax_mps, wmax_radps: velocity limits.
         accel_mps2, alpha_radps2: acceleration limits (linear, angular); they set the braking horizon and
             bound the simulated motion.
-        laser_x_m, laser_y_m, laser_theta_rad: laser pose in the robot frame (used when the log gives none).
+        laser_x_m, laser_y_m, laser_theta_rad: laser pose in the robot frame: where the simulator mounts
+            the laser, and, with ``mounting_fallback``, the mounting of a replayed log that records none.
+        mounting_fallback: read a log that records no laser mounting (a CARMEN log without laser offset
+            PARAMs, a bag without a base -> laser transform) with this robot's laser pose; false reads it
+            with the laser at the rotation centre (a log of another robot: this robot's mounting would be
+            wrong for it). A log's own mounting always wins; the read report says which applied.
 
     The allowed range of every field (and ``front_m + rear_m > 0`` for a rectangle) is checked when a
     configuration is loaded: ``gndreplay.config.RANGES`` and ``CROSS_CHECKS``.
@@ -47,6 +52,12 @@ class RobotConfig:
     laser_x_m: float = 0.72
     laser_y_m: float = 0.0
     laser_theta_rad: float = 0.0
+    mounting_fallback: bool = False
+
+    @property
+    def laser_pose(self) -> tuple[float, float, float]:
+        """The laser pose in the robot frame (x [m], y [m], theta [rad])."""
+        return (self.laser_x_m, self.laser_y_m, self.laser_theta_rad)
 
     @property
     def inner_radius_m(self) -> float:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -166,6 +167,25 @@ def test_bag_without_a_laser_transform_takes_the_fallback(tmp_path: Path, kind: 
     mounted = write_bag(tmp_path, kind, name="mounted")
     pose, source = first_scan_pose(mounted, ReadOptions(default_sensor_pose=FALLBACK))
     assert source == "tf" and pose == Pose2D(*(pytest.approx(v) for v in MOUNT))
+
+
+def test_the_robots_mounting_is_the_fallback_only_when_the_configuration_asks(tmp_path: Path) -> None:
+    """``[robot] mounting_fallback``: a replay of a log without mounting takes the robot's laser pose,
+    recorded as "config default"; without it the log reads with the identity ("none"). scanmatch takes the
+    same setting."""
+    p = carmen_log(tmp_path, n=8)
+    runner = CliRunner()
+    sources = []
+    for k, extra in enumerate(([], ["--set", "robot.mounting_fallback=true"])):
+        out = tmp_path / f"run{k}"
+        res = runner.invoke(app, ["run", str(p), "--no-figures", "--quiet", "--out", str(out), *extra])
+        assert res.exit_code == 0, res.output
+        sources.append(json.loads((out / "summary.json").read_text())["read_report"]["sensor_pose_source"])
+        sm = runner.invoke(app, ["scanmatch", str(p), "--matcher", "odom", "--out", str(tmp_path / f"sm{k}"),
+                                 *extra])
+        assert sm.exit_code == 0, sm.output
+    assert sources == ["none", "config default"]
+    assert "mounting_fallback = true" in (tmp_path / "run1" / "config.toml").read_text()
 
 
 def test_info_shows_the_source_of_the_laser_pose(tmp_path: Path) -> None:
