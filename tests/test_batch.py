@@ -767,15 +767,10 @@ def test_dask_times_out_a_hung_input_and_restarts_its_worker(tmp_path: Path, das
 # ---------------------------------------------------------------- the command
 
 
-def test_cli_batch_takes_the_read_options_of_run_and_a_timeout(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    from typer.testing import CliRunner
-
+def capture_run_batch(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, Any]:
+    """Replace ``run_batch`` by a stand-in recording the keywords the command passes it (an empty batch)."""
     import gndreplay.batch
     from gndreplay.batch import BatchResult
-    from gndreplay.cli import app
-    from gndreplay.io import ReadOptions
 
     seen: dict[str, Any] = {}
 
@@ -784,6 +779,18 @@ def test_cli_batch_takes_the_read_options_of_run_and_a_timeout(
         return BatchResult((), tmp_path, tmp_path / "s.csv", tmp_path / "s.md", None, 0.0)
 
     monkeypatch.setattr(gndreplay.batch, "run_batch", capture)
+    return seen
+
+
+def test_cli_batch_takes_the_read_options_of_run_and_a_timeout(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from typer.testing import CliRunner
+
+    from gndreplay.cli import app
+    from gndreplay.io import ReadOptions
+
+    seen = capture_run_batch(tmp_path, monkeypatch)
     log = write_input(tmp_path, "a.bag", "")
     args = ["batch", str(log), "--format", "rosbag1", "--scan-topic", "/scan", "--odom-topic", "/tf",
             "--cmd-topic", "/cmd_vel", "--truth-topic", "/truth", "--strict", "--timeout", "12.5",
@@ -806,17 +813,9 @@ def test_cli_batch_figures_default_to_scenario_runs_only(
 ) -> None:
     from typer.testing import CliRunner
 
-    import gndreplay.batch
-    from gndreplay.batch import BatchResult
     from gndreplay.cli import app
 
-    seen: dict[str, Any] = {}
-
-    def capture(jobs: Any, **kw: Any) -> BatchResult:
-        seen.update(kw)
-        return BatchResult((), tmp_path, tmp_path / "s.csv", tmp_path / "s.md", None, 0.0)
-
-    monkeypatch.setattr(gndreplay.batch, "run_batch", capture)
+    seen = capture_run_batch(tmp_path, monkeypatch)
     log = write_input(tmp_path, "a.clf", "")
     result = CliRunner().invoke(app, ["batch", str(log), *flag, "--quiet"])
     assert result.exit_code == 0, result.output

@@ -5,8 +5,8 @@ return: mpND (planner OK: the reactor steers to the instantaneous path direction
 the reactor steers to the goal itself) and ROTATE (no free walking area: stop and rotate until the model
 changes). The multi-loop paper adds a reflexive loop below them that overrides everything: brake on an
 imminent collision, stop on stale sensor data, and escape a trap (repeated stopped rotations or
-emergencies) with a slow straight motion where there is room: ahead in the scan, behind in the grid
-(backward first when the planned course points behind).
+emergencies) with a slow straight motion where there is room: ahead in the scan, else behind in the grid
+(``escape_command`` can try backward first; the supervisor always tries forward first).
 
 The collision check (``safe_command``) sweeps the real footprint (rectangle or circle) along the commanded
 arc over the braking horizon the robot's acceleration limits give, against the raw current scan *and* the
