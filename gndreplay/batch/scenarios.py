@@ -81,6 +81,7 @@ def run_scenario(job: Job, run_dir: Path, sim: SimOptions) -> ScenarioRun:
             the scenario cannot run (teleop without an operator, follow without subgoals).
     """
     from ..config import CliOverrides
+    from ..report.rundir import SUMMARY_FILE
     from ..sim import load_scenario, resolve_scenario, simulate_scenario
     from ..sim.closedloop import configure_scenario
 
@@ -97,7 +98,7 @@ def run_scenario(job: Job, run_dir: Path, sim: SimOptions) -> ScenarioRun:
         time_limit_s=sim.time_limit_s,
         figures=sim.figures,
     )
-    data = _read_json(Path(out.out_dir) / "summary.json")
+    data = _read_json(Path(out.out_dir) / SUMMARY_FILE)
     return ScenarioRun(Path(out.out_dir), int(data.get("ticks", out.ticks)), data)
 
 

@@ -194,8 +194,9 @@ def _scored_metrics(outcome: RunOutcome, job: Job) -> tuple[dict[str, float], st
     metrics = metrics_from_summary(outcome.data)
     if job.relations is not None:
         from ..evaluation import load_relations, read_tum, relation_errors
+        from ..report.rundir import CORRECTED_TRAJECTORY_FILE
 
-        t_ns, poses = read_tum(Path(outcome.out_dir) / "trajectory_corrected.tum")
+        t_ns, poses = read_tum(Path(outcome.out_dir) / CORRECTED_TRAJECTORY_FILE)
         stats = relation_errors(t_ns, poses, load_relations(job.relations))
         metrics.update(relation_metrics(stats))
     if job.kind != "scenario":
