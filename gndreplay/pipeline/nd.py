@@ -116,11 +116,13 @@ from ..types import Flag
 from .supervisor import arc_touches, footprint_signed_distance
 
 __all__ = [
+    "NdDiagram",
     "NdMemory",
     "NdParams",
     "NdResult",
     "Situation",
     "drive",
+    "nd_diagram",
     "nd_step",
     "robot_boundary_m",
     "sector_angles",
@@ -737,6 +739,45 @@ def _blocked_now(points: F64, law_v: float, law_w: float, v_nd: float, robot: Ro
         if not arc_touches(points, v, 0.0, w, _STEP_M / v, robot, _SWEEP_MARGIN_M):
             return False
     return True
+
+
+@dataclass(frozen=True, slots=True)
+class NdDiagram:
+    """What ND+ sees around the robot, for drawing a decision (``nd_diagram``); robot frame.
+
+    Attributes:
+        bisectors_rad: (n,) sector bisectors.
+        dist_m: (n,) distance to the closest obstacle point per sector, as ND+ uses it (inf: free).
+        gaps: (n,) True where a gap (discontinuity) lies between sector i and i+1 (mod n).
+        boundary_m: (n,) distance to the robot's boundary per sector.
+        security_m: (n,) distance to the security perimeter per sector (the security zone's edge).
+    """
+
+    bisectors_rad: F64
+    dist_m: F64
+    gaps: NDArray[np.bool_]
+    boundary_m: F64
+    security_m: F64
+
+    def region_mask(self, region: tuple[int, int] | None) -> NDArray[np.bool_]:
+        """(n,) True for the sectors of ``region`` ((first, last), counter-clockwise, wrapping)."""
+        n = self.bisectors_rad.size
+        mask = np.zeros(n, dtype=bool)
+        if region is not None:
+            first, last = region
+            mask[np.arange(first, first + (last - first) % n + 1) % n] = True
+        return mask
+
+
+def nd_diagram(obstacles_xy: ArrayLike, robot: RobotConfig, params: NdParams = NdParams()) -> NdDiagram:
+    """The sectors, gaps and security zone ND+ works on for these obstacle points (robot frame): the same
+    sectorisation and gap rule as ``nd_step``, computed apart so that a tick is drawn only when asked."""
+    pts = np.asarray(obstacles_xy, dtype=np.float64).reshape(-1, 2)
+    geo = _geometry(robot, params)
+    dist, _ = sectorise(pts, geo.angles, params.max_range_m)
+    occ = np.isfinite(dist)
+    dist = np.where(occ, np.maximum(dist, geo.boundary + params.contact_m), dist)
+    return NdDiagram(geo.angles, dist, _discontinuities(dist, geo.gap_m), geo.boundary, geo.security)
 
 
 def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,

@@ -112,6 +112,10 @@ class TickResult:
             or why the desired module commands standing still ("teleop: no command", "teleop: command
             stale"); "" otherwise.
         subgoal_index: the path follower's current subgoal (-1 outside path following).
+        nd_region: the ND+ region GND's reactor chose ((first, last) sectors; None without one or outside
+            GND), for drawing the decision (``nd.nd_diagram``).
+        nd_target_xy: where GND's reactor steered to (robot frame: the planner's direction point, or the
+            goal itself in mND); None outside GND.
     """
 
     t_ns: int
@@ -131,6 +135,8 @@ class TickResult:
     active_mode: str = "gnd"
     takeover_reason: str = ""
     subgoal_index: int = -1
+    nd_region: tuple[int, int] | None = None
+    nd_target_xy: tuple[float, float] | None = None
 
 
 def make_planner(params: StackParams) -> Planner:
@@ -293,7 +299,8 @@ class NavigationStack:
             situation=nd.situation, flags=verdict.flags, direction_rad=nd.direction_rad,
             goal=(float(goal[0]), float(goal[1])), path_xy=path_xy, timings_ms=timings,
             planner_nodes=planned.nodes_expanded, planner_length_m=planned.length_m,
-            tunnel_width_m=planned.width_m if planned.ok else math.nan
+            tunnel_width_m=planned.width_m if planned.ok else math.nan, nd_region=nd.region,
+            nd_target_xy=(float(target[0]), float(target[1])),
         )
 
     def _multi_loop_step(self, scan: Scan, pose: Pose2D, goal_xy: tuple[float, float], odom: Pose2D,
