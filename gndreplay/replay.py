@@ -314,7 +314,7 @@ def run_replay(
                                    match=MatchInfo(m.match_ms, m.failed))
                     for sink in sinks:
                         sink.add_result(m.tick, r, stack.grid)
-                    write_tick(r)
+                    write_tick(r, m.tick.cmd)
                     rec.add(r)
                     if on_tick is not None:
                         on_tick(r)

@@ -129,7 +129,7 @@ def test_an_older_commands_csv_reads_as_gnd(tmp_path: Path) -> None:
     c = read_commands(p)
     assert c.desired.tolist() == c.active.tolist() == ["gnd"] and c.takeover.tolist() == [""]
     assert c.subgoal.tolist() == [-1]
-    p.write_text(",".join(COMMAND_COLUMNS) + "\n1.0,0.1,0.0,0.2,mpND,HSWR,,teleop,local,why,x\n")
+    p.write_text(",".join(COMMAND_COLUMNS[:11]) + "\n1.0,0.1,0.0,0.2,mpND,HSWR,,teleop,local,why,x\n")
     with pytest.raises(RunDirError, match=r"commands.csv line 2: expected 11 fields.*subgoal \(an integer\)"):
         read_commands(p)
 

@@ -16,19 +16,23 @@ from numpy.typing import NDArray
 from ..fsutil import atomic_path
 from ..types import REFLEXIVE_MODES
 from .plots import (
+    COMMAND_COLORS,
+    MIN_BAND_FRACTION,
     MODE_COLORS,
     NAV_MODE_COLORS,
     SITUATION_COLORS,
+    band_spans,
     plot_bands,
     plot_commands,
     plot_flags,
     plot_grid,
     plot_hit_raster,
     plot_pose,
+    plot_series,
     plot_timing,
     plot_trajectory,
 )
-from .rundir import TIMING_MODULES, RunData, episodes, tick_edges
+from .rundir import TIMING_MODULES, RunData, TimeWindow, episodes, time_origin
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -38,15 +42,18 @@ __all__ = [
     "DPI",
     "FIGURES",
     "FIGURE_MAKERS",
+    "WINDOW_FIGURES",
     "budgets_ms",
     "build_figures",
     "figure_commands",
     "figure_model",
     "figure_modes",
+    "figure_names",
     "figure_raw",
     "figure_timing",
     "save_figure",
     "scan_period_s",
+    "window_figure_name",
 ]
 
 DPI = 120
@@ -62,7 +69,14 @@ FIGURES: Mapping[str, str] = {
     "active navigation mode, and the reflexive overrides (emergency stops, safe replacements, stale data, "
     "trap escapes).",
 }
+#: The figures drawn for a time window (``build_figures`` of a windowed run): the time series, and the maps
+#: zoomed to the poses of the window.
+WINDOW_FIGURES = ("fig_commands.png", "fig_timing.png", "fig_modes.png", "fig_model.png", "fig_raw.png")
+COLUMNS = 1000
+"""Pixel columns of a time axis (fewer than the axes' 1100-odd pixels): a series with more ticks is drawn
+as its range and mean per column (``plots.plot_series``)."""
 LegendLoc = Literal["outside right upper", "outside right center"]
+Box = tuple[float, float, float, float]  # x0, x1, y0, y1 [m]
 _START, _END, _GOAL = "#2ca02c", "#d62728", "#ffbf00"
 _CORRECTED, _RAW = "#1f77b4", "#ff7f0e"
 
@@ -87,11 +101,6 @@ def scan_period_s(t_s: NDArray[np.float64]) -> float | None:
     return float(np.median(d)) if d.size else None
 
 
-def _t0(data: RunData) -> float:
-    starts = [a[0] for a in (data.traj_corrected[:, 0], data.commands.t_s, data.timing.t_s) if a.size]
-    return float(min(starts)) if starts else 0.0
-
-
 def _bounds(*boxes: tuple[float, float, float, float] | None, margin: float = 0.03
             ) -> tuple[float, float, float, float]:
     """The union of (x0, x1, y0, y1) boxes (None and non-finite skipped), grown by ``margin`` of its size."""
@@ -107,6 +116,39 @@ def _box(xy: NDArray[np.float64]) -> tuple[float, float, float, float] | None:
     if xy.shape[0] == 0:
         return None
     return (float(xy[:, 0].min()), float(xy[:, 0].max()), float(xy[:, 1].min()), float(xy[:, 1].max()))
+
+
+def _window_box(traj: NDArray[np.float64], min_side_m: float = 6.0) -> Box | None:
+    """The box of a window's poses (M, 4) t, x, y, yaw, at least ``min_side_m`` on a side (around a short
+    stretch, its surroundings)."""
+    b = _box(traj[:, 1:3])
+    if b is None:
+        return None
+    cx, cy = 0.5 * (b[0] + b[1]), 0.5 * (b[2] + b[3])
+    hx, hy = max(0.5 * (b[1] - b[0]), 0.5 * min_side_m), max(0.5 * (b[3] - b[2]), 0.5 * min_side_m)
+    return (cx - hx, cx + hx, cy - hy, cy + hy)
+
+
+def _map_box(data: RunData, extent: Box | None, *trajs: NDArray[np.float64]) -> Box:
+    """A map figure's box: the map's ``extent`` and the trajectories; of a window, its first trajectory's
+    poses (``_window_box``), or the whole map when the window holds no pose."""
+    if data.window is not None and trajs[0].shape[0]:
+        return _bounds(_window_box(trajs[0]))
+    return _bounds(extent, *(_box(tr[:, 1:3]) for tr in trajs))
+
+
+def _hits(ax: Axes, data: RunData, hits: NDArray[Any], extent: Box, box: Box) -> None:
+    """A hit raster; of a window, only its cells inside ``box`` (so zooming in keeps the map's cells)."""
+    if data.window is not None:
+        x0, x1, y0, y1 = extent
+        h, w = hits.shape
+        cx, cy = max(x1 - x0, 1e-9) / max(w, 1), max(y1 - y0, 1e-9) / max(h, 1)
+        c0, c1 = (int(np.clip(f((v - x0) / cx), 0, w)) for f, v in ((np.floor, box[0]), (np.ceil, box[1])))
+        r0, r1 = (int(np.clip(f((v - y0) / cy), 0, h)) for f, v in ((np.floor, box[2]), (np.ceil, box[3])))
+        if c1 <= c0 or r1 <= r0:
+            return
+        hits, extent = hits[r0:r1, c0:c1], (x0 + c0 * cx, x0 + c1 * cx, y0 + r0 * cy, y0 + r1 * cy)
+    plot_hit_raster(ax, hits, extent)
 
 
 def _set_box(ax: Axes, box: tuple[float, float, float, float]) -> None:
@@ -143,15 +185,24 @@ def _no_data(ax: Axes, text: str) -> None:
 
 
 def figure_model(data: RunData) -> Figure:
-    """Fig. 5b: the global model map with both trajectories, and the robot-centred grid at one tick."""
+    """Fig. 5b: the global model map with both trajectories, and the robot-centred grid at one tick (of a
+    window: the map around the window's poses, the grid only when its tick lies in the window)."""
     maps = data.maps
     snap = maps.snapshot if maps is not None else None
-    box = _bounds(maps.corrected_extent if maps is not None else None, _box(data.traj_corrected[:, 1:3]),
-                  _box(data.traj_odom[:, 1:3]))
-    fig = _new_figure(13.0, max(6.0, _map_height(box, 7.6) + 1.4))
-    ax, ax_g = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.7, 1.0]})
+    w = data.window
+    if snap is not None and w is not None and not w.start_s <= snap.elapsed_s <= w.end_s:
+        snap = None
+    box = _map_box(data, maps.corrected_extent if maps is not None else None, data.traj_corrected,
+                   data.traj_odom)
+    ax_g: Axes | None = None
+    if w is not None and snap is None:
+        fig = _new_figure(9.0, _map_height(box, 8.4) + 1.3)
+        ax = fig.subplots()
+    else:
+        fig = _new_figure(13.0, max(6.0, _map_height(box, 7.6) + 1.4))
+        ax, ax_g = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.7, 1.0]})
     if maps is not None:
-        plot_hit_raster(ax, maps.corrected_hits, maps.corrected_extent)
+        _hits(ax, data, maps.corrected_hits, maps.corrected_extent, box)
     else:
         _no_data(ax, "maps.npz missing: no map")
     plot_trajectory(ax, data.traj_odom[:, 1:3], label="raw odometry", style="--", color=_RAW, linewidth=1.0,
@@ -170,9 +221,11 @@ def figure_model(data: RunData) -> Figure:
     ax.set_xlabel("x [m] (corrected frame)")
     ax.set_ylabel("y [m]")
     cell = f", {maps.cell_m * 100:.0f} cm cells" if maps is not None else ""
-    ax.set_title(f"Model: scan hits at the corrected poses{cell}", fontsize=10)
+    ax.set_title(f"Model: scan hits at the corrected poses{cell}{_window_title(w)}", fontsize=10)
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=5, fontsize=8, frameon=False)
 
+    if ax_g is None:
+        return fig
     if snap is None:
         _no_data(ax_g, "no robot-centred grid snapshot")
         ax_g.set_axis_off()
@@ -206,12 +259,12 @@ def figure_model(data: RunData) -> Figure:
 
 def figure_raw(data: RunData) -> Figure:
     """Fig. 5c: every scan placed with the raw odometry, and the odometry trajectory."""
-    box = _bounds(data.maps.raw_extent if data.maps is not None else None, _box(data.traj_odom[:, 1:3]))
+    box = _map_box(data, data.maps.raw_extent if data.maps is not None else None, data.traj_odom)
     fig = _new_figure(9.0, _map_height(box, 8.4) + 1.3)
     ax = fig.subplots()
     _set_box(ax, box)
     if data.maps is not None:
-        plot_hit_raster(ax, data.maps.raw_hits, data.maps.raw_extent)
+        _hits(ax, data, data.maps.raw_hits, data.maps.raw_extent, box)
     else:
         _no_data(ax, "maps.npz missing: no raw map")
     plot_trajectory(ax, data.traj_odom[:, 1:3], label="raw odometry", color=_RAW, linewidth=1.2)
@@ -220,21 +273,47 @@ def figure_raw(data: RunData) -> Figure:
     ax.set_aspect("equal")
     ax.set_xlabel("x [m] (odometry frame)")
     ax.set_ylabel("y [m]")
-    ax.set_title("Raw laser data and trajectory from the odometry alone", fontsize=10)
+    ax.set_title(f"Raw laser data and trajectory from the odometry alone{_window_title(data.window)}",
+                 fontsize=10)
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=3, fontsize=8, frameon=False)
     return fig
 
 
-def _pad_xlim(ax: Axes, t: NDArray[np.float64]) -> None:
-    if t.size:
-        pad = 0.005 * max(float(t[-1] - t[0]), 1e-3)
-        ax.set_xlim(float(t[0]) - pad, float(t[-1]) + pad)
+def _time_axis(data: RunData, t: NDArray[np.float64]) -> tuple[float, float]:
+    """The x range of a time-series figure [s since the first tick]: the window, else the first to the last
+    tick padded by 0.5 %."""
+    if data.window is not None:
+        return data.window.start_s, data.window.end_s
+    if t.size == 0:
+        return 0.0, 1.0
+    pad = 0.005 * max(float(t[-1] - t[0]), 1e-3)
+    return float(t[0]) - pad, float(t[-1]) + pad
+
+
+def _min_width(span: tuple[float, float]) -> float:
+    return MIN_BAND_FRACTION * (span[1] - span[0])
+
+
+def _window_title(window: TimeWindow | None) -> str:
+    return "" if window is None else f", from {window.start_s:g} to {window.end_s:g} s"
+
+
+def _logged(data: RunData) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """The log's recorded (v, w) per tick, None when the run's commands.csv has no such columns."""
+    c = data.commands
+    return (c.log_v_mps, c.log_w_radps) if c.log_v_mps.shape == c.t_s.shape else None
+
+
+def _envelope_note(n: int) -> str:
+    return "; per pixel column: range shaded, mean as the line" if n > COLUMNS else ""
 
 
 def figure_commands(data: RunData) -> Figure:
-    """Fig. 5d: v and w over time, mode and situation bands, flag markers."""
+    """Fig. 5d: v and w over time (the log's recorded v and w behind, lighter), mode and situation bands
+    (an episode of one tick still a visible mark), flag markers."""
     c = data.commands
-    t = c.t_s - _t0(data)
+    t = c.t_s - time_origin(data)
+    span = _time_axis(data, t)
     n_flags = max(1, sum(1 for m in c.flags.values() if np.any(m)))
     fig = _new_figure(12.0, 5.6 + 0.2 * n_flags)
     axes = fig.subplots(5, 1, sharex=True,
@@ -242,13 +321,14 @@ def figure_commands(data: RunData) -> Figure:
     ax_v, ax_w, ax_m, ax_s, ax_f = axes
     if len(c) == 0:
         _no_data(ax_v, "no tick")
-    plot_commands(ax_v, ax_w, t, c.v_mps, c.w_radps, vy=c.vy_mps)
+    plot_commands(ax_v, ax_w, t, c.v_mps, c.w_radps, vy=c.vy_mps, logged=_logged(data), span=span,
+                  columns=COLUMNS)
     strips: tuple[tuple[Axes, NDArray[np.str_], Mapping[str, str], str, LegendLoc], ...] = (
         (ax_m, c.modes, MODE_COLORS, "GND mode", "outside right upper"),
         (ax_s, c.situations, SITUATION_COLORS, "ND+ situation", "outside right center"),
     )
     for ax, labels, colors, name, where in strips:
-        plot_bands(ax, t, labels, colors=colors, legend=False)
+        plot_bands(ax, t, labels, colors=colors, legend=False, min_width=_min_width(span))
         ax.set_ylabel(name.split()[-1], rotation=0, ha="right", va="center", fontsize=8)
         handles, names = ax.get_legend_handles_labels()
         if handles:
@@ -256,29 +336,34 @@ def figure_commands(data: RunData) -> Figure:
                        frameon=False, handlelength=1.0)
     plot_flags(ax_f, t, c.flags)
     ax_f.set_xlabel("time since the first scan [s]")
-    _pad_xlim(ax_f, t)
-    ax_v.set_title(f"Motion commands ({len(c)} ticks)", fontsize=10)
+    ax_f.set_xlim(*span)
+    ax_v.set_title(f"Motion commands ({len(c)} ticks{_window_title(data.window)}{_envelope_note(len(c))})",
+                   fontsize=10)
     return fig
 
 
 def figure_modes(data: RunData) -> Figure:
     """The assisted-navigation audit: v and w over time with each takeover shaded, bands of the desired and
-    the active navigation mode, and a band per reflexive override in the colour of its rule."""
+    the active navigation mode, and a band per reflexive override in the colour of its rule (an episode
+    of one tick still a visible mark)."""
     c = data.commands
-    t = c.t_s - _t0(data)
+    t = c.t_s - time_origin(data)
+    span = _time_axis(data, t)
+    min_width = _min_width(span)
     fig = _new_figure(12.0, 4.8)
     ax_c, ax_d, ax_a, ax_r = fig.subplots(4, 1, sharex=True,
                                           gridspec_kw={"height_ratios": [3.0, 0.45, 0.45, 0.45]})
     if len(c) == 0:
         _no_data(ax_c, "no tick")
-    ax_c.step(t, c.v_mps, where="post", color="#1f4e79", linewidth=0.8, label="v [m/s]")
-    ax_c.step(t, c.w_radps, where="post", color="#7b1f3a", linewidth=0.8, label="w [rad/s]")
+    for y, key, label in ((c.v_mps, "v", "v [m/s]"), (c.w_radps, "w", "w [rad/s]")):
+        plot_series(ax_c, t, y, span=span, columns=COLUMNS, color=COMMAND_COLORS[key], label=label)
     ax_c.axhline(0.0, color="0.6", linewidth=0.6, zorder=0)
     ax_c.grid(True, linewidth=0.3, alpha=0.6)
-    edges = tick_edges(t)
-    taken = episodes(np.where(c.active != c.desired, "takeover", "").tolist())
-    for k, (i, j) in enumerate(taken):
-        ax_c.axvspan(float(edges[i]), float(edges[j]), color="#e41a1c", alpha=0.15, linewidth=0,
+    taken = np.where(c.active != c.desired, "takeover", "")
+    shaded = band_spans(t, taken, min_width=min_width)
+    for k, i in enumerate(np.flatnonzero(shaded.labels == "takeover")):
+        x0 = float(shaded.x0[i])
+        ax_c.axvspan(x0, x0 + float(shaded.width[i]), color="#e41a1c", alpha=0.15, linewidth=0,
                      label="takeover" if k == 0 else None)
     ax_c.legend(loc="upper right", fontsize=7, ncol=3)
     rules = np.where(np.isin(c.modes, REFLEXIVE_MODES), c.modes, "")
@@ -288,7 +373,7 @@ def figure_modes(data: RunData) -> Figure:
         (ax_r, rules, MODE_COLORS, "reflexive"),
     )
     for ax, labels, colors, name in strips:
-        plot_bands(ax, t, labels, colors=colors, legend=False, skip=("",))
+        plot_bands(ax, t, labels, colors=colors, legend=False, skip=("",), min_width=min_width)
         ax.set_ylabel(name, rotation=0, ha="right", va="center", fontsize=8)
     legends: tuple[tuple[Axes, str, LegendLoc], ...] = (
         (ax_a, "navigation mode", "outside right upper"), (ax_r, "reflexive rule", "outside right center"))
@@ -301,11 +386,13 @@ def figure_modes(data: RunData) -> Figure:
         ax_r.text(0.5, 0.5, "no reflexive override", transform=ax_r.transAxes, ha="center", va="center",
                   fontsize=7, color="0.4")
     ax_r.set_xlabel("time since the first scan [s]")
-    _pad_xlim(ax_r, t)
+    ax_r.set_xlim(*span)
+    n_taken, n_reflex = int(np.count_nonzero(taken != "")), int(np.count_nonzero(rules != ""))
+    n_episodes = int(np.count_nonzero(shaded.labels == "takeover"))
     n_rules = len(episodes(rules.tolist()))
-    n_taken, n_reflex = int(np.count_nonzero(c.active != c.desired)), int(np.count_nonzero(rules != ""))
-    ax_c.set_title(f"Interventions: {len(taken)} takeover{'s' * (len(taken) != 1)} ({n_taken} ticks), "
-                   f"{n_rules} reflexive override{'s' * (n_rules != 1)} ({n_reflex} ticks)", fontsize=10)
+    ax_c.set_title(f"Interventions{_window_title(data.window)}: {n_episodes} takeover"
+                   f"{'s' * (n_episodes != 1)} ({n_taken} ticks), {n_rules} reflexive override"
+                   f"{'s' * (n_rules != 1)} ({n_reflex} ticks){_envelope_note(len(c))}", fontsize=10)
     return fig
 
 
@@ -325,7 +412,7 @@ def figure_timing(data: RunData) -> Figure:
     from matplotlib.lines import Line2D
 
     tm = data.timing
-    t = tm.t_s - _t0(data)
+    t = tm.t_s - time_origin(data)
     modules = [m for m in (*TIMING_MODULES, "total") if m in tm.ms]
     fig = _new_figure(12.0, 1.3 + 1.35 * len(modules))
     axes = np.atleast_1d(fig.subplots(len(modules), 1, sharex=True, sharey=True))
@@ -342,11 +429,11 @@ def figure_timing(data: RunData) -> Figure:
                 fontsize=8, bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 1.5})
     if t.size == 0:
         _no_data(axes[0], "no tick")
-    _pad_xlim(axes[-1], t)
+    axes[-1].set_xlim(*_time_axis(data, t))
     top = max([float(np.max(tm.ms[m])) for m in modules if tm.ms[m].size] + [period_ms or 1.0, 1.0])
     axes[0].set_ylim(top=top * 3.0)
     axes[-1].set_xlabel("time since the first scan [s]")
-    axes[0].set_title("Computation time per tick", fontsize=10)
+    axes[0].set_title(f"Computation time per tick{_window_title(data.window)}", fontsize=10)
     proxies = [Line2D([], [], color="0.3", linewidth=0.8, label="time per tick"),
                Line2D([], [], color="0.3", linestyle="--", linewidth=1.0, label="budget (time-out)")]
     if period_ms is not None:
@@ -374,11 +461,23 @@ FIGURE_MAKERS: Mapping[str, Callable[[RunData], Figure]] = {
 }
 
 
+def window_figure_name(name: str, window: TimeWindow) -> str:
+    """The file a figure of a window is written to: ``fig_commands.png`` -> ``fig_commands_<from>-<to>.png``
+    (never the whole run's file)."""
+    stem, dot, ext = name.rpartition(".")
+    return f"{stem}_{window.tag}{dot}{ext}"
+
+
+def figure_names(window: TimeWindow | None) -> dict[str, Callable[[RunData], Figure]]:
+    """The files ``build_figures`` writes for the whole run (``FIGURE_MAKERS``) or for a window
+    (``WINDOW_FIGURES``, named by ``window_figure_name``), with their makers."""
+    if window is None:
+        return dict(FIGURE_MAKERS)
+    return {window_figure_name(n, window): FIGURE_MAKERS[n] for n in WINDOW_FIGURES}
+
+
 def build_figures(data: RunData, out_dir: Path, *, dpi: int = DPI) -> list[Path]:
-    """Draw the figures of ``data`` into ``out_dir`` under their fixed names (``FIGURE_MAKERS``),
+    """Draw the figures of ``data`` into ``out_dir`` under the names of ``figure_names(data.window)``,
     replacing earlier ones (the caller checks they are gndreplay's: ``fsutil.check_may_write``)."""
-    makers = FIGURE_MAKERS
-    out = []
-    for name, make in makers.items():
-        out.append(save_figure(make(data), Path(out_dir) / name, dpi=dpi))
-    return out
+    return [save_figure(make(data), Path(out_dir) / name, dpi=dpi)
+            for name, make in figure_names(data.window).items()]

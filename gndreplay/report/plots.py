@@ -7,6 +7,7 @@ figure and report agrees.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -18,11 +19,16 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
 __all__ = [
+    "COMMAND_COLORS",
     "FLAG_ORDER",
+    "MIN_BAND_FRACTION",
     "MODE_COLORS",
     "MODULE_COLORS",
     "NAV_MODE_COLORS",
     "SITUATION_COLORS",
+    "Bands",
+    "band_spans",
+    "column_envelope",
     "hit_image",
     "plot_bands",
     "plot_commands",
@@ -30,6 +36,7 @@ __all__ = [
     "plot_grid",
     "plot_hit_raster",
     "plot_pose",
+    "plot_series",
     "plot_timing",
     "plot_trajectory",
     "runs",
@@ -108,6 +115,13 @@ _FLAG_COLORS: Mapping[str, str] = {
     "REACTOR_OVER_BUDGET": "#c51b7d",
 }
 _GRID_COLORS = ("#9e9e9e", "#ffffff", "#000000")  # UNKNOWN, FREE, OCCUPIED
+#: the stack's command (dark) and the log's recorded one (the same hue, lighter, drawn behind)
+COMMAND_COLORS: Mapping[str, str] = {
+    "v": "#1f4e79", "w": "#7b1f3a", "vy": "#ff7f00", "log_v": "#9dc3e6", "log_w": "#e3a6b8",
+}  # fmt: skip
+MIN_BAND_FRACTION = 0.003
+"""The narrowest band or shaded episode, as a fraction of the time axis: a one-tick episode of a long run
+stays a visible mark (0.003 of an 1800 s axis is 5.4 s, about 3 pixels of a figure 1440 pixels wide)."""
 
 
 def plot_trajectory(
@@ -179,24 +193,52 @@ def plot_grid(ax: Axes, cells: ArrayLike, extent: Extent) -> None:
     ax.set_aspect("equal")
 
 
-def plot_bands(ax: Axes, t: ArrayLike, labels: ArrayLike, *, colors: Mapping[str, str],
-               legend: bool = True, legend_title: str = "", skip: Sequence[str] = ()) -> None:
-    """A strip of coloured bands: tick k spans [t_k, t_k+1) in the colour of ``labels[k]``.
+@dataclass(frozen=True, slots=True, eq=False)
+class Bands:
+    """The runs of equal consecutive labels as drawn: (R,) ``labels``, left edge ``x0`` and ``width`` in the
+    time axis' unit, and ``widened``: the run was narrower than the minimum width and is drawn at it."""
 
-    Labels missing from ``colors`` are drawn grey; labels in ``skip`` are left blank. The legend lists the
-    labels present, in ``colors`` order.
-    """
+    labels: NDArray[np.str_]
+    x0: F64
+    width: F64
+    widened: NDArray[np.bool_]
+
+
+def band_spans(t: ArrayLike, labels: ArrayLike, *, min_width: float = 0.0) -> Bands:
+    """The bands of ``labels`` per tick (tick k spans [t_k, t_k+1), ``tick_edges``), one per run of equal
+    labels; a run narrower than ``min_width`` is widened to it about its centre, so it stays visible."""
     tt = np.asarray(t, dtype=np.float64)
     lab = np.asarray(labels).astype(str)
     edges = tick_edges(tt)
     start, end = runs(lab)
+    x0, width = edges[start], edges[end] - edges[start]
+    widened = width < min_width
+    return Bands(labels=lab[start], x0=np.where(widened, x0 - 0.5 * (min_width - width), x0),
+                 width=np.maximum(width, min_width), widened=widened)
+
+
+def plot_bands(ax: Axes, t: ArrayLike, labels: ArrayLike, *, colors: Mapping[str, str],
+               legend: bool = True, legend_title: str = "", skip: Sequence[str] = (),
+               min_width: float = 0.0) -> None:
+    """A strip of coloured bands: tick k spans [t_k, t_k+1) in the colour of ``labels[k]``; a run narrower
+    than ``min_width`` is drawn at that width, over its neighbours (``band_spans``).
+
+    Labels missing from ``colors`` are drawn grey; labels in ``skip`` are left blank. The legend lists the
+    labels present, in ``colors`` order.
+    """
+    lab = np.asarray(labels).astype(str)
+    bands = band_spans(t, lab, min_width=min_width)
     present = [k for k in colors if np.any(lab == k)] + sorted(set(lab.tolist()) - set(colors))
     present = [k for k in present if k not in skip]
-    for name in present:
-        sel = lab[start] == name
-        x0 = edges[start[sel]]
-        ax.broken_barh(list(zip(x0.tolist(), (edges[end[sel]] - x0).tolist(), strict=True)), (0.0, 1.0),
-                       facecolors=colors.get(name, "#cccccc"), edgecolor="none", label=name)
+    for name in present:  # the legend follows the order drawn; the widened runs lie on top (zorder)
+        label: str | None = name
+        for widened in (False, True):
+            sel = (bands.labels == name) & (bands.widened == widened)
+            if np.any(sel):
+                ax.broken_barh(list(zip(bands.x0[sel].tolist(), bands.width[sel].tolist(), strict=True)),
+                               (0.0, 1.0), facecolors=colors.get(name, "#cccccc"), edgecolor="none",
+                               label=label, zorder=1.0 + widened)
+                label = None
     ax.set_ylim(0.0, 1.0)
     ax.set_yticks([])
     if legend and present:
@@ -204,21 +246,87 @@ def plot_bands(ax: Axes, t: ArrayLike, labels: ArrayLike, *, colors: Mapping[str
                   title=legend_title or None, title_fontsize=7, handlelength=1.0, borderaxespad=0.0)
 
 
+def column_envelope(t: ArrayLike, y: ArrayLike, *, span: tuple[float, float], columns: int
+                    ) -> tuple[F64, F64, F64, F64]:
+    """A per-tick series (each value holds from its tick until the next) summarised over ``columns`` equal
+    columns of the time ``span``: the (columns + 1,) column edges and, per column, the minimum, maximum
+    and mean of the values it shows (its ticks' values and the one held into it from before; NaN values
+    ignored). A column without a tick holds the value before it; NaN before the first tick. ``t`` ascending.
+    """
+    tt, yy = np.asarray(t, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    t0, t1 = span
+    x = np.linspace(t0, t1, columns + 1)
+    col = np.floor((tt - t0) * (columns / max(t1 - t0, 1e-12))).astype(np.intp)
+    keep = (col >= 0) & (col < columns)
+    tt, yy, col = tt[keep], yy[keep], col[keep]
+    lo, hi, mean = np.full(columns, np.nan), np.full(columns, np.nan), np.full(columns, np.nan)
+    if col.size == 0:
+        return x, lo, hi, mean
+    first = np.flatnonzero(np.r_[True, col[1:] != col[:-1]])
+    cols = col[first]
+    ok = np.isfinite(yy)
+    count = np.add.reduceat(ok.astype(np.int64), first)
+    total = np.add.reduceat(np.where(ok, yy, 0.0), first)
+    mean[cols] = np.where(count > 0, total / np.maximum(count, 1), np.nan)
+    held = np.r_[np.nan, yy][first]  # the value held into each column with ticks (NaN before the first)
+    with np.errstate(invalid="ignore"):
+        lo[cols] = np.fmin(np.fmin.reduceat(yy, first), held)
+        hi[cols] = np.fmax(np.fmax.reduceat(yy, first), held)
+    last = np.searchsorted(col, np.arange(columns), side="left") - 1  # the last tick before each column
+    empty = np.ones(columns, dtype=bool)
+    empty[cols] = False
+    hold = empty & (last >= 0)
+    lo[hold] = hi[hold] = mean[hold] = yy[last[hold]]
+    return x, lo, hi, mean
+
+
+def plot_series(ax: Axes, t: ArrayLike, y: ArrayLike, *, span: tuple[float, float], columns: int,
+                color: str, label: str | None = None, linewidth: float = 0.8, zorder: float = 2.0) -> None:
+    """A per-tick series as a step line (a value holds until the next tick); with more ticks than
+    ``columns`` (pixel columns), its range per column shaded and its mean per column as the line
+    (``column_envelope``), so a long run is its trend and spread, not a solid block."""
+    tt, yy = np.asarray(t, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    if tt.size <= columns:
+        ax.step(tt, yy, where="post", color=color, linewidth=linewidth, label=label, zorder=zorder)
+        return
+    x, lo, hi, mean = column_envelope(tt, yy, span=span, columns=columns)
+    ax.fill_between(x, np.r_[lo, lo[-1]], np.r_[hi, hi[-1]], step="post", color=color, alpha=0.35,
+                    linewidth=0.0, zorder=zorder)
+    ax.step(x, np.r_[mean, mean[-1]], where="post", color=color, linewidth=linewidth, label=label,
+            zorder=zorder)
+
+
 def plot_commands(ax_v: Axes, ax_w: Axes, t: ArrayLike, v: ArrayLike, w: ArrayLike, *,
-                  vy: ArrayLike | None = None) -> None:
-    """v [m/s] (and vy when given and not all zero) on ``ax_v`` and w [rad/s] on ``ax_w``, as step lines
-    (a command holds until the next tick)."""
+                  vy: ArrayLike | None = None, logged: tuple[ArrayLike, ArrayLike] | None = None,
+                  span: tuple[float, float] | None = None, columns: int = 1000) -> None:
+    """v [m/s] (and vy when given and not all zero) on ``ax_v`` and w [rad/s] on ``ax_w`` as step lines (a
+    command holds until the next tick), over ``span`` (default: the first tick to the end of the last);
+    ``logged``: the log's recorded (v, w) per tick (NaN where none), drawn behind in lighter colours.
+    More ticks than ``columns``: each series as its range and mean per column (``plot_series``)."""
     tt = np.asarray(t, dtype=np.float64)
-    ax_v.step(tt, np.asarray(v, dtype=np.float64), where="post", color="#1f4e79", linewidth=0.8, label="v")
+    if span is None:
+        edges = tick_edges(tt)
+        span = (float(edges[0]), float(edges[-1]))
+    series: list[tuple[Axes, ArrayLike, str, str, float]] = []  # axes, values, colour, label, line width
+    if logged is not None:
+        series += [(ax, y, COMMAND_COLORS[key], f"{key[-1]} recorded in the log", 1.2)
+                   for ax, y, key in ((ax_v, logged[0], "log_v"), (ax_w, logged[1], "log_w"))
+                   if np.any(np.isfinite(np.asarray(y, dtype=np.float64)))]
+    series += [(ax_v, v, COMMAND_COLORS["v"], "v", 0.8), (ax_w, w, COMMAND_COLORS["w"], "w", 0.8)]
     if vy is not None and np.any(np.asarray(vy) != 0.0):
-        ax_v.step(tt, np.asarray(vy, dtype=np.float64), where="post", color="#ff7f00", linewidth=0.8,
-                  label="vy")
-        ax_v.legend(loc="upper right", fontsize=7)
-    ax_w.step(tt, np.asarray(w, dtype=np.float64), where="post", color="#7b1f3a", linewidth=0.8, label="w")
+        series.append((ax_v, vy, COMMAND_COLORS["vy"], "vy", 0.8))
+    for z, (ax, y, color, label, lw) in enumerate(series):  # in order: the log's behind the stack's
+        plot_series(ax, tt, y, span=span, columns=columns, color=color, label=label, linewidth=lw,
+                    zorder=1.5 + 0.1 * z)
     for ax, name in ((ax_v, "v [m/s]"), (ax_w, "w [rad/s]")):
         ax.axhline(0.0, color="0.6", linewidth=0.6, zorder=0)
         ax.set_ylabel(name)
         ax.grid(True, linewidth=0.3, alpha=0.6)
+        handles, labels = ax.get_legend_handles_labels()
+        if len(handles) > 1:  # the stack's command first, then the log's
+            order = sorted(range(len(labels)), key=lambda i: "recorded" in labels[i])
+            ax.legend([handles[i] for i in order], [labels[i] for i in order], loc="upper right", fontsize=7,
+                      ncol=3)
 
 
 def plot_flags(ax: Axes, t: ArrayLike, flags: Mapping[str, ArrayLike], *,

@@ -1,9 +1,10 @@
 """The run directory: its files, their formats, the writers a replay streams into them and the readers
 that read them back, each file's writer beside its reader.
 
-- commands.csv (``COMMAND_COLUMNS``): each tick's command, what produced it and the assisted-navigation
-  audit; timing.csv: milliseconds per module, the planner's work and the wall-clock ``*_OVER_BUDGET`` flags.
-  Written a row per tick by :func:`tick_tables`, read by :func:`read_commands` and :func:`read_timing`.
+- commands.csv (``COMMAND_COLUMNS``): each tick's command, what produced it, the assisted-navigation
+  audit and the command the log recorded at the tick; timing.csv: milliseconds per module, the planner's
+  work and the wall-clock ``*_OVER_BUDGET`` flags. Written a row per tick by :func:`tick_tables`, read by
+  :func:`read_commands` and :func:`read_timing`.
 - trajectory_odom.tum, trajectory_corrected.tum: the raw-odometry and the corrected pose of every scan (TUM,
   as evo reads it). Written by :class:`TrajectoryWriter`, read by :func:`read_tum`.
 - summary.json (built by :func:`gndreplay.report.summary.summarise`): written by :func:`write_summary`, read
@@ -17,7 +18,8 @@ The records are a pure function of log + config: commands.csv, the trajectories 
 wall-clock facts (the ``*_OVER_BUDGET`` flags live in timing.csv unless ``enforce_budgets`` let them change a
 command: :func:`recorded_flags`), and every file prints a tick's time with ``fsutil.format_stamp``.
 
-Only the files are read back: ``gndreplay report RUN_DIR`` redraws everything without the log. The folder may
+Only the files are read back: ``gndreplay report RUN_DIR`` redraws everything without the log
+(:func:`window_run` restricts what was read to a stretch of the run, :class:`TimeWindow`). The folder may
 have been damaged since the run wrote it: each file is read through :mod:`gndreplay.io.userfile` (a regular
 file of bounded size, UTF-8, JSON nesting bounded) and maps.npz's members are checked before they are
 loaded (:func:`~gndreplay.report.maps.load_maps`); anything malformed is a one-line RunDirError naming the
@@ -46,7 +48,7 @@ from ..fsutil import format_stamp
 from ..io.userfile import load_json, read_text
 from ..pipeline.model import RobotCentredGrid
 from ..pipeline.stack import MODULES, TickResult
-from ..types import BUDGET_FLAGS, Flag, Pose2D, Tick
+from ..types import BUDGET_FLAGS, Command, Flag, Pose2D, Tick
 from .maps import MAPS_FILE, MapsData, load_maps
 
 __all__ = [
@@ -64,9 +66,11 @@ __all__ = [
     "RunDirError",
     "RunSink",
     "StagedSink",
+    "TimeWindow",
     "Timing",
     "TrajectoryWriter",
     "check_summary",
+    "check_window",
     "command_row",
     "csv_text",
     "episodes",
@@ -79,7 +83,9 @@ __all__ = [
     "runs",
     "tick_edges",
     "tick_tables",
+    "time_origin",
     "timing_row",
+    "window_run",
     "write_config",
     "write_summary",
 ]
@@ -96,9 +102,11 @@ CONFIG_FILE = "config.toml"
 #: commands.csv's columns: the command, what produced it (GND mode or reflexive rule, ND+ situation, flags),
 #: then the audit: desired and active navigation mode, the takeover reason (why the active mode is not the
 #: desired one, or why the desired module stood still: "teleop: no command", "teleop: command stale"; ""
-#: when the desired module's own command won), the subgoal.
+#: when the desired module's own command won), the subgoal; last, the log's recorded command at the tick
+#: (``Tick.cmd``: forward and turn rate, empty when the log records none).
 COMMAND_COLUMNS = (
     "t", "v", "vy", "w", "mode", "situation", "flags", "desired", "active", "takeover", "subgoal",
+    "log_v", "log_w",
 )  # fmt: skip
 COMMAND_HEADER = ",".join(COMMAND_COLUMNS) + "\n"
 TIMING_HEADER = "t," + ",".join(f"{m}_ms" for m in MODULES) + ",total_ms,planner_nodes,path_m,flags\n"
@@ -156,14 +164,16 @@ def csv_text(text: str) -> str:
     return " ".join(text.replace(",", ";").split())
 
 
-def command_row(r: TickResult, enforce_budgets: bool) -> str:
-    """A tick's commands.csv row (``COMMAND_COLUMNS``)."""
+def command_row(r: TickResult, enforce_budgets: bool, logged: Command | None = None) -> str:
+    """A tick's commands.csv row (``COMMAND_COLUMNS``); ``logged`` is the log's recorded command at the tick
+    (``Tick.cmd``; None: the log records none, the last two fields are empty)."""
     flags = "|".join(recorded_flags(r.flags, enforce_budgets=enforce_budgets).names())
+    log_vw = "," if logged is None else f"{logged.v_mps:.6f},{logged.w_radps:.6f}"
     return (
         f"{format_stamp(r.t_ns)},{r.command.v_mps:.6f},{r.command.vy_mps:.6f},{r.command.w_radps:.6f},"
         f"{r.mode.value},{r.situation.name},{flags},"
         f"{csv_text(r.desired_mode)},{csv_text(r.active_mode)},{csv_text(r.takeover_reason)},"
-        f"{r.subgoal_index}\n"
+        f"{r.subgoal_index},{log_vw}\n"
     )
 
 
@@ -176,9 +186,11 @@ def timing_row(r: TickResult) -> str:
 
 
 @contextmanager
-def tick_tables(run_dir: Path, *, enforce_budgets: bool) -> Iterator[Callable[[TickResult], None]]:
+def tick_tables(run_dir: Path, *, enforce_budgets: bool
+                ) -> Iterator[Callable[[TickResult, Command | None], None]]:
     """Open commands.csv and timing.csv in ``run_dir``, write their headers and give the function that
-    appends a tick's row to each: the tables stream, one row per tick, and close with the ``with``."""
+    appends a tick's row to each, from the stack's result and the log's recorded command at the tick
+    (``Tick.cmd``): the tables stream, one row per tick, and close with the ``with``."""
     with (
         open(run_dir / COMMANDS_FILE, "w", newline="") as f_cmd,
         open(run_dir / TIMING_FILE, "w", newline="") as f_tim,
@@ -186,8 +198,8 @@ def tick_tables(run_dir: Path, *, enforce_budgets: bool) -> Iterator[Callable[[T
         f_cmd.write(COMMAND_HEADER)
         f_tim.write(TIMING_HEADER)
 
-        def write_tick(r: TickResult) -> None:
-            f_cmd.write(command_row(r, enforce_budgets))
+        def write_tick(r: TickResult, logged: Command | None) -> None:
+            f_cmd.write(command_row(r, enforce_budgets, logged))
             f_tim.write(timing_row(r))
 
         yield write_tick
@@ -273,6 +285,8 @@ class Commands:
         desired, active, takeover: (K,) str arrays: the desired and the active navigation mode and the
             takeover reason ("" when none). A run written before the audit existed reads as "gnd", "gnd", "".
         subgoal: (K,) int: the path follower's subgoal (-1 outside path following).
+        log_v_mps, log_w_radps: (K,) the log's recorded command at each tick, NaN where it records none
+            (everywhere in a run written without these columns).
     """
 
     t_s: F64
@@ -286,6 +300,8 @@ class Commands:
     active: NDArray[np.str_] = field(default_factory=lambda: np.zeros(0, dtype=np.str_))
     takeover: NDArray[np.str_] = field(default_factory=lambda: np.zeros(0, dtype=np.str_))
     subgoal: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    log_v_mps: F64 = field(default_factory=lambda: np.zeros(0))
+    log_w_radps: F64 = field(default_factory=lambda: np.zeros(0))
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -311,6 +327,8 @@ class RunData:
         traj_odom, traj_corrected: (M, 4) t [s], x, y [m], yaw [rad] from the TUM files (every scan).
         summary: summary.json.
         maps: maps.npz, or None when the run was written without it.
+        window: the stretch of the run the tables and trajectories hold (:func:`window_run`); None: all of
+            it.
     """
 
     run_dir: Path
@@ -320,6 +338,101 @@ class RunData:
     traj_corrected: F64
     summary: dict[str, Any]
     maps: MapsData | None
+    window: TimeWindow | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class TimeWindow:
+    """A stretch of a run: from ``start_s`` to ``end_s`` seconds since ``origin_s``, the stamp [s] of the
+    run's first tick (figures of a window keep the run's time axis)."""
+
+    origin_s: float
+    start_s: float
+    end_s: float
+
+    @property
+    def tag(self) -> str:
+        """The window in a file name: ``<start>-<end>`` in seconds, at most three decimals."""
+        return f"{_seconds(self.start_s)}-{_seconds(self.end_s)}"
+
+
+def _seconds(x: float) -> str:
+    return f"{x + 0.0:.3f}".rstrip("0").rstrip(".")  # + 0.0: no "-0"
+
+
+def _take(a: F64, keep: NDArray[np.bool_]) -> F64:
+    """``a[keep]``; NaN for a column the tables do not have (``a`` empty)."""
+    return a[keep] if a.shape == keep.shape else np.full(int(np.count_nonzero(keep)), np.nan)
+
+
+def time_origin(data: RunData) -> float:
+    """The stamp [s] the figures count time from: the run's first tick (its first scan, stack tick or
+    timing row), also for a window of it."""
+    if data.window is not None:
+        return data.window.origin_s
+    starts = [a[0] for a in (data.traj_corrected[:, 0], data.commands.t_s, data.timing.t_s) if a.size]
+    return float(min(starts)) if starts else 0.0
+
+
+def check_window(t_from: float | None, t_to: float | None, *, name: str = "run",
+                 duration_s: float | None = None) -> None:
+    """Check a window of the run ``name`` given as seconds since its first tick (None: from its start, to
+    its end); ``duration_s``, the run's last tick, when known (before a run it is not).
+
+    Raises:
+        ConfigError: one line naming ``name`` (and its span when known): not finite, starting before 0,
+            not starting before its end, or starting after the run's last tick.
+    """
+    span = "" if duration_s is None else f"; {name} spans 0-{_seconds(duration_s)} s since its first tick"
+    ends = ("start" if t_from is None else _seconds(t_from), "end" if t_to is None else _seconds(t_to))
+    asked = f"window {ends[0]}-{ends[1]} s"
+    start = 0.0 if t_from is None else t_from
+    if not all(np.isfinite(x) for x in (start, 0.0 if t_to is None else t_to)):
+        raise ConfigError(f"{name}: {asked}: from and to must be finite numbers of seconds{span}")
+    if start < 0.0:
+        raise ConfigError(f"{name}: {asked} starts before the run (from must be >= 0){span}")
+    if t_to is not None and start >= t_to:
+        raise ConfigError(f"{name}: {asked} is empty (from must be before to){span}")
+    if duration_s is not None and start > duration_s:
+        raise ConfigError(f"{name}: {asked} is outside the run{span}")
+
+
+def window_run(data: RunData, t_from: float | None, t_to: float | None) -> RunData:
+    """``data`` restricted to the ticks, timing rows and poses from ``t_from`` to ``t_to`` seconds since
+    the run's first tick (None: from its start, to its end; an end past the last tick is clipped to it).
+
+    Raises:
+        ConfigError: the window is empty or outside the run (``check_window``), or the run has no tick.
+    """
+    if len(data.commands) == 0:
+        raise ConfigError(f"{data.run_dir}: the run has no tick to draw a window of")
+    origin = time_origin(data)
+    duration = float(data.commands.t_s[-1]) - origin
+    check_window(t_from, t_to, name=str(data.run_dir), duration_s=duration)
+    start = 0.0 if t_from is None else float(t_from)
+    end = duration if t_to is None else min(float(t_to), duration)
+    lo, hi = origin + start, origin + end
+
+    def inside(t: F64) -> NDArray[np.bool_]:
+        return (t >= lo) & (t <= hi)
+
+    c, tm = data.commands, data.timing
+    k = inside(c.t_s)
+    commands = Commands(
+        t_s=c.t_s[k], v_mps=c.v_mps[k], vy_mps=c.vy_mps[k], w_radps=c.w_radps[k], modes=c.modes[k],
+        situations=c.situations[k], flags={n: m[k] for n, m in c.flags.items() if np.any(m[k])},
+        desired=c.desired[k], active=c.active[k], takeover=c.takeover[k], subgoal=c.subgoal[k],
+        log_v_mps=_take(c.log_v_mps, k), log_w_radps=_take(c.log_w_radps, k),
+    )
+    j = inside(tm.t_s)
+    timing = Timing(t_s=tm.t_s[j], ms={n: v[j] for n, v in tm.ms.items()},
+                    over_budget={n: m[j] for n, m in tm.over_budget.items() if np.any(m[j])})
+    return RunData(
+        run_dir=data.run_dir, commands=commands, timing=timing,
+        traj_odom=data.traj_odom[inside(data.traj_odom[:, 0])],
+        traj_corrected=data.traj_corrected[inside(data.traj_corrected[:, 0])],
+        summary=data.summary, maps=data.maps, window=TimeWindow(origin, start, end),
+    )
 
 
 def _need(path: Path) -> Path:
@@ -337,24 +450,29 @@ def _rows(path: Path) -> list[list[str]]:
     return list(csv.reader(io.StringIO(text, newline="")))
 
 
-#: commands.csv's header before the assisted-navigation audit (still read: desired = active = "gnd").
-_COMMAND_HEADER_V1 = ["t", "v", "vy", "w", "mode", "situation", "flags"]
+#: The headers commands.csv is read with: all columns; without the log's recorded command (log_v, log_w
+#: read as NaN); without the audit too (desired = active = "gnd").
+_COMMAND_HEADERS = (list(COMMAND_COLUMNS), list(COMMAND_COLUMNS[:11]), list(COMMAND_COLUMNS[:7]))
+
+
+def _number_or_nan(x: str) -> float:
+    return float(x) if x else np.nan
 
 
 def read_commands(path: Path) -> Commands:
-    """Parse commands.csv (header ``COMMAND_COLUMNS``, or the older one without the audit columns
-    ``desired,active,takeover,subgoal``).
+    """Parse commands.csv (header ``COMMAND_COLUMNS``, or one without the recorded command ``log_v,log_w``
+    or also without the audit columns ``desired,active,takeover,subgoal``).
 
     Raises:
         RunDirError: missing file, wrong header or a malformed row (named by line).
     """
     rows = _rows(path)
-    expected = list(COMMAND_COLUMNS)
-    if not rows or rows[0] not in (expected, _COMMAND_HEADER_V1):
-        raise RunDirError(f"{path}: expected header {','.join(expected)}")
+    if not rows or rows[0] not in _COMMAND_HEADERS:
+        raise RunDirError(f"{path}: expected header {','.join(COMMAND_COLUMNS)}")
     width = len(rows[0])
     body = rows[1:]
     num = np.empty((len(body), 4), dtype=np.float64)
+    logged = np.full((len(body), 2), np.nan)
     subgoal = np.full(len(body), -1, dtype=np.int64)
     flags: dict[str, NDArray[np.bool_]] = {}
     for k, r in enumerate(body):
@@ -364,10 +482,13 @@ def read_commands(path: Path) -> Commands:
             num[k] = [float(x) for x in r[:4]]
             if width > 7:
                 subgoal[k] = int(r[10])
+            if width > 11:
+                logged[k] = [_number_or_nan(x) for x in r[11:13]]
         except ValueError as err:
             raise RunDirError(
                 f"{path} line {k + 2}: expected {width} fields t,v,vy,w (numbers),mode,situation,flags"
-                f"{',desired,active,takeover,subgoal (an integer)' if width > 7 else ''} ({err})"
+                f"{',desired,active,takeover,subgoal (an integer)' if width > 7 else ''}"
+                f"{',log_v,log_w (numbers or empty)' if width > 11 else ''} ({err})"
             ) from err
         for name in filter(None, r[6].split("|")):
             mask = flags.get(name)
@@ -386,6 +507,8 @@ def read_commands(path: Path) -> Commands:
         active=np.array([r[8] if width > 7 else "gnd" for r in body], dtype=np.str_),
         takeover=np.array([r[9] if width > 7 else "" for r in body], dtype=np.str_),
         subgoal=subgoal,
+        log_v_mps=logged[:, 0],
+        log_w_radps=logged[:, 1],
     )
 
 
