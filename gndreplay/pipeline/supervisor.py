@@ -44,6 +44,7 @@ from ..types import Flag, Mode
 __all__ = [
     "SafeCommand",
     "SupervisorParams",
+    "arc_poses",
     "arc_touches",
     "blind_points",
     "braking_time_s",
@@ -286,6 +287,25 @@ _SWEEP_STEP_M = 0.02  # largest displacement of any footprint point between two 
 _SWEEP_MAX_POSES = 48
 
 
+def arc_poses(
+    v_mps: float, vy_mps: float, w_radps: float, t_end_s: float, robot: RobotConfig
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The footprint poses ``arc_touches`` checks along the constant-twist arc of ``t_end_s``: x, y [m] and
+    theta [rad] (each (n + 1,), the first the robot now), robot frame, one every 2 cm of the farthest
+    footprint point's travel (at most 48 steps)."""
+    travel = math.hypot(v_mps, vy_mps) * t_end_s
+    reach = travel + abs(w_radps) * robot.outer_radius_m * t_end_s
+    n = min(max(math.ceil(reach / _SWEEP_STEP_M), 1), _SWEEP_MAX_POSES)
+    ts = np.linspace(0.0, t_end_s, n + 1)
+    th = w_radps * ts
+    # constant-twist integration (exact for an arc); the limit w -> 0 is a straight line
+    if abs(w_radps) > 1e-9:
+        s, c1 = dm.sin_a(th) / w_radps, (1.0 - dm.cos_a(th)) / w_radps
+    else:
+        s, c1 = ts, np.zeros_like(ts)
+    return v_mps * s - vy_mps * c1, v_mps * c1 + vy_mps * s, th
+
+
 def arc_touches(
     points_xy: NDArray[np.float64], v_mps: float, vy_mps: float, w_radps: float, t_end_s: float,
     robot: RobotConfig, margin_m: float
@@ -302,17 +322,7 @@ def arc_touches(
     points_xy = points_xy[dm.sqdist(points_xy) <= bound * bound]
     if points_xy.shape[0] == 0:
         return False
-    reach = travel + abs(w_radps) * robot.outer_radius_m * t_end_s
-    n = min(max(math.ceil(reach / _SWEEP_STEP_M), 1), _SWEEP_MAX_POSES)
-    ts = np.linspace(0.0, t_end_s, n + 1)
-    th = w_radps * ts
-    # constant-twist integration (exact for an arc); the limit w -> 0 is a straight line
-    if abs(w_radps) > 1e-9:
-        s, c1 = dm.sin_a(th) / w_radps, (1.0 - dm.cos_a(th)) / w_radps
-    else:
-        s, c1 = ts, np.zeros_like(ts)
-    px = v_mps * s - vy_mps * c1
-    py = v_mps * c1 + vy_mps * s
+    px, py, th = arc_poses(v_mps, vy_mps, w_radps, t_end_s, robot)
     # points expressed in each future robot frame: R(-th) (p - t)
     dx = points_xy[None, :, 0] - px[:, None]
     dy = points_xy[None, :, 1] - py[:, None]

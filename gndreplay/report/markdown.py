@@ -12,8 +12,9 @@ from numpy.typing import NDArray
 from ..geometry import compose, inverse
 from .figures import FIGURES, budgets_ms, scan_period_s
 from .rundir import RunData
+from .snapshots import SNAPSHOTS_DIR, SnapshotEntry, read_snapshot_index
 
-__all__ = ["interventions_section", "render_report", "trajectory_gap"]
+__all__ = ["interventions_section", "render_report", "timeline_section", "trajectory_gap"]
 
 _LATENCY_ROWS = ("match", "model", "planner", "reactor", "stack", "total")
 _OVER = {"match": "MATCH_OVER_BUDGET", "model": "MODEL_OVER_BUDGET", "planner": "PLANNER_OVER_BUDGET",
@@ -94,6 +95,25 @@ def interventions_section(iv: Mapping[str, Any] | None, n: int) -> list[str]:
     return out
 
 
+def timeline_section(entries: Sequence[SnapshotEntry] | None) -> list[str]:
+    """report.md's "Timeline": the key events that got a snapshot (snapshots/index.csv), each linked to its
+    picture; nothing when the run has no snapshots/."""
+    if entries is None:
+        return []
+    out = ["## Timeline", ""]
+    if not entries:
+        return [*out, "No key event (mode change, reflexive rule, trap, planner failure, takeover, goal) "
+                "got a snapshot.", ""]
+    rows = [(f"{e.elapsed_s:.2f}", e.kind, e.reason.replace("|", " \\| "),
+             f"[{e.file}]({SNAPSHOTS_DIR}/{e.file})") for e in entries]
+    out += _table(("t [s]", "event", "reason", "snapshot"), rows)
+    out += ["Each snapshot is the decision at that tick: the robot-centred grid with the scan, the planned "
+            "path and goal, ND+'s chosen region, gaps and security zone, the motion direction, the footprint "
+            "and the area the command sweeps over the braking horizon. Events are rate-limited per kind and "
+            "capped per run; times are seconds since the first scan.", ""]
+    return out
+
+
 def trajectory_gap(odom: NDArray[np.float64], corrected: NDArray[np.float64]) -> dict[str, float]:
     """How far the correction moved the trajectory: path lengths of both (M, 4) t, x, y, yaw trajectories,
     and the distance between them (both anchored at the first pose) at the end and at its largest."""
@@ -163,6 +183,7 @@ def render_report(data: RunData, figures: Iterable[str] = tuple(FIGURES), *, nam
         out += [f"Never fired: {', '.join(silent)}.", ""]
 
     out += interventions_section(s.get("interventions"), n)
+    out += timeline_section(read_snapshot_index(data.run_dir))
 
     agree = s.get("agreement", {}) or {}
     if agree:

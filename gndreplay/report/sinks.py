@@ -9,6 +9,7 @@ from .build import ReportSink
 from .maps import MapSink
 from .mcap_export import McapSink
 from .rundir import RunSink
+from .snapshots import SnapshotOptions, SnapshotSink
 
 __all__ = ["default_sinks"]
 
@@ -20,16 +21,19 @@ def default_sinks(
     enforce_budgets: bool = False,
     extra: Sequence[RunSink] = (),
     on_draw: Callable[[], None] | None = None,
+    snapshots: SnapshotOptions | None = None,
 ) -> list[RunSink]:
     """The sinks of a run, in the order they finish: with ``figures`` the map rasters (maps.npz) first,
     then the caller's ``extra`` sinks (a simulation's result.json, log.mcap, ...), the results MCAP with
     ``mcap`` (its flags topic records what commands.csv records, so it needs ``enforce_budgets``), and with
     ``figures`` the figures and report.md last, drawn inside the staging directory from the files the others
-    wrote (``on_draw`` is called just before drawing)."""
+    wrote (``on_draw`` is called just before drawing). With ``snapshots``, the key events' snapshots/ come
+    just before the figures (report.md links them)."""
     sinks: list[RunSink] = [MapSink()] if figures else []
     sinks += extra
     if mcap:
         sinks.append(McapSink(enforce_budgets=enforce_budgets))
+    sinks += [SnapshotSink(snapshots)] if snapshots is not None else []
     if figures:
         sinks.append(ReportSink(on_draw=on_draw))
     return sinks

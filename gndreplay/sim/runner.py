@@ -19,7 +19,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -30,6 +30,9 @@ from .closedloop import ClosedLoop, SimParams
 from .figure import draw_world
 from .geometry import warm_up as warm_up_geometry
 from .scenario_file import ScenarioSpec, resolve_scenario
+
+if TYPE_CHECKING:
+    from ..report.snapshots import SnapshotOptions
 
 __all__ = [
     "RESULT_FILE", "SimOutcome", "SimSink", "parse_latency", "simulate_scenario",
@@ -216,6 +219,7 @@ def simulate_scenario(
     on_tick: Any = None,
     params: SimParams | None = None,
     run_kwargs: dict[str, Any] | None = None,
+    snapshots: SnapshotOptions | None = None,
 ) -> SimOutcome:
     """Run one scenario in closed loop and write its run directory.
 
@@ -233,6 +237,7 @@ def simulate_scenario(
             ``out_dir-2``, ...; the outcome's ``out_dir`` says where).
         on_tick: also called with each TickResult (progress bars).
         run_kwargs: extra keyword arguments for ``run_replay`` (e.g. ``on_stage``).
+        snapshots: write snapshots/ of the key events (``report.snapshots``); None: none.
 
     Raises:
         ConfigError: a bad scenario file (one line naming the file and the key).
@@ -251,7 +256,7 @@ def simulate_scenario(
         if on_tick is not None:
             on_tick(r)
 
-    sinks = default_sinks(figures=figures, extra=[SimSink(loop, figure=figures)])
+    sinks = default_sinks(figures=figures, extra=[SimSink(loop, figure=figures)], snapshots=snapshots)
     summary = run_replay(loop.ticks(), loop.cfg, Path(out_dir), log=Path(spec.source),
                          options=RunOptions(goal_xy=spec.goal, subgoals=spec.subgoals), on_tick=tick_done,
                          sinks=sinks, overwrite=overwrite, **(run_kwargs or {}))
