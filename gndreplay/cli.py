@@ -17,6 +17,7 @@ import importlib
 import inspect
 import logging
 import math
+import re
 import sys
 import warnings
 from collections.abc import Callable, Sequence
@@ -25,7 +26,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, NoReturn, ParamSpec, TextIO, TypeVar, cast
 
 import typer
-from typer.core import TyperGroup
+from rich.markup import escape
+from typer.core import TyperCommand, TyperGroup
 
 from . import __version__
 from .errors import ConfigError, GndReplayError, find_cause, one_line
@@ -71,6 +73,9 @@ class _Commands(TyperGroup):
         except (_click.ClickException, GndReplayError) as err:
             _command_line_error(err, args)
 
+    def get_params(self, ctx: Any) -> list[Any]:
+        return _untyped_flags(super().get_params(ctx))
+
     def invoke(self, ctx: Any) -> Any:
         # the command and its arguments, before it parses them (click's private field, as TyperGroup reads)
         args = [*getattr(ctx, "_protected_args", ()), *ctx.args]
@@ -80,6 +85,48 @@ class _Commands(TyperGroup):
             raise
         except (_click.ClickException, GndReplayError) as err:
             _command_line_error(err, args)
+
+
+#: The rich markup a help text uses on purpose (``[bold]Examples[/]``); every other "[" is text.
+_MARKUP = re.compile(r"\[(?:/?(?:bold|italic|dim)|/)\]")
+
+
+def help_markup(text: str) -> str:
+    """``text`` as rich markup that renders every character of it: each "[" not opening a tag of
+    ``_MARKUP`` is escaped (rich would read ``[dask]`` as a style), and the lines of each paragraph that is
+    not indented (prose, not an example) are joined for the terminal to wrap (typer keeps a docstring's line
+    breaks)."""
+    paragraphs = []
+    for para in inspect.cleandoc(text).split("\n\n"):
+        lines = para.split("\n")
+        paragraphs.append(para if any(line.startswith(" ") for line in lines) else " ".join(lines))
+    joined = "\n\n".join(paragraphs)
+    tags = _MARKUP.findall(joined)
+    texts = [escape(t) for t in _MARKUP.split(joined)]
+    return "".join(t + tag for t, tag in zip(texts, [*tags, ""], strict=True))
+
+
+class _Command(TyperCommand):
+    """A command whose help shows every character of its docstring and option help texts
+    (:func:`help_markup`), and a flag without a ``<bool>`` type."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.help = help_markup(self.help) if self.help else self.help
+        for param in self.params:
+            if isinstance(help_text := getattr(param, "help", None), str):
+                param.help = help_markup(help_text)  # type: ignore[attr-defined]
+
+    def get_params(self, ctx: Any) -> list[Any]:
+        return _untyped_flags(super().get_params(ctx))
+
+
+def _untyped_flags(params: list[Any]) -> list[Any]:
+    """``params`` with no type shown for a flag (it takes no value: no "<bool>" in the help)."""
+    for param in params:
+        if getattr(param, "is_flag", False):
+            param.metavar = ""
+    return params
 
 
 def _command_line_error(err: Exception, args: Sequence[str]) -> NoReturn:
@@ -259,7 +306,7 @@ FormatOpt = Annotated[
     str | None,
     typer.Option(
         "--format",
-        help="Log format instead of guessing from the path: carmen, rosbag1, rosbag2, mcap (or rosbag).",
+        help="Log format instead of guessing from the path: carmen, rosbag1, rosbag2, mcap, rosbag.",
         rich_help_panel=_LOG_PANEL,
         show_default=False,
     ),
@@ -304,7 +351,7 @@ StrictOpt = Annotated[
     bool,
     typer.Option(
         "--strict",
-        help="A malformed line or message is an error instead of being skipped and counted.",
+        help="A malformed line or message is an error (instead of skipped and counted).",
         rich_help_panel=_LOG_PANEL,
     ),
 ]
@@ -312,7 +359,7 @@ PresetOpt = Annotated[
     str | None,
     typer.Option(
         "--preset",
-        help="Robot and stack preset: wheelchair or xr4000 (default: wheelchair; for a scenario, its own).",
+        help="Robot and stack preset: wheelchair (default) or xr4000; a scenario has its own.",
         rich_help_panel=_CONFIG_PANEL,
         show_default=False,
     ),
@@ -330,8 +377,8 @@ SetOpt = Annotated[
     list[str] | None,
     typer.Option(
         "--set",
-        help="Override one configuration key, section.key=value (repeatable; applied last, checked like "
-        "the TOML file), e.g. --set reactor.security_m=0.4 --set planner.kind=tunnel.",
+        help="Override one configuration key, section.key=value (repeatable; applied last), e.g. "
+        "--set reactor.security_m=0.4.",
         rich_help_panel=_CONFIG_PANEL,
         show_default=False,
     ),
@@ -340,7 +387,7 @@ PlannerOpt = Annotated[
     str | None,
     typer.Option(
         "--planner",
-        help="Global planner: nf1 (GND) or tunnel (the wheelchair paper). Default: the config's, nf1.",
+        help="Global planner: nf1 (GND) or tunnel (the wheelchair paper); default: the config's, nf1.",
         rich_help_panel=_CONFIG_PANEL,
         show_default=False,
     ),
@@ -349,9 +396,9 @@ ModeOpt = Annotated[
     str | None,
     typer.Option(
         "--mode",
-        help="Desired navigation mode: gnd (GND to the goal), teleop (the recorded velocity commands: a "
-        "Twist topic, CARMEN ODOM tv/rv), follow (path following of --subgoals) or local (local navigation "
-        "alone). Default: the config's \\[navigation] mode, gnd.",
+        help="Desired navigation mode: gnd (GND to the goal), teleop (the recorded velocity commands), "
+        "follow (path following of --subgoals) or local (local navigation alone). Default: the config's "
+        "[navigation] mode, gnd.",
         rich_help_panel=_MODE_PANEL,
         show_default=False,
     ),
@@ -369,7 +416,7 @@ SubgoalsOpt = Annotated[
     Path | None,
     typer.Option(
         "--subgoals",
-        help="Subgoals for --mode follow: one 'x y theta \\[stop|forward|reverse]' per line, in the "
+        help="Subgoals for --mode follow: one 'x y theta [stop|forward|reverse]' per line, in the "
         "corrected odometry frame.",
         rich_help_panel=_MODE_PANEL,
         show_default=False,
@@ -379,8 +426,8 @@ NoSelectorOpt = Annotated[
     bool,
     typer.Option(
         "--no-selector",
-        help="Disable the mode selector: the desired mode's command goes out unchanged (no takeover "
-        "by local navigation, no reflexive override), for comparison.",
+        help="Disable the mode selector: the desired mode's command goes out unchanged (no takeover, no "
+        "reflexive override).",
         rich_help_panel=_MODE_PANEL,
     ),
 ]
@@ -389,9 +436,9 @@ GoalAheadOpt = Annotated[
     typer.Option(
         "--goal-ahead",
         callback=_bounded("--goal-ahead", 0.1, _MAX_POSITION_M),
-        help="Goal = the pose this many metres further along the log's corrected trajectory.",
+        help="Goal = the pose this many metres further along the log's corrected trajectory (default 5).",
         rich_help_panel=_RUN_PANEL,
-        show_default="5.0",
+        show_default=False,
     ),
 ]
 UntilOpt = Annotated[
@@ -435,16 +482,17 @@ LatencyOpt = Annotated[
     str,
     typer.Option(
         "--latency",
-        help="Scenarios: seconds from a scan to its command taking effect, or 'measured' (the stack's "
-        "own time: not deterministic).",
+        help="Seconds from a scan to its command taking effect, or 'measured' (the stack's time: not "
+        "deterministic). Default 0.",
         rich_help_panel=_SIM_PANEL,
+        show_default=False,
     ),
 ]
 PerfectOdometryOpt = Annotated[
     bool,
     typer.Option(
         "--perfect-odometry",
-        help="Scenarios: no odometry drift (scan matching still runs).",
+        help="No odometry drift (scan matching still runs).",
         rich_help_panel=_SIM_PANEL,
     ),
 ]
@@ -453,7 +501,7 @@ TimeLimitOpt = Annotated[
     typer.Option(
         "--time-limit",
         callback=_bounded("--time-limit", 0.1, _MAX_SCENARIO_TIME_S),
-        help="Scenarios: override each scenario's time limit (seconds, 0.1 to 1e6).",
+        help="Override each scenario's time limit (s, 0.1 to 1e6).",
         rich_help_panel=_SIM_PANEL,
         show_default=False,
     ),
@@ -602,7 +650,7 @@ def _print_json(data: object) -> None:
 # Commands
 
 
-@app.command()
+@app.command(cls=_Command)
 @cli_errors
 @log_options
 def info(log: LogArg, json_out: JsonOpt = False, *, read: ReadOptions) -> None:
@@ -615,7 +663,6 @@ def info(log: LogArg, json_out: JsonOpt = False, *, read: ReadOptions) -> None:
     [bold]Examples[/]
 
       gndreplay info mit-csail.clf.bz2
-
       gndreplay info run.bag --scan-topic /base_scan --json
     """
     from .info import log_info
@@ -686,7 +733,7 @@ def _log_stem(log: Path) -> str:
     return safe_name(name)
 
 
-@app.command()
+@app.command(cls=_Command)
 @cli_errors
 @log_options
 @navigation_options
@@ -758,13 +805,10 @@ def run(
 
     [bold]Examples[/]
 
-      gndreplay run                                   # the bundled sample log
-
+      gndreplay run                               # the bundled sample log
       gndreplay run aces.clf.bz2 --goal-ahead 3 --out out/aces
-
       gndreplay run run.bag --preset xr4000 --config mine.toml --until 60 --mcap
-
-      gndreplay run run.bag --mode teleop       # where would the stack have taken over from the driver?
+      gndreplay run run.bag --mode teleop         # would the stack have taken over?
     """
     from .replay import RunOptions, run_log
     from .report.sinks import default_sinks
@@ -791,7 +835,7 @@ def run(
         _print_run(summary.data, summary.out_dir)
 
 
-@app.command()
+@app.command(cls=_Command)
 @cli_errors
 @log_options
 @config_options
@@ -919,16 +963,17 @@ def _console() -> Console:
     return console
 
 
-@app.command()
+@app.command(cls=_Command)
 @cli_errors
 def report(
     run_dir: Annotated[
         Path, typer.Argument(help="A run directory written by `gndreplay run`.", show_default=False)
     ],
 ) -> None:
-    """Redraw the figures (fig_model, fig_raw, fig_commands, fig_timing, fig_modes) and report.md of a
-    finished run from its files alone (commands.csv, timing.csv, trajectories, summary.json, maps.npz); no
-    log needed.
+    """Redraw the figures and report.md of a finished run from its files alone (no log needed).
+
+    The figures (fig_model, fig_raw, fig_commands, fig_timing, fig_modes) come from commands.csv,
+    timing.csv, the trajectories, summary.json and maps.npz.
 
     [bold]Example[/]
 
@@ -940,7 +985,7 @@ def report(
         typer.echo(str(path))
 
 
-@app.command()
+@app.command(cls=_Command)
 @cli_errors
 @navigation_options
 def simulate(
@@ -1043,7 +1088,7 @@ def _list_scenarios(*, given: bool) -> None:
         typer.echo(f"{name:24s} {text}")
 
 
-@app.command()
+@app.command(cls=_Command)
 @cli_errors
 @log_options
 @navigation_options
@@ -1059,7 +1104,7 @@ def batch(
         list[str] | None,
         typer.Option(
             "--scenarios",
-            help="Shipped scenarios to run as well: all, or names (comma-separated or repeated; see "
+            help="Shipped scenarios to run too: all, or names (comma-separated or repeated; see "
             "`gndreplay simulate --list`).",
             rich_help_panel=_SIM_PANEL,
             show_default=False,
@@ -1069,8 +1114,8 @@ def batch(
         str | None,
         typer.Option(
             "--seeds",
-            help="Seeds of every scenario, e.g. 1-20, 1,3,5 or 0-4,10: one run per scenario and seed, "
-            "named <scenario>-s<seed> (default 0).",
+            help="Seeds of each scenario (default 0), e.g. 1-20, 1,3,5 or 0-4,10: a run each, named "
+            "<scenario>-s<seed>.",
             rich_help_panel=_SIM_PANEL,
             show_default=False,
         ),
@@ -1082,8 +1127,8 @@ def batch(
         Path | None,
         typer.Option(
             "--thresholds",
-            help="TOML of pass/fail limits and per-input settings (relations, goal); for scenarios "
-            "also per-scenario limits over seeds (min_success_rate, ...).",
+            help="TOML of pass/fail limits and per-input settings (relations, goal; for scenarios "
+            "min_success_rate, ...).",
             show_default=False,
         ),
     ] = None,
@@ -1091,8 +1136,8 @@ def batch(
         Path,
         typer.Option(
             "--out",
-            help="Batch folder: one run directory per input. If it holds an earlier batch, the new one is "
-            "written beside it (out/batch-2, ...) unless --overwrite.",
+            help="Batch folder, a run directory per input; beside an earlier batch (out/batch-2, ...) "
+            "unless --overwrite.",
             rich_help_panel=_RUN_PANEL,
         ),
     ] = Path("out/batch"),
@@ -1101,7 +1146,7 @@ def batch(
         Path | None,
         typer.Option(
             "--junit",
-            help="Also write JUnit XML (one test case per input, per scenario x seed).",
+            help="Also write JUnit XML (a test case per input and scenario x seed).",
             rich_help_panel=_RUN_PANEL,
             show_default=False,
         ),
@@ -1110,8 +1155,7 @@ def batch(
         str | None,
         typer.Option(
             "--dask",
-            help="Send the inputs to this dask.distributed scheduler (needs the dask extra: pip install "
-            "'gndreplay\\[dask]').",
+            help="Send the inputs to this dask.distributed scheduler (pip install 'gndreplay[dask]').",
             show_default=False,
         ),
     ] = None,
@@ -1125,7 +1169,7 @@ def batch(
         bool | None,
         typer.Option(
             "--figures/--no-figures",
-            help="Draw each run's figures (and a log's maps.npz and report.md). Default: scenario runs only.",
+            help="Draw each run's figures (a log's also maps.npz, report.md). Default: scenario runs only.",
             rich_help_panel=_RUN_PANEL,
         ),
     ] = None,
@@ -1134,8 +1178,9 @@ def batch(
         typer.Option(
             "--timeout",
             callback=_bounded("--timeout", 0.001, _MAX_SECONDS),
-            help="Per-input time limit (s): a "
-            "longer input is stopped, its worker killed, and it is reported as an error; the batch goes on.",
+            help="Per-input time limit (s, default 3600): a longer input is stopped and reported as an "
+            "error.",
+            show_default=False,
         ),
     ] = 3600.0,
     quiet: QuietOpt = False,
@@ -1143,26 +1188,21 @@ def batch(
     read: ReadOptions,
     setup: Setup,
 ) -> None:
-    """Replay many logs and run closed-loop scenarios in parallel, check thresholds, write summary.csv /
-    summary.md / JUnit.
+    """Replay many logs and run closed-loop scenarios in parallel; check thresholds; write summary.csv,
+    summary.md and JUnit XML.
 
-    Each input runs in its own worker process, so a bad, crashing or hung input (over --timeout) fails
-    alone and is reported. A scenario (a .yaml file, or shipped ones with --scenarios) runs once per seed
-    (--seeds) as `gndreplay simulate` does, each run one row and one JUnit test case: it passes when the
-    robot reaches the goal (a collision, a goal missed or a time-out fails, with the reason); summary.md and
-    scenarios.csv add each scenario's success rate, collisions, goals missed, time-outs, mean time and
-    minimum clearance over seeds. Exit code: 0 all passed, 1 a threshold was exceeded, 2 an input could
-    not be read. The configuration and navigation mode options apply to the logs and to the scenarios
-    (--mode, --local and --subgoals in place of a scenario's own, as `simulate`).
+    Each input runs in its own worker process: a bad, crashing or hung input (over --timeout) fails alone.
+    A scenario (a .yaml file, or --scenarios) runs once per seed as `gndreplay simulate` does and passes
+    when the robot reaches the goal; scenarios.csv gives each scenario's success rate, collisions, goals
+    missed, time-outs, mean time and minimum clearance over its seeds. The configuration and navigation
+    options apply to logs and scenarios alike. Exit 0: all passed; 1: a threshold was exceeded; 2: an
+    input could not be read.
 
     [bold]Examples[/]
 
       gndreplay batch ../shared/datasets/carmen --jobs 2 --junit out/junit.xml
-
       gndreplay batch logs/ --thresholds ci.toml --until 120
-
       gndreplay batch --scenarios all --seeds 1-20 --jobs 2 --no-figures
-
       gndreplay batch my_world.yaml --scenarios u_trap,enclosed --seeds 1,3,5 --preset xr4000
     """
     import os
