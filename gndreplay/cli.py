@@ -19,6 +19,7 @@ import logging
 import math
 import re
 import sys
+import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -202,6 +203,9 @@ _MAX_SECONDS = 4.5e9
 _MAX_SCENARIO_TIME_S = 1e6
 _MAX_EVERY = 1_000_000
 _MAX_JOBS = 4096
+#: ``--progress`` values, and the seconds between two plain progress lines while the total is unknown.
+_PROGRESS_STYLES = ("auto", "plain", "none")
+_PLAIN_EVERY_S = 10.0
 
 app = typer.Typer(
     cls=_Commands,
@@ -475,6 +479,15 @@ OverwriteOpt = Annotated[
     ),
 ]
 QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")]
+ProgressOpt = Annotated[
+    str,
+    typer.Option(
+        "--progress",
+        help="Progress on stderr: auto (a bar on a terminal, else a line every 10 %), plain (those lines) "
+        "or none.",
+        rich_help_panel=_RUN_PANEL,
+    ),
+]
 JsonOpt = Annotated[
     bool, typer.Option("--json", help="Print the result as JSON on stdout instead of tables.")
 ]
@@ -793,6 +806,7 @@ def run(
     ] = False,
     figures: FiguresOpt = True,
     quiet: QuietOpt = False,
+    progress: ProgressOpt = "auto",
     json_out: JsonOpt = False,
     *,
     read: ReadOptions,
@@ -821,11 +835,13 @@ def run(
     out_dir = out if out is not None else Path("out") / _log_stem(log_path)
     options = RunOptions(goal_xy=goal_xy, goal_ahead_m=5.0 if goal_ahead is None else goal_ahead,
                          until_s=until, every=every, subgoals=setup.subgoals)
-    with _RunProgress(enabled=not (quiet or json_out), label=log_path.name, until_s=until) as progress:
+    style = _progress_style(progress, quiet=quiet, json_out=json_out)
+    with _Progress(style) as shown:
+        watch = _LogProgress(shown, log_path.name, until_s=until)
         sinks = default_sinks(figures=figures, mcap=mcap, enforce_budgets=cfg.supervisor.enforce_budgets,
-                              on_draw=progress.on_draw)
+                              on_draw=watch.on_draw)
         summary = run_log(log_path, cfg, out_dir, options=options, read=read, sinks=sinks,
-                          overwrite=overwrite, **progress.callbacks())
+                          overwrite=overwrite, **watch.callbacks())
     _said_moved(out_dir, summary.out_dir, silent=quiet or json_out)
     if (gap := command_gap_warning(summary.data)) is not None:
         typer.echo(f"gndreplay: warning: {gap}", err=True)
@@ -862,6 +878,7 @@ def scanmatch(
         ),
     ] = None,
     overwrite: OverwriteOpt = False,
+    progress: ProgressOpt = "auto",
     json_out: JsonOpt = False,
     *,
     read: ReadOptions,
@@ -891,17 +908,14 @@ def scanmatch(
     refs = load_relations(relations) if relations is not None else None
     out_dir = out if out is not None else Path("out") / f"{_log_stem(log)}-scanmatch"
 
-    rows = run_scanmatch(
-        log_ticks(log, mounting_for(read, cfg)),
-        methods,
-        relations=refs,
-        out_dir=out_dir,
-        idc=cfg.scanmatch.idc,
-        kiss=cfg.scanmatch.kiss,
-        relations_name=str(relations),
-        overwrite=overwrite,
-        inputs=[Path(log)] + ([relations] if relations is not None else []),
-    )
+    with _Progress(_progress_style(progress, json_out=json_out)) as shown:
+        watch = _LogProgress(shown, log.name, until_s=None)
+        rows = run_scanmatch(
+            log_ticks(log, mounting_for(read, cfg), on_open=watch.on_open, on_tick=watch.on_tick),
+            methods, relations=refs, out_dir=out_dir, idc=cfg.scanmatch.idc, kiss=cfg.scanmatch.kiss,
+            relations_name=str(relations), overwrite=overwrite, on_pass=watch.on_pass,
+            inputs=[Path(log)] + ([relations] if relations is not None else []),
+        )
     _said_moved(out_dir, Path(rows[0].tum_path).parent if rows and rows[0].tum_path else out_dir)
     if json_out:
         _print_json([r.to_dict() for r in rows])
@@ -1022,6 +1036,7 @@ def simulate(
     figures: FiguresOpt = True,
     overwrite: OverwriteOpt = False,
     list_: Annotated[bool, typer.Option("--list", help="List the shipped scenarios and exit.")] = False,
+    progress: ProgressOpt = "auto",
     json_out: JsonOpt = False,
     *,
     setup: Setup,
@@ -1055,9 +1070,13 @@ def simulate(
                                    overrides=setup.overrides, subgoals=setup.subgoals)
     run_name = safe_name(f"{spec.name}-{cfg.preset}-{seed}")  # a scenario's name never leaves out/sim
     out_dir = out if out is not None else Path("out") / "sim" / run_name
-    result = simulate_scenario(spec, out_dir=out_dir, cfg=cfg, seed=seed, latency_s=latency_s,
-                               perfect_odometry=perfect_odometry, time_limit_s=time_limit, figures=figures,
-                               overwrite=overwrite)
+    with _Progress(_progress_style(progress, json_out=json_out)) as shown:
+        watch = _LogProgress(shown, spec.name, until_s=time_limit or spec.time_limit_s)
+        result = simulate_scenario(
+            spec, out_dir=out_dir, cfg=cfg, seed=seed, latency_s=latency_s, perfect_odometry=perfect_odometry,
+            time_limit_s=time_limit, figures=figures, overwrite=overwrite, on_tick=watch.on_tick,
+            run_kwargs={"on_stage": watch.on_stage, "on_compile": watch.on_compile},
+        )
     _said_moved(out_dir, result.out_dir, silent=json_out)
     if json_out:
         _print_json(result.result)
@@ -1184,6 +1203,7 @@ def batch(
         ),
     ] = 3600.0,
     quiet: QuietOpt = False,
+    progress: ProgressOpt = "auto",
     *,
     read: ReadOptions,
     setup: Setup,
@@ -1223,9 +1243,11 @@ def batch(
     limits = load_thresholds(thresholds) if thresholds is not None else Thresholds()
     options = RunOptions(goal_ahead_m=5.0 if goal_ahead is None else goal_ahead, until_s=until, every=every,
                          subgoals=setup.subgoals)
-    with _progress(enabled=not quiet, label="batch", total=len(job_list), unit="inputs") as progress:
+    with _Progress(_progress_style(progress, quiet=quiet)) as shown:
+        shown.start("batch", len(job_list))
+        advance = None if shown.style == "none" else _counter(shown, len(job_list), "inputs")
         result = run_batch(job_list, cfg=cfg, options=options, thresholds=limits, out_dir=out, workers=jobs,
-                           dask_address=dask, progress=progress, junit=junit, read=read, timeout_s=timeout,
+                           dask_address=dask, progress=advance, junit=junit, read=read, timeout_s=timeout,
                            overwrite=overwrite, sim=sim, figures=figures is True)
     _said_moved(Path(os.path.abspath(out)), result.out_dir, "batch")
     _print_batch(result, quiet=quiet)
@@ -1283,120 +1305,175 @@ def _num(value: object, fmt: str = "{:.2f}") -> str:
 
 
 
-class _progress:
-    """The one progress helper: a transient rich bar on a terminal (silent otherwise, or when disabled).
+class _Progress:
+    """Progress on stderr in one of three styles (:func:`_progress_style`): "live", a transient rich bar
+    (:func:`_progress_bar`); "plain", a line at each tenth of the total (none at the end: the result
+    follows), or every ``_PLAIN_EVERY_S`` seconds while the total is unknown; "none".
 
-    With ``total`` it is a bar over that many items (batch inputs); without, a counter with the rate
-    (replay ticks). ``__enter__`` returns the callback to call once per item, or None when silent.
+    ``start`` begins a pass over ``total`` units (None: unknown), ``update`` says how far it is and
+    ``describe`` names a stage of the pass.
     """
 
-    def __init__(self, *, enabled: bool, label: str, total: int | None = None, unit: str = "ticks") -> None:
-        self.enabled = enabled and sys.stderr.isatty()
-        self.label, self.total, self.unit = label, total, unit
-        self._bar: object | None = None
+    def __init__(self, style: str) -> None:
+        self.style = style
+        self.description = ""
+        self.total: float | None = None
+        self._t0 = self._last = time.monotonic()
+        self._tenths = 0
+        self._bar: Progress | None = None
+        self._task: TaskID | None = None
 
-    def __enter__(self) -> Callable[[object], None] | None:
-        if not self.enabled:
-            return None
-        import time
+    def __enter__(self) -> _Progress:
+        if self.style == "live":
+            from rich.console import Console
 
-        from rich.console import Console
-        from rich.progress import (
-            BarColumn,
-            MofNCompleteColumn,
-            Progress,
-            ProgressColumn,
-            TaskProgressColumn,
-            TextColumn,
-            TimeElapsedColumn,
-            TimeRemainingColumn,
-        )
-
-        counted: tuple[ProgressColumn, ...] = (
-            (BarColumn(), MofNCompleteColumn(), TaskProgressColumn())
-            if self.total
-            else (TextColumn("{task.completed}"),)
-        )
-        eta: tuple[ProgressColumn, ...] = (TextColumn("ETA"), TimeRemainingColumn()) if self.total else ()
-        bar = Progress(
-            TextColumn("[bold]{task.description}"),
-            *counted,
-            TextColumn(f"{self.unit} " + "{task.fields[rate]:.1f}/s"),
-            TextColumn("{task.fields[last]}"),
-            TimeElapsedColumn(),
-            *eta,
-            console=Console(stderr=True),
-            transient=True,
-        )
-        bar.__enter__()
-        task = bar.add_task(self.label, total=self.total, rate=0.0, last="")
-        self._bar = bar
-        t0 = time.perf_counter()
-
-        def advance(item: object) -> None:
-            done = bar.tasks[0].completed + 1
-            rate = done / max(time.perf_counter() - t0, 1e-9)
-            bar.update(task, completed=done, rate=rate, last=str(getattr(item, "name", "")))
-
-        return advance
+            self._bar = _progress_bar(Console(stderr=True))
+            self._bar.start()
+            self._task = self._bar.add_task("", total=None, detail="")
+        return self
 
     def __exit__(self, *exc: object) -> None:
         if self._bar is not None:
-            self._bar.__exit__(*exc)  # type: ignore[attr-defined]
+            self._bar.stop()
+
+    def start(self, description: str, total: float | None) -> None:
+        """A pass over ``total`` units begins."""
+        self.description, self.total = description, total
+        self._t0 = self._last = time.monotonic()
+        self._tenths = 0
+        if self._bar is not None and self._task is not None:
+            self._bar.reset(self._task, total=total, description=escape(description), detail="")
+
+    def describe(self, description: str, detail: str | None = None, completed: float | None = None) -> None:
+        """Name the stage the pass is in (the bar's text; plain lines only count)."""
+        self.description = description
+        fields: dict[str, Any] = {"description": escape(description)}
+        fields |= ({} if detail is None else {"detail": detail}) | ({} if completed is None else
+                                                                   {"completed": completed})
+        if self._bar is not None and self._task is not None:
+            self._bar.update(self._task, **fields)
+
+    def update(self, completed: float, detail: str = "") -> None:
+        """``completed`` of the pass's ``total`` units are done."""
+        if self._bar is not None and self._task is not None:
+            self._bar.update(self._task, completed=completed, detail=detail)
+        elif self.style == "plain" and self._plain_due(completed):
+            line = _plain_line(self.description, completed, self.total, detail, time.monotonic() - self._t0)
+            typer.echo(line, err=True)
+
+    def note(self, text: str) -> None:
+        """A one-time notice a plain display prints (the bar shows it in its text instead)."""
+        if self.style == "plain":
+            typer.echo(f"gndreplay: {text}", err=True)
+
+    def _plain_due(self, completed: float) -> bool:
+        """Whether a plain line is due: a new tenth of the total reached (not the last), or, with no
+        total, ``_PLAIN_EVERY_S`` seconds since the last line."""
+        if self.total:
+            tenths = int(10 * completed / self.total)
+            if tenths <= self._tenths or tenths >= 10:
+                return False
+            self._tenths = tenths
+            return True
+        now = time.monotonic()
+        if now - self._last < _PLAIN_EVERY_S:
+            return False
+        self._last = now
+        return True
 
 
-class _RunProgress:
-    """What ``run`` shows while it works, on stderr: the warm-up ("compiling (first run only)" with the
-    count of kernels when numba's disk cache is cold), then a bar over the log's time with percentage and
-    ETA (total: --until, else the log's duration or scan count when its format knows them; a counter
-    otherwise), then writing and drawing the figures. Disabled: silent. Off a terminal: only the
-    one-line compile notice."""
+def _progress_style(choice: str, *, quiet: bool = False, json_out: bool = False) -> str:
+    """The progress display ``--progress`` asks for: none with --quiet (and, unless asked, with --json);
+    auto is a live bar when stderr is a terminal and plain lines when it is a file or a pipe."""
+    from .config import choose
 
-    def __init__(self, *, enabled: bool, label: str, until_s: float | None) -> None:
-        self.enabled = enabled
-        self.live = enabled and sys.stderr.isatty()
+    style = choose("--progress", choice, _PROGRESS_STYLES)
+    if quiet or style == "none" or (style == "auto" and json_out):
+        return "none"
+    return "live" if style == "auto" and sys.stderr.isatty() else "plain"
+
+
+def _progress_bar(console: Console) -> Progress:
+    """The live bar: spinner, description, bar, percentage, detail, elapsed time and ETA. The description
+    and the detail are cut (with an ellipsis) before the times are, so the line fits 80 columns."""
+    from rich.progress import (
+        BarColumn,
+        Progress,
+        SpinnerColumn,
+        TaskProgressColumn,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+    from rich.table import Column
+
+    def fixed(width: int) -> Column:
+        return Column(min_width=width, no_wrap=True)
+
+    def cut(width: int) -> Column:
+        return Column(max_width=width, no_wrap=True, overflow="ellipsis")
+
+    return Progress(
+        SpinnerColumn(),
+        TextColumn("[bold]{task.description}", table_column=cut(22)),
+        BarColumn(bar_width=None, table_column=Column(ratio=1, min_width=8)),
+        TaskProgressColumn(table_column=fixed(4)),
+        TextColumn("{task.fields[detail]}", table_column=cut(20)),
+        TimeElapsedColumn(table_column=fixed(7)),
+        TextColumn("ETA", table_column=fixed(3)),
+        TimeRemainingColumn(table_column=fixed(7)),
+        console=console,
+        transient=True,
+        expand=True,
+    )
+
+
+def _plain_line(description: str, done: float, total: float | None, detail: str, elapsed_s: float) -> str:
+    """One plain progress line: ``gndreplay: aces.clf: 40 % (120 ticks, 96 s), 0:00:12 elapsed, ETA
+    0:00:18`` (without a total: no share and no ETA)."""
+    share = f" {math.floor(100.0 * done / total)} %" if total else ""
+    what = f" ({detail})" if detail and share else f" {detail}" if detail else ""
+    eta = f", ETA {_clock(elapsed_s * (total - done) / done)}" if total and done > 0 else ""
+    return f"gndreplay: {description}:{share}{what}, {_clock(elapsed_s)} elapsed{eta}"
+
+
+def _clock(seconds: float) -> str:
+    """``h:mm:ss``, as the bar shows times."""
+    s = max(round(seconds), 0)
+    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
+
+
+def _counter(progress: _Progress, total: int, unit: str) -> Callable[[object], None]:
+    """A callback advancing ``progress`` by one item (a batch input, named by its ``name``)."""
+    done = 0
+
+    def advance(item: object) -> None:
+        nonlocal done
+        done += 1
+        progress.update(done, f"{done}/{total} {unit}, last {getattr(item, 'name', '')}")
+
+    return advance
+
+
+class _LogProgress:
+    """What ``run``, ``scanmatch`` and ``simulate`` show while they work (through a :class:`_Progress`):
+    the warm-up ("compiling (first run only)" with the count of kernels when numba's disk cache is cold),
+    then each pass over the log's time with percentage and ETA (total: ``until_s``, else the log's
+    duration or scan count when its format knows them, else the share of the file read), then writing and
+    drawing the figures. ``scanmatch`` makes one pass per matcher (``on_pass``)."""
+
+    def __init__(self, progress: _Progress, label: str, *, until_s: float | None) -> None:
+        self.progress = progress
         self.label = label
+        self.until_s = until_s
         self.total: float | None = until_s
         self.unit = "s"
         self.ticks = 0
         self.compiled = 0
         self._t0_ns: int | None = None
         self._fraction: Callable[[], float | None] | None = None
-        self._bar: Progress | None = None
-        self._task: TaskID | None = None
-
-    def __enter__(self) -> _RunProgress:
-        if self.live:
-            from rich.console import Console
-            from rich.progress import (
-                BarColumn,
-                Progress,
-                SpinnerColumn,
-                TaskProgressColumn,
-                TextColumn,
-                TimeElapsedColumn,
-                TimeRemainingColumn,
-            )
-
-            self._bar = Progress(
-                SpinnerColumn(),
-                TextColumn("[bold]{task.description}"),
-                BarColumn(),
-                TaskProgressColumn(),
-                TextColumn("{task.fields[detail]}"),
-                TimeElapsedColumn(),
-                TextColumn("ETA"),
-                TimeRemainingColumn(),
-                console=Console(stderr=True),
-                transient=True,
-            )
-            self._bar.start()
-            self._task = self._bar.add_task(f"{self.label}: opening", total=None, detail="")
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        if self._bar is not None:
-            self._bar.stop()
+        self._pass: str | None = None
+        progress.describe(f"{label}: opening")
 
     def callbacks(self) -> dict[str, Callable[..., None]]:
         """The callbacks ``replay.run_log`` takes: on_tick, on_open, on_stage, on_compile."""
@@ -1407,63 +1484,77 @@ class _RunProgress:
             "on_compile": self.on_compile,
         }
 
-    def _show(self, **fields: object) -> None:
-        if self._bar is not None and self._task is not None:
-            self._bar.update(self._task, **fields)  # type: ignore[arg-type]
-
     def on_open(self, reader: object) -> None:
-        """Take the total from the log's description (duration, else scan count) when it knows it, else
-        follow the share of the file read (CARMEN logs do not say their length)."""
-        desc = reader.describe() if hasattr(reader, "describe") else reader
-        start, end = getattr(desc, "start_ns", None), getattr(desc, "end_ns", None)
-        if start is not None and end is not None and end > start:
-            duration = (end - start) / 1e9
-            self.total = duration if self.total is None else min(self.total, duration)
-        elif self.total is None:
-            scan = getattr(desc, "scan_stream", None)
-            counts = [s.count for s in getattr(desc, "streams", ()) if s.name == scan and s.count]
-            if counts:
-                self.total, self.unit = float(counts[0]), "scans"
-            elif callable(fraction := getattr(reader, "fraction_read", None)):
-                self.total, self.unit, self._fraction = 100.0, "%", fraction
+        """The log is open: its total (and, in a matcher's pass, the pass begins)."""
+        self.total, self.unit, self._fraction = _log_total(reader, self.until_s)
+        if self._pass is not None:
+            self._begin(f"{self.label}: {self._pass}")
+
+    def on_pass(self, method: str) -> None:
+        """A matcher's pass over the log begins (the log is opened next)."""
+        self._pass = method
 
     def on_stage(self, stage: str) -> None:
-        """Switch the bar to the replay's stage."""
+        """Switch the display to the replay's stage."""
         if stage == "warm-up":
-            self._show(description=f"{self.label}: warming up")
-        elif stage == "replay" and self._bar is not None and self._task is not None:
-            self._bar.reset(self._task, total=self.total, description=self.label, detail="")
+            self.progress.describe(f"{self.label}: warming up")
+        elif stage == "replay":
+            self._begin(self.label)
         elif stage == "write":
-            self._show(description=f"{self.label}: writing", completed=self.total or 0)
+            self.progress.describe(f"{self.label}: writing", completed=self.total or 0)
+
+    def _begin(self, description: str) -> None:
+        self.ticks, self._t0_ns = 0, None
+        self.progress.start(description, self.total)
 
     def on_compile(self, kernel: str) -> None:
         """A kernel is being compiled (cold cache): say so, once, and count them."""
         self.compiled += 1
-        if self.compiled == 1 and self.enabled and not self.live:
-            typer.echo("gndreplay: compiling (first run only)...", err=True)
-        self._show(
-            description=f"{self.label}: compiling (first run only)…",
-            detail=f"{self.compiled} kernels ({kernel})",
+        if self.compiled == 1:
+            self.progress.note("compiling (first run only)...")
+        self.progress.describe(
+            f"{self.label}: compiling (first run only)…", detail=f"{self.compiled} kernels ({kernel})"
         )
 
     def on_tick(self, result: object) -> None:
-        """One stack tick: advance by its log time (or by one scan)."""
-        if self._bar is None:
-            return
+        """One tick (a stack decision, a matched scan): advance by its log time (or by one scan, or by the
+        share of the file read)."""
         t_ns = int(getattr(result, "t_ns", 0))
         if self._t0_ns is None:
             self._t0_ns = t_ns
         self.ticks += 1
+        log_s = (t_ns - self._t0_ns) / 1e9
         if self._fraction is not None:
-            done = 100.0 * (self._fraction() or 0.0)
-            self._show(completed=done, detail=f"{self.ticks} ticks, {(t_ns - self._t0_ns) / 1e9:.0f} s")
+            self.progress.update(100.0 * (self._fraction() or 0.0), f"{self.ticks} ticks, {log_s:.0f} s")
             return
-        done = (t_ns - self._t0_ns) / 1e9 if self.unit == "s" else float(self.ticks)
-        self._show(completed=done, detail=f"{self.ticks} ticks, {done:.0f} {self.unit}")
+        done = log_s if self.unit == "s" else float(self.ticks)
+        self.progress.update(done, f"{self.ticks} ticks, {done:.0f} {self.unit}")
 
     def on_draw(self) -> None:
         """The figures are being drawn."""
-        self._show(description=f"{self.label}: drawing figures")
+        self.progress.describe(f"{self.label}: drawing figures")
+
+
+def _log_total(
+    reader: object, until_s: float | None
+) -> tuple[float | None, str, Callable[[], float | None] | None]:
+    """What a pass over an open log counts to, as (total, unit, share-of-file callback): the log's duration
+    in seconds (at most ``until_s``) when its description knows it, else ``until_s``, else its scan count,
+    else the share of the file read (CARMEN logs do not say their length) in %, else unknown."""
+    desc = reader.describe() if hasattr(reader, "describe") else reader
+    start, end = getattr(desc, "start_ns", None), getattr(desc, "end_ns", None)
+    if start is not None and end is not None and end > start:
+        duration = (end - start) / 1e9
+        return (duration if until_s is None else min(until_s, duration)), "s", None
+    if until_s is not None:
+        return until_s, "s", None
+    scan = getattr(desc, "scan_stream", None)
+    counts = [s.count for s in getattr(desc, "streams", ()) if s.name == scan and s.count]
+    if counts:
+        return float(counts[0]), "scans", None
+    if callable(fraction := getattr(reader, "fraction_read", None)):
+        return 100.0, "%", fraction
+    return None, "s", None
 
 
 def _print_run(data: dict[str, object], out_dir: Path) -> None:
