@@ -734,6 +734,13 @@ def _parse_goal(value: str | None, goal_ahead: float | None) -> tuple[float, flo
     )
 
 
+def _corrected_xy(run_dir: Path) -> Any:
+    """The x, y of every pose of a run's corrected trajectory ((N, 2), from trajectory_corrected.tum)."""
+    from .report.rundir import CORRECTED_TRAJECTORY_FILE, read_tum
+
+    return read_tum(run_dir / CORRECTED_TRAJECTORY_FILE)[:, 1:3]
+
+
 def _log_stem(log: Path) -> str:
     """The default output name of a log: its name less the log suffixes, never ``.``/``..``/empty/hidden."""
     from .fsutil import safe_name
@@ -824,7 +831,7 @@ def run(
       gndreplay run run.bag --preset xr4000 --config mine.toml --until 60 --mcap
       gndreplay run run.bag --mode teleop         # would the stack have taken over?
     """
-    from .replay import RunOptions, run_log
+    from .replay import RunOptions, far_goal_warning, run_log
     from .report.sinks import default_sinks
     from .report.summary import command_gap_warning
     from .sim.scenario import sample_log
@@ -843,8 +850,10 @@ def run(
         summary = run_log(log_path, cfg, out_dir, options=options, read=read, sinks=sinks,
                           overwrite=overwrite, **watch.callbacks())
     _said_moved(out_dir, summary.out_dir, silent=quiet or json_out)
-    if (gap := command_gap_warning(summary.data)) is not None:
-        typer.echo(f"gndreplay: warning: {gap}", err=True)
+    far = None if goal_xy is None else far_goal_warning(goal_xy, _corrected_xy(summary.out_dir), cfg.grid)
+    for warning in (far, command_gap_warning(summary.data)):
+        if warning is not None:
+            typer.echo(f"gndreplay: warning: {warning}", err=True)
     if json_out:
         _print_json(summary.data)
     elif not quiet:
