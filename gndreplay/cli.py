@@ -704,8 +704,8 @@ def _print_info(result: object) -> None:
         summary.add_row(label, value)
     console.print(summary)
     streams = Table(title="streams", title_justify="left")
-    for col in ("stream", "type", "used as", "count", "rate"):
-        streams.add_column(col, justify="right" if col in ("count", "rate") else "left")
+    for col in ("stream", "type", "used as", "count", "rate", "average"):
+        streams.add_column(col, justify="right" if col in ("count", "rate", "average") else "left")
     for row in stream_rows(result):
         streams.add_row(*row)
     console.print(streams)
