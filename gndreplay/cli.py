@@ -1033,7 +1033,7 @@ def simulate(
         Path | None,
         typer.Option(
             "--out",
-            help="Run directory (default out/sim/<scenario>-<preset>-<seed>); for office: the CARMEN log "
+            help="Run directory (default out/sim/SCENARIO-PRESET-SEED); for office: the CARMEN log "
             "to write (.clf, .clf.gz, .clf.bz2; default office.clf.bz2).",
             rich_help_panel=_RUN_PANEL,
             show_default=False,

@@ -72,7 +72,7 @@ def test_flags_show_no_type(name: str) -> None:
 def test_batch_help_is_readable_and_simulate_shows_its_out_default() -> None:
     assert len(rendered(["batch", "--help"], 100).splitlines()) < 100
     sim = visible(rendered(["simulate", "--help"], 80))
-    assert visible("(default out/sim/<scenario>-<preset>-<seed>)") in sim
+    assert visible("(default out/sim/SCENARIO-PRESET-SEED)") in sim
     assert visible("default office.clf.bz2)") in sim
 
 
