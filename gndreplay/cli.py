@@ -483,8 +483,7 @@ ProgressOpt = Annotated[
     str,
     typer.Option(
         "--progress",
-        help="Progress on stderr: auto (a bar on a terminal, else a line every 10 %), plain (those lines) "
-        "or none.",
+        help="Progress on stderr: auto (a bar on a terminal, else a line every 10 %), plain or none.",
         rich_help_panel=_RUN_PANEL,
     ),
 ]
@@ -495,8 +494,8 @@ LatencyOpt = Annotated[
     str,
     typer.Option(
         "--latency",
-        help="Seconds from a scan to its command taking effect, or 'measured' (the stack's time: not "
-        "deterministic). Default 0.",
+        help="Seconds from a scan to its command taking effect (default 0), or 'measured' (not "
+        "deterministic).",
         rich_help_panel=_SIM_PANEL,
         show_default=False,
     ),
@@ -1132,8 +1131,8 @@ def batch(
         list[str] | None,
         typer.Option(
             "--scenarios",
-            help="Shipped scenarios to run too: all, or names (comma-separated or repeated; see "
-            "`gndreplay simulate --list`).",
+            help="Shipped scenarios to run too: all, or names (comma-separated or repeated; "
+            "`simulate --list`).",
             rich_help_panel=_SIM_PANEL,
             show_default=False,
         ),
@@ -1164,8 +1163,9 @@ def batch(
         Path,
         typer.Option(
             "--out",
-            help="Batch folder, a run directory per input; beside an earlier batch (out/batch-2, ...) "
-            "unless --overwrite.",
+            help="Batch folder (default out/batch), a run directory per input; beside an earlier one "
+            "(out/batch-2, ...) unless --overwrite.",
+            show_default=False,
             rich_help_panel=_RUN_PANEL,
         ),
     ] = Path("out/batch"),
