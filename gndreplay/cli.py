@@ -205,6 +205,8 @@ _MAX_EVERY = 1_000_000
 _MAX_JOBS = 4096
 #: ``--progress`` values, and the seconds between two plain progress lines while the total is unknown.
 _PROGRESS_STYLES = ("auto", "plain", "none")
+#: ``--mcap-grid`` values: results.mcap's robot-centred grid on every tick, or when it changed.
+_MCAP_GRID = ("every", "change")
 _PLAIN_EVERY_S = 10.0
 
 app = typer.Typer(
@@ -490,6 +492,43 @@ ProgressOpt = Annotated[
 JsonOpt = Annotated[
     bool, typer.Option("--json", help="Print the result as JSON on stdout instead of tables.")
 ]
+FromOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--from",
+        callback=_bounded("--from", 0.0, _MAX_SECONDS),
+        help="Draw the time-series figures from T seconds into the run (log time since its first tick).",
+        rich_help_panel=_RUN_PANEL,
+        show_default=False,
+    ),
+]
+ToOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--to",
+        callback=_bounded("--to", 0.0, _MAX_SECONDS),
+        help="Draw the time-series figures up to T seconds into the run.",
+        rich_help_panel=_RUN_PANEL,
+        show_default=False,
+    ),
+]
+SnapshotsOpt = Annotated[
+    bool | None,
+    typer.Option(
+        "--snapshots/--no-snapshots",
+        help="Draw a figure of each key event into snapshots/ (default: with the figures).",
+        rich_help_panel=_RUN_PANEL,
+        show_default=False,
+    ),
+]
+McapGridOpt = Annotated[
+    str,
+    typer.Option(
+        "--mcap-grid",
+        help="results.mcap's robot-centred grid: on every tick, or when it changed.",
+        rich_help_panel=_RUN_PANEL,
+    ),
+]
 LatencyOpt = Annotated[
     str,
     typer.Option(
@@ -733,6 +772,28 @@ def _parse_goal(value: str | None, goal_ahead: float | None) -> tuple[float, flo
     )
 
 
+def _window(t_from: float | None, t_to: float | None, *, figures: bool) -> bool:
+    """Whether ``--from`` / ``--to`` ask for a window of the time-series figures (refused without them).
+
+    Raises:
+        ConfigError: a window with --no-figures.
+    """
+    if t_from is None and t_to is None:
+        return False
+    if not figures:
+        raise ConfigError("--from / --to choose the figures' window: not with --no-figures")
+    return True
+
+
+def _snapshot_options(snapshots: bool | None, *, figures: bool) -> Any:
+    """The event snapshots ``default_sinks`` draws: on with the figures unless --no-snapshots (None: off)."""
+    if not (figures if snapshots is None else snapshots):
+        return None
+    from .report.snapshots import SnapshotOptions
+
+    return SnapshotOptions()
+
+
 def _corrected_xy(run_dir: Path) -> Any:
     """The x, y of every pose of a run's corrected trajectory ((N, 2), from trajectory_corrected.tum)."""
     from .report.rundir import CORRECTED_TRAJECTORY_FILE, read_tum
@@ -811,6 +872,10 @@ def run(
         ),
     ] = False,
     figures: FiguresOpt = True,
+    snapshots: SnapshotsOpt = None,
+    mcap_grid: McapGridOpt = "change",
+    t_from: FromOpt = None,
+    t_to: ToOpt = None,
     quiet: QuietOpt = False,
     progress: ProgressOpt = "auto",
     json_out: JsonOpt = False,
@@ -830,12 +895,16 @@ def run(
       gndreplay run run.bag --preset xr4000 --config mine.toml --until 60 --mcap
       gndreplay run run.bag --mode teleop         # would the stack have taken over?
     """
+    from .config import choose
     from .replay import RunOptions, far_goal_warning, run_log
+    from .report.build import build_report
     from .report.sinks import default_sinks
     from .report.summary import command_gap_warning
     from .sim.scenario import sample_log
 
     goal_xy = _parse_goal(goal, goal_ahead)
+    window = _window(t_from, t_to, figures=figures)
+    grid_every = choose("--mcap-grid", mcap_grid, _MCAP_GRID)
     cfg = setup.config(matcher=matcher, enforce_budgets=enforce_budgets)
     log_path = log if log is not None else sample_log()
     out_dir = out if out is not None else Path("out") / _log_stem(log_path)
@@ -845,9 +914,13 @@ def run(
     with _Progress(style) as shown:
         watch = _LogProgress(shown, log_path.name, until_s=until)
         sinks = default_sinks(figures=figures, mcap=mcap, enforce_budgets=cfg.supervisor.enforce_budgets,
-                              on_draw=watch.on_draw)
+                              on_draw=watch.on_draw, snapshots=_snapshot_options(snapshots, figures=figures),
+                              mcap_grid=grid_every)
         summary = run_log(log_path, cfg, out_dir, options=options, read=read, sinks=sinks,
                           overwrite=overwrite, **watch.callbacks())
+        if window:
+            watch.on_draw()
+            build_report(summary.out_dir, require_marker=True, t_from=t_from, t_to=t_to)
     _said_moved(out_dir, summary.out_dir, silent=quiet or json_out)
     far = None if goal_xy is None else far_goal_warning(goal_xy, _corrected_xy(summary.out_dir), cfg.grid)
     for warning in (far, command_gap_warning(summary.data)):
@@ -991,19 +1064,50 @@ def report(
     run_dir: Annotated[
         Path, typer.Argument(help="A run directory written by `gndreplay run`.", show_default=False)
     ],
+    t_from: FromOpt = None,
+    t_to: ToOpt = None,
+    animate: Annotated[
+        bool,
+        typer.Option(
+            "--animate",
+            help="Write an animation of the robot-centred view (GIF; MP4 when an encoder is installed) "
+            "instead of redrawing the figures.",
+        ),
+    ] = False,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out", help="The animation's file (default: animation.gif in the run directory).",
+            show_default=False,
+        ),
+    ] = None,
+    progress: ProgressOpt = "auto",
 ) -> None:
     """Redraw the figures and report.md of a finished run from its files alone (no log needed).
 
     The figures (fig_model, fig_raw, fig_commands, fig_timing, fig_modes) come from commands.csv,
-    timing.csv, the trajectories, summary.json and maps.npz.
+    timing.csv, the trajectories, summary.json and maps.npz; --from / --to draw the time series of a
+    window. --animate writes an animation of the robot-centred view instead.
 
-    [bold]Example[/]
+    [bold]Examples[/]
 
       gndreplay report out/aces
+      gndreplay report out/aces --from 600 --to 660
+      gndreplay report out/aces --animate --from 600 --to 620 --out aces.gif
     """
-    from .report import build_report
+    from .report.build import build_report
 
-    for path in build_report(run_dir, require_marker=True):
+    if animate:
+        from .report.animate import animate_run
+
+        with _Progress(_progress_style(progress)) as shown:
+            path = animate_run(run_dir, out if out is not None else run_dir / "animation.gif", t_from=t_from,
+                               t_to=t_to, on_progress=_frame_counter(shown, f"{run_dir.name}: animation"))
+        typer.echo(str(path))
+        return
+    if out is not None:
+        raise ConfigError("report: --out names the animation's file: give --animate too")
+    for path in build_report(run_dir, require_marker=True, t_from=t_from, t_to=t_to):
         typer.echo(str(path))
 
 
@@ -1042,6 +1146,7 @@ def simulate(
     perfect_odometry: PerfectOdometryOpt = False,
     time_limit: TimeLimitOpt = None,
     figures: FiguresOpt = True,
+    snapshots: SnapshotsOpt = None,
     overwrite: OverwriteOpt = False,
     list_: Annotated[bool, typer.Option("--list", help="List the shipped scenarios and exit.")] = False,
     progress: ProgressOpt = "auto",
@@ -1084,6 +1189,7 @@ def simulate(
             spec, out_dir=out_dir, cfg=cfg, seed=seed, latency_s=latency_s, perfect_odometry=perfect_odometry,
             time_limit_s=time_limit, figures=figures, overwrite=overwrite, on_tick=watch.on_tick,
             run_kwargs={"on_stage": watch.on_stage, "on_compile": watch.on_compile},
+            snapshots=_snapshot_options(snapshots, figures=figures),
         )
     _said_moved(out_dir, result.out_dir, silent=json_out)
     if json_out:
@@ -1462,6 +1568,17 @@ def _counter(progress: _Progress, total: int, unit: str) -> Callable[[object], N
         progress.update(done, f"{done}/{total} {unit}, last {getattr(item, 'name', '')}")
 
     return advance
+
+
+def _frame_counter(progress: _Progress, label: str) -> Callable[[int, int], None]:
+    """A callback showing an animation's frames drawn (done, total) on ``progress``."""
+
+    def on_frame(done: int, total: int) -> None:
+        if progress.total != total:
+            progress.start(label, total)
+        progress.update(done, f"{done}/{total} frames")
+
+    return on_frame
 
 
 class _LogProgress:
