@@ -17,7 +17,9 @@ import importlib
 import inspect
 import logging
 import math
+import re
 import sys
+import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -25,7 +27,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, NoReturn, ParamSpec, TextIO, TypeVar, cast
 
 import typer
-from typer.core import TyperGroup
+from rich.markup import escape
+from typer.core import TyperCommand, TyperGroup
 
 from . import __version__
 from .errors import ConfigError, GndReplayError, find_cause, one_line
@@ -71,6 +74,9 @@ class _Commands(TyperGroup):
         except (_click.ClickException, GndReplayError) as err:
             _command_line_error(err, args)
 
+    def get_params(self, ctx: Any) -> list[Any]:
+        return _untyped_flags(super().get_params(ctx))
+
     def invoke(self, ctx: Any) -> Any:
         # the command and its arguments, before it parses them (click's private field, as TyperGroup reads)
         args = [*getattr(ctx, "_protected_args", ()), *ctx.args]
@@ -80,6 +86,48 @@ class _Commands(TyperGroup):
             raise
         except (_click.ClickException, GndReplayError) as err:
             _command_line_error(err, args)
+
+
+#: The rich markup a help text uses on purpose (``[bold]Examples[/]``); every other "[" is text.
+_MARKUP = re.compile(r"\[(?:/?(?:bold|italic|dim)|/)\]")
+
+
+def help_markup(text: str) -> str:
+    """``text`` as rich markup that renders every character of it: each "[" not opening a tag of
+    ``_MARKUP`` is escaped (rich would read ``[dask]`` as a style), and the lines of each paragraph that is
+    not indented (prose, not an example) are joined for the terminal to wrap (typer keeps a docstring's line
+    breaks)."""
+    paragraphs = []
+    for para in inspect.cleandoc(text).split("\n\n"):
+        lines = para.split("\n")
+        paragraphs.append(para if any(line.startswith(" ") for line in lines) else " ".join(lines))
+    joined = "\n\n".join(paragraphs)
+    tags = _MARKUP.findall(joined)
+    texts = [escape(t) for t in _MARKUP.split(joined)]
+    return "".join(t + tag for t, tag in zip(texts, [*tags, ""], strict=True))
+
+
+class _Command(TyperCommand):
+    """A command whose help shows every character of its docstring and option help texts
+    (:func:`help_markup`), and a flag without a ``<bool>`` type."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.help = help_markup(self.help) if self.help else self.help
+        for param in self.params:
+            if isinstance(help_text := getattr(param, "help", None), str):
+                param.help = help_markup(help_text)  # type: ignore[attr-defined]
+
+    def get_params(self, ctx: Any) -> list[Any]:
+        return _untyped_flags(super().get_params(ctx))
+
+
+def _untyped_flags(params: list[Any]) -> list[Any]:
+    """``params`` with no type shown for a flag (it takes no value: no "<bool>" in the help)."""
+    for param in params:
+        if getattr(param, "is_flag", False):
+            param.metavar = ""
+    return params
 
 
 def _command_line_error(err: Exception, args: Sequence[str]) -> NoReturn:
@@ -155,6 +203,11 @@ _MAX_SECONDS = 4.5e9
 _MAX_SCENARIO_TIME_S = 1e6
 _MAX_EVERY = 1_000_000
 _MAX_JOBS = 4096
+#: ``--progress`` values, and the seconds between two plain progress lines while the total is unknown.
+_PROGRESS_STYLES = ("auto", "plain", "none")
+#: ``--mcap-grid`` values: results.mcap's robot-centred grid on every tick, or when it changed.
+_MCAP_GRID = ("every", "change")
+_PLAIN_EVERY_S = 10.0
 
 app = typer.Typer(
     cls=_Commands,
@@ -259,7 +312,7 @@ FormatOpt = Annotated[
     str | None,
     typer.Option(
         "--format",
-        help="Log format instead of guessing from the path: carmen, rosbag1, rosbag2, mcap (or rosbag).",
+        help="Log format instead of guessing from the path: carmen, rosbag1, rosbag2, mcap, rosbag.",
         rich_help_panel=_LOG_PANEL,
         show_default=False,
     ),
@@ -304,7 +357,7 @@ StrictOpt = Annotated[
     bool,
     typer.Option(
         "--strict",
-        help="A malformed line or message is an error instead of being skipped and counted.",
+        help="A malformed line or message is an error (instead of skipped and counted).",
         rich_help_panel=_LOG_PANEL,
     ),
 ]
@@ -312,7 +365,7 @@ PresetOpt = Annotated[
     str | None,
     typer.Option(
         "--preset",
-        help="Robot and stack preset: wheelchair or xr4000 (default: wheelchair; for a scenario, its own).",
+        help="Robot and stack preset: wheelchair (default) or xr4000; a scenario has its own.",
         rich_help_panel=_CONFIG_PANEL,
         show_default=False,
     ),
@@ -330,8 +383,8 @@ SetOpt = Annotated[
     list[str] | None,
     typer.Option(
         "--set",
-        help="Override one configuration key, section.key=value (repeatable; applied last, checked like "
-        "the TOML file), e.g. --set reactor.security_m=0.4 --set planner.kind=tunnel.",
+        help="Override one configuration key, section.key=value (repeatable; applied last), e.g. "
+        "--set reactor.security_m=0.4.",
         rich_help_panel=_CONFIG_PANEL,
         show_default=False,
     ),
@@ -340,7 +393,7 @@ PlannerOpt = Annotated[
     str | None,
     typer.Option(
         "--planner",
-        help="Global planner: nf1 (GND) or tunnel (the wheelchair paper). Default: the config's, nf1.",
+        help="Global planner: nf1 (GND) or tunnel (the wheelchair paper); default: the config's, nf1.",
         rich_help_panel=_CONFIG_PANEL,
         show_default=False,
     ),
@@ -349,9 +402,9 @@ ModeOpt = Annotated[
     str | None,
     typer.Option(
         "--mode",
-        help="Desired navigation mode: gnd (GND to the goal), teleop (the recorded velocity commands: a "
-        "Twist topic, CARMEN ODOM tv/rv), follow (path following of --subgoals) or local (local navigation "
-        "alone). Default: the config's \\[navigation] mode, gnd.",
+        help="Desired navigation mode: gnd (GND to the goal), teleop (the recorded velocity commands), "
+        "follow (path following of --subgoals) or local (local navigation alone). Default: the config's "
+        "[navigation] mode, gnd.",
         rich_help_panel=_MODE_PANEL,
         show_default=False,
     ),
@@ -369,7 +422,7 @@ SubgoalsOpt = Annotated[
     Path | None,
     typer.Option(
         "--subgoals",
-        help="Subgoals for --mode follow: one 'x y theta \\[stop|forward|reverse]' per line, in the "
+        help="Subgoals for --mode follow: one 'x y theta [stop|forward|reverse]' per line, in the "
         "corrected odometry frame.",
         rich_help_panel=_MODE_PANEL,
         show_default=False,
@@ -379,8 +432,8 @@ NoSelectorOpt = Annotated[
     bool,
     typer.Option(
         "--no-selector",
-        help="Disable the mode selector: the desired mode's command goes out unchanged (no takeover "
-        "by local navigation, no reflexive override), for comparison.",
+        help="Disable the mode selector: the desired mode's command goes out unchanged (no takeover, no "
+        "reflexive override).",
         rich_help_panel=_MODE_PANEL,
     ),
 ]
@@ -389,9 +442,9 @@ GoalAheadOpt = Annotated[
     typer.Option(
         "--goal-ahead",
         callback=_bounded("--goal-ahead", 0.1, _MAX_POSITION_M),
-        help="Goal = the pose this many metres further along the log's corrected trajectory.",
+        help="Goal = the pose this many metres further along the log's corrected trajectory (default 5).",
         rich_help_panel=_RUN_PANEL,
-        show_default="5.0",
+        show_default=False,
     ),
 ]
 UntilOpt = Annotated[
@@ -428,23 +481,69 @@ OverwriteOpt = Annotated[
     ),
 ]
 QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or table.")]
+ProgressOpt = Annotated[
+    str,
+    typer.Option(
+        "--progress",
+        help="Progress on stderr: auto (a bar on a terminal, else a line every 10 %), plain or none.",
+        rich_help_panel=_RUN_PANEL,
+    ),
+]
 JsonOpt = Annotated[
     bool, typer.Option("--json", help="Print the result as JSON on stdout instead of tables.")
+]
+FromOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--from",
+        callback=_bounded("--from", 0.0, _MAX_SECONDS),
+        help="Draw the time-series figures from T seconds into the run (log time since its first tick).",
+        rich_help_panel=_RUN_PANEL,
+        show_default=False,
+    ),
+]
+ToOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--to",
+        callback=_bounded("--to", 0.0, _MAX_SECONDS),
+        help="Draw the time-series figures up to T seconds into the run.",
+        rich_help_panel=_RUN_PANEL,
+        show_default=False,
+    ),
+]
+SnapshotsOpt = Annotated[
+    bool | None,
+    typer.Option(
+        "--snapshots/--no-snapshots",
+        help="Draw a figure of each key event into snapshots/ (default: with the figures).",
+        rich_help_panel=_RUN_PANEL,
+        show_default=False,
+    ),
+]
+McapGridOpt = Annotated[
+    str,
+    typer.Option(
+        "--mcap-grid",
+        help="results.mcap's robot-centred grid: on every tick, or when it changed.",
+        rich_help_panel=_RUN_PANEL,
+    ),
 ]
 LatencyOpt = Annotated[
     str,
     typer.Option(
         "--latency",
-        help="Scenarios: seconds from a scan to its command taking effect, or 'measured' (the stack's "
-        "own time: not deterministic).",
+        help="Seconds from a scan to its command taking effect (default 0), or 'measured' (not "
+        "deterministic).",
         rich_help_panel=_SIM_PANEL,
+        show_default=False,
     ),
 ]
 PerfectOdometryOpt = Annotated[
     bool,
     typer.Option(
         "--perfect-odometry",
-        help="Scenarios: no odometry drift (scan matching still runs).",
+        help="No odometry drift (scan matching still runs).",
         rich_help_panel=_SIM_PANEL,
     ),
 ]
@@ -453,7 +552,7 @@ TimeLimitOpt = Annotated[
     typer.Option(
         "--time-limit",
         callback=_bounded("--time-limit", 0.1, _MAX_SCENARIO_TIME_S),
-        help="Scenarios: override each scenario's time limit (seconds, 0.1 to 1e6).",
+        help="Override each scenario's time limit (s, 0.1 to 1e6).",
         rich_help_panel=_SIM_PANEL,
         show_default=False,
     ),
@@ -602,7 +701,7 @@ def _print_json(data: object) -> None:
 # Commands
 
 
-@app.command()
+@app.command(cls=_Command)
 @cli_errors
 @log_options
 def info(log: LogArg, json_out: JsonOpt = False, *, read: ReadOptions) -> None:
@@ -615,7 +714,6 @@ def info(log: LogArg, json_out: JsonOpt = False, *, read: ReadOptions) -> None:
     [bold]Examples[/]
 
       gndreplay info mit-csail.clf.bz2
-
       gndreplay info run.bag --scan-topic /base_scan --json
     """
     from .info import log_info
@@ -644,8 +742,8 @@ def _print_info(result: object) -> None:
         summary.add_row(label, value)
     console.print(summary)
     streams = Table(title="streams", title_justify="left")
-    for col in ("stream", "type", "used as", "count", "rate"):
-        streams.add_column(col, justify="right" if col in ("count", "rate") else "left")
+    for col in ("stream", "type", "used as", "count", "rate", "average"):
+        streams.add_column(col, justify="right" if col in ("count", "rate", "average") else "left")
     for row in stream_rows(result):
         streams.add_row(*row)
     console.print(streams)
@@ -674,6 +772,35 @@ def _parse_goal(value: str | None, goal_ahead: float | None) -> tuple[float, flo
     )
 
 
+def _window(t_from: float | None, t_to: float | None, *, figures: bool) -> bool:
+    """Whether ``--from`` / ``--to`` ask for a window of the time-series figures (refused without them).
+
+    Raises:
+        ConfigError: a window with --no-figures.
+    """
+    if t_from is None and t_to is None:
+        return False
+    if not figures:
+        raise ConfigError("--from / --to choose the figures' window: not with --no-figures")
+    return True
+
+
+def _snapshot_options(snapshots: bool | None, *, figures: bool) -> Any:
+    """The event snapshots ``default_sinks`` draws: on with the figures unless --no-snapshots (None: off)."""
+    if not (figures if snapshots is None else snapshots):
+        return None
+    from .report.snapshots import SnapshotOptions
+
+    return SnapshotOptions()
+
+
+def _corrected_xy(run_dir: Path) -> Any:
+    """The x, y of every pose of a run's corrected trajectory ((N, 2), from trajectory_corrected.tum)."""
+    from .report.rundir import CORRECTED_TRAJECTORY_FILE, read_tum
+
+    return read_tum(run_dir / CORRECTED_TRAJECTORY_FILE)[:, 1:3]
+
+
 def _log_stem(log: Path) -> str:
     """The default output name of a log: its name less the log suffixes, never ``.``/``..``/empty/hidden."""
     from .fsutil import safe_name
@@ -686,7 +813,7 @@ def _log_stem(log: Path) -> str:
     return safe_name(name)
 
 
-@app.command()
+@app.command(cls=_Command)
 @cli_errors
 @log_options
 @navigation_options
@@ -745,7 +872,12 @@ def run(
         ),
     ] = False,
     figures: FiguresOpt = True,
+    snapshots: SnapshotsOpt = None,
+    mcap_grid: McapGridOpt = "change",
+    t_from: FromOpt = None,
+    t_to: ToOpt = None,
     quiet: QuietOpt = False,
+    progress: ProgressOpt = "auto",
     json_out: JsonOpt = False,
     *,
     read: ReadOptions,
@@ -758,40 +890,49 @@ def run(
 
     [bold]Examples[/]
 
-      gndreplay run                                   # the bundled sample log
-
+      gndreplay run                               # the bundled sample log
       gndreplay run aces.clf.bz2 --goal-ahead 3 --out out/aces
-
       gndreplay run run.bag --preset xr4000 --config mine.toml --until 60 --mcap
-
-      gndreplay run run.bag --mode teleop       # where would the stack have taken over from the driver?
+      gndreplay run run.bag --mode teleop         # would the stack have taken over?
     """
-    from .replay import RunOptions, run_log
+    from .config import choose
+    from .replay import RunOptions, far_goal_warning, run_log
+    from .report.build import build_report
     from .report.sinks import default_sinks
     from .report.summary import command_gap_warning
     from .sim.scenario import sample_log
 
     goal_xy = _parse_goal(goal, goal_ahead)
+    window = _window(t_from, t_to, figures=figures)
+    grid_every = choose("--mcap-grid", mcap_grid, _MCAP_GRID)
     cfg = setup.config(matcher=matcher, enforce_budgets=enforce_budgets)
     log_path = log if log is not None else sample_log()
     out_dir = out if out is not None else Path("out") / _log_stem(log_path)
     options = RunOptions(goal_xy=goal_xy, goal_ahead_m=5.0 if goal_ahead is None else goal_ahead,
                          until_s=until, every=every, subgoals=setup.subgoals)
-    with _RunProgress(enabled=not (quiet or json_out), label=log_path.name, until_s=until) as progress:
+    style = _progress_style(progress, quiet=quiet, json_out=json_out)
+    with _Progress(style) as shown:
+        watch = _LogProgress(shown, log_path.name, until_s=until)
         sinks = default_sinks(figures=figures, mcap=mcap, enforce_budgets=cfg.supervisor.enforce_budgets,
-                              on_draw=progress.on_draw)
+                              on_draw=watch.on_draw, snapshots=_snapshot_options(snapshots, figures=figures),
+                              mcap_grid=grid_every)
         summary = run_log(log_path, cfg, out_dir, options=options, read=read, sinks=sinks,
-                          overwrite=overwrite, **progress.callbacks())
+                          overwrite=overwrite, **watch.callbacks())
+        if window:
+            watch.on_draw()
+            build_report(summary.out_dir, require_marker=True, t_from=t_from, t_to=t_to)
     _said_moved(out_dir, summary.out_dir, silent=quiet or json_out)
-    if (gap := command_gap_warning(summary.data)) is not None:
-        typer.echo(f"gndreplay: warning: {gap}", err=True)
+    far = None if goal_xy is None else far_goal_warning(goal_xy, _corrected_xy(summary.out_dir), cfg.grid)
+    for warning in (far, command_gap_warning(summary.data)):
+        if warning is not None:
+            typer.echo(f"gndreplay: warning: {warning}", err=True)
     if json_out:
         _print_json(summary.data)
     elif not quiet:
         _print_run(summary.data, summary.out_dir)
 
 
-@app.command()
+@app.command(cls=_Command)
 @cli_errors
 @log_options
 @config_options
@@ -818,6 +959,7 @@ def scanmatch(
         ),
     ] = None,
     overwrite: OverwriteOpt = False,
+    progress: ProgressOpt = "auto",
     json_out: JsonOpt = False,
     *,
     read: ReadOptions,
@@ -847,17 +989,14 @@ def scanmatch(
     refs = load_relations(relations) if relations is not None else None
     out_dir = out if out is not None else Path("out") / f"{_log_stem(log)}-scanmatch"
 
-    rows = run_scanmatch(
-        log_ticks(log, mounting_for(read, cfg)),
-        methods,
-        relations=refs,
-        out_dir=out_dir,
-        idc=cfg.scanmatch.idc,
-        kiss=cfg.scanmatch.kiss,
-        relations_name=str(relations),
-        overwrite=overwrite,
-        inputs=[Path(log)] + ([relations] if relations is not None else []),
-    )
+    with _Progress(_progress_style(progress, json_out=json_out)) as shown:
+        watch = _LogProgress(shown, log.name, until_s=None)
+        rows = run_scanmatch(
+            log_ticks(log, mounting_for(read, cfg), on_open=watch.on_open, on_tick=watch.on_tick),
+            methods, relations=refs, out_dir=out_dir, idc=cfg.scanmatch.idc, kiss=cfg.scanmatch.kiss,
+            relations_name=str(relations), overwrite=overwrite, on_pass=watch.on_pass,
+            inputs=[Path(log)] + ([relations] if relations is not None else []),
+        )
     _said_moved(out_dir, Path(rows[0].tum_path).parent if rows and rows[0].tum_path else out_dir)
     if json_out:
         _print_json([r.to_dict() for r in rows])
@@ -919,28 +1058,60 @@ def _console() -> Console:
     return console
 
 
-@app.command()
+@app.command(cls=_Command)
 @cli_errors
 def report(
     run_dir: Annotated[
         Path, typer.Argument(help="A run directory written by `gndreplay run`.", show_default=False)
     ],
+    t_from: FromOpt = None,
+    t_to: ToOpt = None,
+    animate: Annotated[
+        bool,
+        typer.Option(
+            "--animate",
+            help="Write an animation of the robot-centred view (GIF; MP4 when an encoder is installed) "
+            "instead of redrawing the figures.",
+        ),
+    ] = False,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out", help="The animation's file (default: animation.gif in the run directory).",
+            show_default=False,
+        ),
+    ] = None,
+    progress: ProgressOpt = "auto",
 ) -> None:
-    """Redraw the figures (fig_model, fig_raw, fig_commands, fig_timing, fig_modes) and report.md of a
-    finished run from its files alone (commands.csv, timing.csv, trajectories, summary.json, maps.npz); no
-    log needed.
+    """Redraw the figures and report.md of a finished run from its files alone (no log needed).
 
-    [bold]Example[/]
+    The figures (fig_model, fig_raw, fig_commands, fig_timing, fig_modes) come from commands.csv,
+    timing.csv, the trajectories, summary.json and maps.npz; --from / --to draw the time series of a
+    window. --animate writes an animation of the robot-centred view instead.
+
+    [bold]Examples[/]
 
       gndreplay report out/aces
+      gndreplay report out/aces --from 600 --to 660
+      gndreplay report out/aces --animate --from 600 --to 620 --out aces.gif
     """
-    from .report import build_report
+    from .report.build import build_report
 
-    for path in build_report(run_dir, require_marker=True):
+    if animate:
+        from .report.animate import animate_run
+
+        with _Progress(_progress_style(progress)) as shown:
+            path = animate_run(run_dir, out if out is not None else run_dir / "animation.gif", t_from=t_from,
+                               t_to=t_to, on_progress=_frame_counter(shown, f"{run_dir.name}: animation"))
+        typer.echo(str(path))
+        return
+    if out is not None:
+        raise ConfigError("report: --out names the animation's file: give --animate too")
+    for path in build_report(run_dir, require_marker=True, t_from=t_from, t_to=t_to):
         typer.echo(str(path))
 
 
-@app.command()
+@app.command(cls=_Command)
 @cli_errors
 @navigation_options
 def simulate(
@@ -965,7 +1136,7 @@ def simulate(
         Path | None,
         typer.Option(
             "--out",
-            help="Run directory (default out/sim/<scenario>-<preset>-<seed>); for office: the CARMEN log "
+            help="Run directory (default out/sim/SCENARIO-PRESET-SEED); for office: the CARMEN log "
             "to write (.clf, .clf.gz, .clf.bz2; default office.clf.bz2).",
             rich_help_panel=_RUN_PANEL,
             show_default=False,
@@ -975,8 +1146,10 @@ def simulate(
     perfect_odometry: PerfectOdometryOpt = False,
     time_limit: TimeLimitOpt = None,
     figures: FiguresOpt = True,
+    snapshots: SnapshotsOpt = None,
     overwrite: OverwriteOpt = False,
     list_: Annotated[bool, typer.Option("--list", help="List the shipped scenarios and exit.")] = False,
+    progress: ProgressOpt = "auto",
     json_out: JsonOpt = False,
     *,
     setup: Setup,
@@ -1010,9 +1183,14 @@ def simulate(
                                    overrides=setup.overrides, subgoals=setup.subgoals)
     run_name = safe_name(f"{spec.name}-{cfg.preset}-{seed}")  # a scenario's name never leaves out/sim
     out_dir = out if out is not None else Path("out") / "sim" / run_name
-    result = simulate_scenario(spec, out_dir=out_dir, cfg=cfg, seed=seed, latency_s=latency_s,
-                               perfect_odometry=perfect_odometry, time_limit_s=time_limit, figures=figures,
-                               overwrite=overwrite)
+    with _Progress(_progress_style(progress, json_out=json_out)) as shown:
+        watch = _LogProgress(shown, spec.name, until_s=time_limit or spec.time_limit_s)
+        result = simulate_scenario(
+            spec, out_dir=out_dir, cfg=cfg, seed=seed, latency_s=latency_s, perfect_odometry=perfect_odometry,
+            time_limit_s=time_limit, figures=figures, overwrite=overwrite, on_tick=watch.on_tick,
+            run_kwargs={"on_stage": watch.on_stage, "on_compile": watch.on_compile},
+            snapshots=_snapshot_options(snapshots, figures=figures),
+        )
     _said_moved(out_dir, result.out_dir, silent=json_out)
     if json_out:
         _print_json(result.result)
@@ -1043,7 +1221,7 @@ def _list_scenarios(*, given: bool) -> None:
         typer.echo(f"{name:24s} {text}")
 
 
-@app.command()
+@app.command(cls=_Command)
 @cli_errors
 @log_options
 @navigation_options
@@ -1059,8 +1237,8 @@ def batch(
         list[str] | None,
         typer.Option(
             "--scenarios",
-            help="Shipped scenarios to run as well: all, or names (comma-separated or repeated; see "
-            "`gndreplay simulate --list`).",
+            help="Shipped scenarios to run too: all, or names (comma-separated or repeated; "
+            "`simulate --list`).",
             rich_help_panel=_SIM_PANEL,
             show_default=False,
         ),
@@ -1069,8 +1247,8 @@ def batch(
         str | None,
         typer.Option(
             "--seeds",
-            help="Seeds of every scenario, e.g. 1-20, 1,3,5 or 0-4,10: one run per scenario and seed, "
-            "named <scenario>-s<seed> (default 0).",
+            help="Seeds of each scenario (default 0), e.g. 1-20, 1,3,5 or 0-4,10: a run each, named "
+            "<scenario>-s<seed>.",
             rich_help_panel=_SIM_PANEL,
             show_default=False,
         ),
@@ -1082,8 +1260,8 @@ def batch(
         Path | None,
         typer.Option(
             "--thresholds",
-            help="TOML of pass/fail limits and per-input settings (relations, goal); for scenarios "
-            "also per-scenario limits over seeds (min_success_rate, ...).",
+            help="TOML of pass/fail limits and per-input settings (relations, goal; for scenarios "
+            "min_success_rate, ...).",
             show_default=False,
         ),
     ] = None,
@@ -1091,8 +1269,9 @@ def batch(
         Path,
         typer.Option(
             "--out",
-            help="Batch folder: one run directory per input. If it holds an earlier batch, the new one is "
-            "written beside it (out/batch-2, ...) unless --overwrite.",
+            help="Batch folder (default out/batch), a run directory per input; beside an earlier one "
+            "(out/batch-2, ...) unless --overwrite.",
+            show_default=False,
             rich_help_panel=_RUN_PANEL,
         ),
     ] = Path("out/batch"),
@@ -1101,7 +1280,7 @@ def batch(
         Path | None,
         typer.Option(
             "--junit",
-            help="Also write JUnit XML (one test case per input, per scenario x seed).",
+            help="Also write JUnit XML (a test case per input and scenario x seed).",
             rich_help_panel=_RUN_PANEL,
             show_default=False,
         ),
@@ -1110,8 +1289,7 @@ def batch(
         str | None,
         typer.Option(
             "--dask",
-            help="Send the inputs to this dask.distributed scheduler (needs the dask extra: pip install "
-            "'gndreplay\\[dask]').",
+            help="Send the inputs to this dask.distributed scheduler (pip install 'gndreplay[dask]').",
             show_default=False,
         ),
     ] = None,
@@ -1125,7 +1303,7 @@ def batch(
         bool | None,
         typer.Option(
             "--figures/--no-figures",
-            help="Draw each run's figures (and a log's maps.npz and report.md). Default: scenario runs only.",
+            help="Draw each run's figures (a log's also maps.npz, report.md). Default: scenario runs only.",
             rich_help_panel=_RUN_PANEL,
         ),
     ] = None,
@@ -1134,35 +1312,32 @@ def batch(
         typer.Option(
             "--timeout",
             callback=_bounded("--timeout", 0.001, _MAX_SECONDS),
-            help="Per-input time limit (s): a "
-            "longer input is stopped, its worker killed, and it is reported as an error; the batch goes on.",
+            help="Per-input time limit (s, default 3600): a longer input is stopped and reported as an "
+            "error.",
+            show_default=False,
         ),
     ] = 3600.0,
     quiet: QuietOpt = False,
+    progress: ProgressOpt = "auto",
     *,
     read: ReadOptions,
     setup: Setup,
 ) -> None:
-    """Replay many logs and run closed-loop scenarios in parallel, check thresholds, write summary.csv /
-    summary.md / JUnit.
+    """Replay many logs and run closed-loop scenarios in parallel; check thresholds; write summary.csv,
+    summary.md and JUnit XML.
 
-    Each input runs in its own worker process, so a bad, crashing or hung input (over --timeout) fails
-    alone and is reported. A scenario (a .yaml file, or shipped ones with --scenarios) runs once per seed
-    (--seeds) as `gndreplay simulate` does, each run one row and one JUnit test case: it passes when the
-    robot reaches the goal (a collision, a goal missed or a time-out fails, with the reason); summary.md and
-    scenarios.csv add each scenario's success rate, collisions, goals missed, time-outs, mean time and
-    minimum clearance over seeds. Exit code: 0 all passed, 1 a threshold was exceeded, 2 an input could
-    not be read. The configuration and navigation mode options apply to the logs and to the scenarios
-    (--mode, --local and --subgoals in place of a scenario's own, as `simulate`).
+    Each input runs in its own worker process: a bad, crashing or hung input (over --timeout) fails alone.
+    A scenario (a .yaml file, or --scenarios) runs once per seed as `gndreplay simulate` does and passes
+    when the robot reaches the goal; scenarios.csv gives each scenario's success rate, collisions, goals
+    missed, time-outs, mean time and minimum clearance over its seeds. The configuration and navigation
+    options apply to logs and scenarios alike. Exit 0: all passed; 1: a threshold was exceeded; 2: an
+    input could not be read.
 
     [bold]Examples[/]
 
       gndreplay batch ../shared/datasets/carmen --jobs 2 --junit out/junit.xml
-
       gndreplay batch logs/ --thresholds ci.toml --until 120
-
       gndreplay batch --scenarios all --seeds 1-20 --jobs 2 --no-figures
-
       gndreplay batch my_world.yaml --scenarios u_trap,enclosed --seeds 1,3,5 --preset xr4000
     """
     import os
@@ -1183,9 +1358,11 @@ def batch(
     limits = load_thresholds(thresholds) if thresholds is not None else Thresholds()
     options = RunOptions(goal_ahead_m=5.0 if goal_ahead is None else goal_ahead, until_s=until, every=every,
                          subgoals=setup.subgoals)
-    with _progress(enabled=not quiet, label="batch", total=len(job_list), unit="inputs") as progress:
+    with _Progress(_progress_style(progress, quiet=quiet)) as shown:
+        shown.start("batch", len(job_list))
+        advance = None if shown.style == "none" else _counter(shown, len(job_list), "inputs")
         result = run_batch(job_list, cfg=cfg, options=options, thresholds=limits, out_dir=out, workers=jobs,
-                           dask_address=dask, progress=progress, junit=junit, read=read, timeout_s=timeout,
+                           dask_address=dask, progress=advance, junit=junit, read=read, timeout_s=timeout,
                            overwrite=overwrite, sim=sim, figures=figures is True)
     _said_moved(Path(os.path.abspath(out)), result.out_dir, "batch")
     _print_batch(result, quiet=quiet)
@@ -1243,120 +1420,186 @@ def _num(value: object, fmt: str = "{:.2f}") -> str:
 
 
 
-class _progress:
-    """The one progress helper: a transient rich bar on a terminal (silent otherwise, or when disabled).
+class _Progress:
+    """Progress on stderr in one of three styles (:func:`_progress_style`): "live", a transient rich bar
+    (:func:`_progress_bar`); "plain", a line at each tenth of the total (none at the end: the result
+    follows), or every ``_PLAIN_EVERY_S`` seconds while the total is unknown; "none".
 
-    With ``total`` it is a bar over that many items (batch inputs); without, a counter with the rate
-    (replay ticks). ``__enter__`` returns the callback to call once per item, or None when silent.
+    ``start`` begins a pass over ``total`` units (None: unknown), ``update`` says how far it is and
+    ``describe`` names a stage of the pass.
     """
 
-    def __init__(self, *, enabled: bool, label: str, total: int | None = None, unit: str = "ticks") -> None:
-        self.enabled = enabled and sys.stderr.isatty()
-        self.label, self.total, self.unit = label, total, unit
-        self._bar: object | None = None
+    def __init__(self, style: str) -> None:
+        self.style = style
+        self.description = ""
+        self.total: float | None = None
+        self._t0 = self._last = time.monotonic()
+        self._tenths = 0
+        self._bar: Progress | None = None
+        self._task: TaskID | None = None
 
-    def __enter__(self) -> Callable[[object], None] | None:
-        if not self.enabled:
-            return None
-        import time
+    def __enter__(self) -> _Progress:
+        if self.style == "live":
+            from rich.console import Console
 
-        from rich.console import Console
-        from rich.progress import (
-            BarColumn,
-            MofNCompleteColumn,
-            Progress,
-            ProgressColumn,
-            TaskProgressColumn,
-            TextColumn,
-            TimeElapsedColumn,
-            TimeRemainingColumn,
-        )
-
-        counted: tuple[ProgressColumn, ...] = (
-            (BarColumn(), MofNCompleteColumn(), TaskProgressColumn())
-            if self.total
-            else (TextColumn("{task.completed}"),)
-        )
-        eta: tuple[ProgressColumn, ...] = (TextColumn("ETA"), TimeRemainingColumn()) if self.total else ()
-        bar = Progress(
-            TextColumn("[bold]{task.description}"),
-            *counted,
-            TextColumn(f"{self.unit} " + "{task.fields[rate]:.1f}/s"),
-            TextColumn("{task.fields[last]}"),
-            TimeElapsedColumn(),
-            *eta,
-            console=Console(stderr=True),
-            transient=True,
-        )
-        bar.__enter__()
-        task = bar.add_task(self.label, total=self.total, rate=0.0, last="")
-        self._bar = bar
-        t0 = time.perf_counter()
-
-        def advance(item: object) -> None:
-            done = bar.tasks[0].completed + 1
-            rate = done / max(time.perf_counter() - t0, 1e-9)
-            bar.update(task, completed=done, rate=rate, last=str(getattr(item, "name", "")))
-
-        return advance
+            self._bar = _progress_bar(Console(stderr=True))
+            self._bar.start()
+            self._task = self._bar.add_task("", total=None, detail="")
+        return self
 
     def __exit__(self, *exc: object) -> None:
         if self._bar is not None:
-            self._bar.__exit__(*exc)  # type: ignore[attr-defined]
+            self._bar.stop()
+
+    def start(self, description: str, total: float | None) -> None:
+        """A pass over ``total`` units begins."""
+        self.description, self.total = description, total
+        self._t0 = self._last = time.monotonic()
+        self._tenths = 0
+        if self._bar is not None and self._task is not None:
+            self._bar.reset(self._task, total=total, description=escape(description), detail="")
+
+    def describe(self, description: str, detail: str | None = None, completed: float | None = None) -> None:
+        """Name the stage the pass is in (the bar's text; plain lines only count)."""
+        self.description = description
+        fields: dict[str, Any] = {"description": escape(description)}
+        fields |= ({} if detail is None else {"detail": detail}) | ({} if completed is None else
+                                                                   {"completed": completed})
+        if self._bar is not None and self._task is not None:
+            self._bar.update(self._task, **fields)
+
+    def update(self, completed: float, detail: str = "") -> None:
+        """``completed`` of the pass's ``total`` units are done."""
+        if self._bar is not None and self._task is not None:
+            self._bar.update(self._task, completed=completed, detail=detail)
+        elif self.style == "plain" and self._plain_due(completed):
+            line = _plain_line(self.description, completed, self.total, detail, time.monotonic() - self._t0)
+            typer.echo(line, err=True)
+
+    def note(self, text: str) -> None:
+        """A one-time notice a plain display prints (the bar shows it in its text instead)."""
+        if self.style == "plain":
+            typer.echo(f"gndreplay: {text}", err=True)
+
+    def _plain_due(self, completed: float) -> bool:
+        """Whether a plain line is due: a new tenth of the total reached (not the last), or, with no
+        total, ``_PLAIN_EVERY_S`` seconds since the last line."""
+        if self.total:
+            tenths = int(10 * completed / self.total)
+            if tenths <= self._tenths or tenths >= 10:
+                return False
+            self._tenths = tenths
+            return True
+        now = time.monotonic()
+        if now - self._last < _PLAIN_EVERY_S:
+            return False
+        self._last = now
+        return True
 
 
-class _RunProgress:
-    """What ``run`` shows while it works, on stderr: the warm-up ("compiling (first run only)" with the
-    count of kernels when numba's disk cache is cold), then a bar over the log's time with percentage and
-    ETA (total: --until, else the log's duration or scan count when its format knows them; a counter
-    otherwise), then writing and drawing the figures. Disabled: silent. Off a terminal: only the
-    one-line compile notice."""
+def _progress_style(choice: str, *, quiet: bool = False, json_out: bool = False) -> str:
+    """The progress display ``--progress`` asks for: none with --quiet (and, unless asked, with --json);
+    auto is a live bar when stderr is a terminal and plain lines when it is a file or a pipe."""
+    from .config import choose
 
-    def __init__(self, *, enabled: bool, label: str, until_s: float | None) -> None:
-        self.enabled = enabled
-        self.live = enabled and sys.stderr.isatty()
+    style = choose("--progress", choice, _PROGRESS_STYLES)
+    if quiet or style == "none" or (style == "auto" and json_out):
+        return "none"
+    return "live" if style == "auto" and sys.stderr.isatty() else "plain"
+
+
+def _progress_bar(console: Console) -> Progress:
+    """The live bar: spinner, description, bar, percentage, detail, elapsed time and ETA. The description
+    and the detail are cut (with an ellipsis) before the times are, so the line fits 80 columns."""
+    from rich.progress import (
+        BarColumn,
+        Progress,
+        SpinnerColumn,
+        TaskProgressColumn,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+    from rich.table import Column
+
+    def fixed(width: int) -> Column:
+        return Column(min_width=width, no_wrap=True)
+
+    def cut(width: int) -> Column:
+        return Column(max_width=width, no_wrap=True, overflow="ellipsis")
+
+    return Progress(
+        SpinnerColumn(),
+        TextColumn("[bold]{task.description}", table_column=cut(22)),
+        BarColumn(bar_width=None, table_column=Column(ratio=1, min_width=8)),
+        TaskProgressColumn(table_column=fixed(4)),
+        TextColumn("{task.fields[detail]}", table_column=cut(20)),
+        TimeElapsedColumn(table_column=fixed(7)),
+        TextColumn("ETA", table_column=fixed(3)),
+        TimeRemainingColumn(table_column=fixed(7)),
+        console=console,
+        transient=True,
+        expand=True,
+    )
+
+
+def _plain_line(description: str, done: float, total: float | None, detail: str, elapsed_s: float) -> str:
+    """One plain progress line: ``gndreplay: aces.clf: 40 % (120 ticks, 96 s), 0:00:12 elapsed, ETA
+    0:00:18`` (without a total: no share and no ETA)."""
+    share = f" {math.floor(100.0 * done / total)} %" if total else ""
+    what = f" ({detail})" if detail and share else f" {detail}" if detail else ""
+    eta = f", ETA {_clock(elapsed_s * (total - done) / done)}" if total and done > 0 else ""
+    return f"gndreplay: {description}:{share}{what}, {_clock(elapsed_s)} elapsed{eta}"
+
+
+def _clock(seconds: float) -> str:
+    """``h:mm:ss``, as the bar shows times."""
+    s = max(round(seconds), 0)
+    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
+
+
+def _counter(progress: _Progress, total: int, unit: str) -> Callable[[object], None]:
+    """A callback advancing ``progress`` by one item (a batch input, named by its ``name``)."""
+    done = 0
+
+    def advance(item: object) -> None:
+        nonlocal done
+        done += 1
+        progress.update(done, f"{done}/{total} {unit}, last {getattr(item, 'name', '')}")
+
+    return advance
+
+
+def _frame_counter(progress: _Progress, label: str) -> Callable[[int, int], None]:
+    """A callback showing an animation's frames drawn (done, total) on ``progress``."""
+
+    def on_frame(done: int, total: int) -> None:
+        if progress.total != total:
+            progress.start(label, total)
+        progress.update(done, f"{done}/{total} frames")
+
+    return on_frame
+
+
+class _LogProgress:
+    """What ``run``, ``scanmatch`` and ``simulate`` show while they work (through a :class:`_Progress`):
+    the warm-up ("compiling (first run only)" with the count of kernels when numba's disk cache is cold),
+    then each pass over the log's time with percentage and ETA (total: ``until_s``, else the log's
+    duration or scan count when its format knows them, else the share of the file read), then writing and
+    drawing the figures. ``scanmatch`` makes one pass per matcher (``on_pass``)."""
+
+    def __init__(self, progress: _Progress, label: str, *, until_s: float | None) -> None:
+        self.progress = progress
         self.label = label
+        self.until_s = until_s
         self.total: float | None = until_s
         self.unit = "s"
         self.ticks = 0
         self.compiled = 0
         self._t0_ns: int | None = None
         self._fraction: Callable[[], float | None] | None = None
-        self._bar: Progress | None = None
-        self._task: TaskID | None = None
-
-    def __enter__(self) -> _RunProgress:
-        if self.live:
-            from rich.console import Console
-            from rich.progress import (
-                BarColumn,
-                Progress,
-                SpinnerColumn,
-                TaskProgressColumn,
-                TextColumn,
-                TimeElapsedColumn,
-                TimeRemainingColumn,
-            )
-
-            self._bar = Progress(
-                SpinnerColumn(),
-                TextColumn("[bold]{task.description}"),
-                BarColumn(),
-                TaskProgressColumn(),
-                TextColumn("{task.fields[detail]}"),
-                TimeElapsedColumn(),
-                TextColumn("ETA"),
-                TimeRemainingColumn(),
-                console=Console(stderr=True),
-                transient=True,
-            )
-            self._bar.start()
-            self._task = self._bar.add_task(f"{self.label}: opening", total=None, detail="")
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        if self._bar is not None:
-            self._bar.stop()
+        self._pass: str | None = None
+        progress.describe(f"{label}: opening")
 
     def callbacks(self) -> dict[str, Callable[..., None]]:
         """The callbacks ``replay.run_log`` takes: on_tick, on_open, on_stage, on_compile."""
@@ -1367,63 +1610,77 @@ class _RunProgress:
             "on_compile": self.on_compile,
         }
 
-    def _show(self, **fields: object) -> None:
-        if self._bar is not None and self._task is not None:
-            self._bar.update(self._task, **fields)  # type: ignore[arg-type]
-
     def on_open(self, reader: object) -> None:
-        """Take the total from the log's description (duration, else scan count) when it knows it, else
-        follow the share of the file read (CARMEN logs do not say their length)."""
-        desc = reader.describe() if hasattr(reader, "describe") else reader
-        start, end = getattr(desc, "start_ns", None), getattr(desc, "end_ns", None)
-        if start is not None and end is not None and end > start:
-            duration = (end - start) / 1e9
-            self.total = duration if self.total is None else min(self.total, duration)
-        elif self.total is None:
-            scan = getattr(desc, "scan_stream", None)
-            counts = [s.count for s in getattr(desc, "streams", ()) if s.name == scan and s.count]
-            if counts:
-                self.total, self.unit = float(counts[0]), "scans"
-            elif callable(fraction := getattr(reader, "fraction_read", None)):
-                self.total, self.unit, self._fraction = 100.0, "%", fraction
+        """The log is open: its total (and, in a matcher's pass, the pass begins)."""
+        self.total, self.unit, self._fraction = _log_total(reader, self.until_s)
+        if self._pass is not None:
+            self._begin(f"{self.label}: {self._pass}")
+
+    def on_pass(self, method: str) -> None:
+        """A matcher's pass over the log begins (the log is opened next)."""
+        self._pass = method
 
     def on_stage(self, stage: str) -> None:
-        """Switch the bar to the replay's stage."""
+        """Switch the display to the replay's stage."""
         if stage == "warm-up":
-            self._show(description=f"{self.label}: warming up")
-        elif stage == "replay" and self._bar is not None and self._task is not None:
-            self._bar.reset(self._task, total=self.total, description=self.label, detail="")
+            self.progress.describe(f"{self.label}: warming up")
+        elif stage == "replay":
+            self._begin(self.label)
         elif stage == "write":
-            self._show(description=f"{self.label}: writing", completed=self.total or 0)
+            self.progress.describe(f"{self.label}: writing", completed=self.total or 0)
+
+    def _begin(self, description: str) -> None:
+        self.ticks, self._t0_ns = 0, None
+        self.progress.start(description, self.total)
 
     def on_compile(self, kernel: str) -> None:
         """A kernel is being compiled (cold cache): say so, once, and count them."""
         self.compiled += 1
-        if self.compiled == 1 and self.enabled and not self.live:
-            typer.echo("gndreplay: compiling (first run only)...", err=True)
-        self._show(
-            description=f"{self.label}: compiling (first run only)…",
-            detail=f"{self.compiled} kernels ({kernel})",
+        if self.compiled == 1:
+            self.progress.note("compiling (first run only)...")
+        self.progress.describe(
+            f"{self.label}: compiling (first run only)…", detail=f"{self.compiled} kernels ({kernel})"
         )
 
     def on_tick(self, result: object) -> None:
-        """One stack tick: advance by its log time (or by one scan)."""
-        if self._bar is None:
-            return
+        """One tick (a stack decision, a matched scan): advance by its log time (or by one scan, or by the
+        share of the file read)."""
         t_ns = int(getattr(result, "t_ns", 0))
         if self._t0_ns is None:
             self._t0_ns = t_ns
         self.ticks += 1
+        log_s = (t_ns - self._t0_ns) / 1e9
         if self._fraction is not None:
-            done = 100.0 * (self._fraction() or 0.0)
-            self._show(completed=done, detail=f"{self.ticks} ticks, {(t_ns - self._t0_ns) / 1e9:.0f} s")
+            self.progress.update(100.0 * (self._fraction() or 0.0), f"{self.ticks} ticks, {log_s:.0f} s")
             return
-        done = (t_ns - self._t0_ns) / 1e9 if self.unit == "s" else float(self.ticks)
-        self._show(completed=done, detail=f"{self.ticks} ticks, {done:.0f} {self.unit}")
+        done = log_s if self.unit == "s" else float(self.ticks)
+        self.progress.update(done, f"{self.ticks} ticks, {done:.0f} {self.unit}")
 
     def on_draw(self) -> None:
         """The figures are being drawn."""
-        self._show(description=f"{self.label}: drawing figures")
+        self.progress.describe(f"{self.label}: drawing figures")
+
+
+def _log_total(
+    reader: object, until_s: float | None
+) -> tuple[float | None, str, Callable[[], float | None] | None]:
+    """What a pass over an open log counts to, as (total, unit, share-of-file callback): the log's duration
+    in seconds (at most ``until_s``) when its description knows it, else ``until_s``, else its scan count,
+    else the share of the file read (CARMEN logs do not say their length) in %, else unknown."""
+    desc = reader.describe() if hasattr(reader, "describe") else reader
+    start, end = getattr(desc, "start_ns", None), getattr(desc, "end_ns", None)
+    if start is not None and end is not None and end > start:
+        duration = (end - start) / 1e9
+        return (duration if until_s is None else min(until_s, duration)), "s", None
+    if until_s is not None:
+        return until_s, "s", None
+    scan = getattr(desc, "scan_stream", None)
+    counts = [s.count for s in getattr(desc, "streams", ()) if s.name == scan and s.count]
+    if counts:
+        return float(counts[0]), "scans", None
+    if callable(fraction := getattr(reader, "fraction_read", None)):
+        return 100.0, "%", fraction
+    return None, "s", None
 
 
 def _print_run(data: dict[str, object], out_dir: Path) -> None:

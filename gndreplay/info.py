@@ -5,35 +5,53 @@ numbers are exactly what a replay sees: skipped lines, reordering, scans without
 MCAP files are summarised from their metadata (MCAP: the summary section, via the ``mcap`` library): message
 counts come from the index, scan stamps from the raw header bytes (no decoding), and the beam statistics from
 a decoded, evenly spaced sample of at most ``sample`` scans (``LogInfo.stats_scans`` says how many).
+
+The scan rate is the median scan period's (what the sensor runs at, whatever the gaps; count / duration is
+reported beside it as the average), and a clock that was generated rather than recorded (every period the
+same to the nanosecond, from a round start) is a warning: its rates and gaps describe the generator.
 """
 
 from __future__ import annotations
 
 import math
+from array import array
 from dataclasses import asdict, dataclass, field, replace
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .io import DEFAULT_READ, ReadOptions, detect_format, open_log
 from .io.base import LogDescription, ReadReport
 from .types import NS_PER_S, Pose2D, Scan
 
-__all__ = ["LogInfo", "StreamStat", "log_info", "stream_rows", "summary_rows"]
+__all__ = ["LogInfo", "StreamStat", "log_info", "scan_clock", "stream_rows", "summary_rows"]
 
 DEFAULT_SAMPLE = 500
+#: A clock is synthetic when its first stamp is a multiple of this (a whole millisecond) and every scan
+#: period is the same to the nanosecond (over at least ``_MIN_SYNTHETIC_SCANS`` scans): a recorded clock
+#: jitters.
+_ROUND_START_NS = 1_000_000
+_MIN_SYNTHETIC_SCANS = 3
 
 
 @dataclass(frozen=True, slots=True)
 class StreamStat:
-    """One stream (ROS topic / CARMEN message type): count and mean rate ((count - 1) / scan duration)."""
+    """One stream (ROS topic / CARMEN message type): count and rates.
+
+    Attributes:
+        rate_hz: the scan stream's 1 / median scan period; another stream's average (its stamps are not read).
+        average_hz: (count - 1) / scan duration.
+    """
 
     name: str
     msgtype: str
     role: str
     count: int | None
     rate_hz: float | None
+    average_hz: float | None
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,6 +62,9 @@ class LogInfo:
         path, format, size_bytes: the log.
         scans: number of scans (ticks a replay gets).
         start_ns, end_ns, duration_s: first / last scan stamp and their difference.
+        scan_period_s: the median period between scans (None under two scans).
+        clock_warning: the scan stamps are exactly periodic from a round start (``scan_clock``'s warning,
+            also in ``warnings``), else None.
         streams: per topic / message type counts and rates.
         beams: distinct beam counts per scan.
         angle_min_deg, angle_max_deg, resolution_deg, fov_deg: scan geometry (of the first scan).
@@ -103,17 +124,37 @@ class LogInfo:
     summary_source: str
     warnings: tuple[str, ...] = ()
     notes: tuple[str, ...] = field(default=())
+    scan_period_s: float | None = None
+    clock_warning: str | None = None
 
     @property
     def sampled(self) -> bool:
         return self.stats_scans < self.scans
 
+    @property
+    def synthetic_clock(self) -> bool:
+        return self.clock_warning is not None
+
+    @property
+    def scan_rate_hz(self) -> float | None:
+        """1 / the median scan period."""
+        return 1.0 / self.scan_period_s if self.scan_period_s else None
+
+    @property
+    def average_rate_hz(self) -> float | None:
+        """(scans - 1) / duration: the scan rate averaged over gaps."""
+        return (self.scans - 1) / self.duration_s if self.scans > 1 and self.duration_s > 0 else None
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (tuples become lists; the streams a list of dicts)."""
+        """JSON-ready dict (tuples become lists; the streams a list of dicts; start and end also as UTC
+        dates, ISO 8601)."""
         d = asdict(self)
         d["sampled"] = self.sampled
         d["start_s"] = None if self.start_ns is None else self.start_ns / NS_PER_S
         d["end_s"] = None if self.end_ns is None else self.end_ns / NS_PER_S
+        d["start_utc"], d["end_utc"] = _utc(self.start_ns, "T"), _utc(self.end_ns, "T")
+        d["scan_rate_hz"], d["average_rate_hz"] = self.scan_rate_hz, self.average_rate_hz
+        d["synthetic_clock"] = self.synthetic_clock
         out: dict[str, Any] = _jsonable(d)
         return out
 
@@ -202,31 +243,50 @@ def _size(path: Path) -> int:
 
 
 def _streams(
-    desc: LogDescription, counts: dict[str, int] | None, duration_s: float
+    desc: LogDescription, counts: dict[str, int] | None, duration_s: float, scan_period_s: float | None
 ) -> tuple[StreamStat, ...]:
+    """Each stream's count and rates; the scan stream's rate from its median period ``scan_period_s``."""
     out = []
     for s in desc.streams:
         count = counts.get(s.name, s.count) if counts is not None else s.count
         periodic = count is not None and count > 1 and s.role not in ("param", "tf_static")
-        rate = (count - 1) / duration_s if periodic and duration_s > 0 else None  # type: ignore[operator]
-        out.append(StreamStat(s.name, s.msgtype, s.role, count, rate))
+        average = (count - 1) / duration_s if periodic and duration_s > 0 else None  # type: ignore[operator]
+        median = 1.0 / scan_period_s if s.name == desc.scan_stream and scan_period_s else None
+        out.append(StreamStat(s.name, s.msgtype, s.role, count, median or average, average))
     return tuple(out)
+
+
+def scan_clock(stamps: ArrayLike) -> tuple[float | None, str | None]:
+    """The median period of the scan ``stamps`` [s] (int ns, any order; None under two) and a warning when
+    the clock is synthetic: every period the same to the nanosecond from a round start (a whole
+    millisecond), as a generator or a converter writes them; a recorded clock jitters."""
+    t = np.sort(np.asarray(stamps, dtype=np.int64))
+    if t.size < 2:
+        return None, None
+    periods = np.diff(t)
+    median = float(np.median(periods)) / NS_PER_S
+    period = int(periods[0])
+    synthetic = (t.size >= _MIN_SYNTHETIC_SCANS and period > 0 and int(t[0]) % _ROUND_START_NS == 0
+                 and bool(np.all(periods == period)))
+    if not synthetic:
+        return median, None
+    return median, (f"synthetic clock: all {t.size} scan stamps are exactly {_fmt_ns(period)} s apart from "
+                    f"a round start ({_fmt_ns(int(t[0]))} s): generated, not recorded, so the rate and the "
+                    "gaps describe the generator, not the sensor")
 
 
 def _carmen_info(path: Path, size: int, opts: ReadOptions) -> LogInfo:
     from .io.carmen import CarmenReader
 
     stats = _BeamStats()
-    first_t: int | None = None
-    last_t: int | None = None
+    stamps = array("q")
     with open_log(path, options=opts) as log:
         assert isinstance(log, CarmenReader)
         for tick in log.ticks():
             stats.add(tick.scan)
-            if first_t is None:
-                first_t = tick.t_ns
-            last_t = tick.t_ns
+            stamps.append(tick.t_ns)
         desc, rep, counts = log.describe(), log.report, log.message_counts
+    first_t, last_t = (stamps[0], stamps[-1]) if stamps else (None, None)
     duration = (last_t - first_t) / NS_PER_S if first_t is not None and last_t is not None else 0.0
     return _assemble(
         path,
@@ -235,10 +295,9 @@ def _carmen_info(path: Path, size: int, opts: ReadOptions) -> LogInfo:
         desc,
         rep,
         stats,
-        first_t,
-        last_t,
+        stamps,
         duration,
-        _streams(desc, counts, duration),
+        counts,
         opts.sync.gap_ns,
         "full pass",
         rep.scans_without_odom_before,
@@ -253,10 +312,9 @@ def _assemble(
     desc: LogDescription,
     rep: ReadReport,
     stats: _BeamStats,
-    first_t: int | None,
-    last_t: int | None,
+    stamps: array[int],
     duration: float,
-    streams: tuple[StreamStat, ...],
+    counts: dict[str, int] | None,
     gap_ns: int,
     source: str,
     before: int | None,
@@ -270,9 +328,12 @@ def _assemble(
 ) -> LogInfo:
     amin, amax, res, fov, rmin, rmax, pose = _geometry(stats.first)
     total = max(stats.total, 1)
+    period, clock = scan_clock(np.frombuffer(stamps, dtype=np.int64) if stamps else ())
+    clock = None if rep.index_clock else clock
     return LogInfo(
         path=str(path), format=fmt, size_bytes=size, scans=rep.scans if scans is None else scans,
-        start_ns=first_t, end_ns=last_t, duration_s=duration, streams=streams,
+        start_ns=min(stamps) if stamps else None, end_ns=max(stamps) if stamps else None, duration_s=duration,
+        streams=_streams(desc, counts, duration, period), scan_period_s=period, clock_warning=clock,
         beams=tuple(sorted(stats.beams)), angle_min_deg=amin, angle_max_deg=amax, resolution_deg=res,
         fov_deg=fov, range_min_m=rmin, range_max_m=rmax, invalid_fraction=stats.invalid / total,
         no_return_fraction=stats.no_return / total, stats_scans=stats.n, laser_pose=pose,
@@ -282,7 +343,7 @@ def _assemble(
         max_gap_s=rep.max_gap_s if max_gap_s is None else max_gap_s, gap_threshold_s=gap_ns / NS_PER_S,
         malformed=rep.malformed, malformed_examples=rep.malformed_examples, scans_without_odom_before=before,
         scans_without_odom_after=after, index_clock=rep.index_clock, summary_source=source,
-        warnings=rep.warnings, notes=desc.notes + notes
+        warnings=rep.warnings + ((clock,) if clock else ()), notes=desc.notes + notes
     )
 
 
@@ -301,9 +362,11 @@ class _StampStats:
     max_gap_ns: int = 0
     before: int = 0
     after: int = 0
+    stamps: array[int] = field(default_factory=lambda: array("q"))
 
     def add(self, t: int) -> None:
         self.seen += 1
+        self.stamps.append(t)
         if self.prev is not None:
             if t < self.prev:
                 self.reversals += 1
@@ -373,7 +436,7 @@ def _ros_info(path: Path, fmt: str, size: int, opts: ReadOptions, *, sample: int
     duration = (last_t - first_t) / NS_PER_S if first_t is not None and last_t is not None else 0.0
     note = (f"beam statistics from {beams.n} of {times.seen} scans (every {every}th)",) if every > 1 else ()
     return _assemble(
-        path, fmt, size, desc, rep, beams, first_t, last_t, duration, _streams(desc, counts, duration),
+        path, fmt, size, desc, rep, beams, times.stamps, duration, counts,
         opts.sync.gap_ns, source, times.before if odom_span else None, times.after if odom_span else None,
         reversals=times.reversals, gaps=times.gaps, max_gap_s=times.max_gap_ns / NS_PER_S, notes=note,
     )  # fmt: skip
@@ -384,9 +447,31 @@ def _ros_info(path: Path, fmt: str, size: int, opts: ReadOptions, *, sample: int
 
 
 def _fmt_t(t_ns: int | None) -> str:
+    """A stamp as seconds with microseconds, and its UTC date."""
     if t_ns is None:
         return "-"
-    return f"{t_ns // NS_PER_S}.{t_ns % NS_PER_S // 1000:06d} s"
+    return f"{t_ns // NS_PER_S}.{t_ns % NS_PER_S // 1000:06d} s ({_utc(t_ns, ' ')} UTC)"
+
+
+def _fmt_ns(ns: int) -> str:
+    """Nanoseconds as seconds with as many decimals as they need (up to nine)."""
+    return f"{ns // NS_PER_S}.{ns % NS_PER_S:09d}".rstrip("0").rstrip(".")
+
+
+def _utc(t_ns: int | None, sep: str) -> str | None:
+    """A stamp as an ISO 8601 UTC date to the millisecond (``sep`` between date and time)."""
+    if t_ns is None:
+        return None
+    date = datetime(1970, 1, 1, tzinfo=UTC) + timedelta(microseconds=t_ns // 1000)
+    return date.replace(tzinfo=None).isoformat(sep=sep, timespec="milliseconds") + ("Z" if sep == "T" else "")
+
+
+def _fmt_rate(info: LogInfo) -> str:
+    """The scan rate row: the median period's rate, then the average over the duration."""
+    if info.scan_rate_hz is None or info.scan_period_s is None:
+        return "-"
+    average = "" if info.average_rate_hz is None else f"; average {info.average_rate_hz:.2f} Hz"
+    return f"{info.scan_rate_hz:.2f} Hz (median period {1000 * info.scan_period_s:.1f} ms{average})"
 
 
 def summary_rows(info: LogInfo) -> list[tuple[str, str]]:
@@ -398,8 +483,10 @@ def summary_rows(info: LogInfo) -> list[tuple[str, str]]:
         ("file", info.path),
         ("format", f"{info.format} ({info.size_bytes / 1e6:.1f} MB; {info.summary_source})"),
         ("scans", f"{info.scans} of {beams} beams"),
-        ("start / end", f"{_fmt_t(info.start_ns)} / {_fmt_t(info.end_ns)}"),
+        ("start", _fmt_t(info.start_ns)),
+        ("end", _fmt_t(info.end_ns)),
         ("duration", f"{info.duration_s:.1f} s"),
+        ("scan rate", _fmt_rate(info)),
         (
             "field of view",
             f"{info.fov_deg:.1f} deg ({info.angle_min_deg:.2f} to {info.angle_max_deg:.2f} deg, "
@@ -432,12 +519,14 @@ def summary_rows(info: LogInfo) -> list[tuple[str, str]]:
     rows.append(("malformed records", malformed))
     if info.index_clock:
         rows.append(("clock", "index clock (no timestamps in the log)"))
+    if info.clock_warning is not None:
+        rows.append(("clock", info.clock_warning))
     rows.extend(("note", n) for n in info.notes)
     return rows
 
 
-def stream_rows(info: LogInfo) -> list[tuple[str, str, str, str, str]]:
-    """(stream, type, used as, count, rate) rows for the streams table."""
+def stream_rows(info: LogInfo) -> list[tuple[str, str, str, str, str, str]]:
+    """(stream, type, used as, count, rate, average) rows for the streams table."""
     return [
         (
             s.name,
@@ -445,6 +534,7 @@ def stream_rows(info: LogInfo) -> list[tuple[str, str, str, str, str]]:
             s.role if s.role != "other" else "",
             "?" if s.count is None else str(s.count),
             "" if s.rate_hz is None else f"{s.rate_hz:.2f} Hz",
+            "" if s.average_hz is None else f"{s.average_hz:.2f} Hz",
         )
         for s in info.streams
     ]

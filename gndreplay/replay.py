@@ -29,6 +29,7 @@ from .config import Config
 from .errors import FOLLOW_NEEDS_SUBGOALS, ConfigError, LogFormatError
 from .fsutil import check_output_dir, resolve_output_dir, staging_dir
 from .io import DEFAULT_READ, ReadOptions
+from .pipeline.model import GridParams
 from .pipeline.stack import MatchInfo, NavigationStack, TickResult, warm_up
 from .report.rundir import RunSink, StagedSink, TrajectoryWriter, tick_tables, write_config, write_summary
 from .report.summary import SummaryRecorder, summarise
@@ -45,6 +46,7 @@ __all__ = [
     "assign_goals",
     "check_navigation",
     "corrected_stream",
+    "far_goal_warning",
     "mounting_for",
     "run_replay",
     "warm_up_all",
@@ -382,3 +384,20 @@ def run_log(
             on_stage=on_stage,
             on_compile=on_compile,
         )
+
+
+def far_goal_warning(goal_xy: tuple[float, float], trajectory_xy: Any, grid: GridParams) -> str | None:
+    """One line when the fixed goal ``goal_xy`` lies farther than half the grid's side from every pose of
+    the corrected trajectory ``trajectory_xy`` ((N, 2) x, y [m]), else None: the goal was then never on the
+    robot-centred grid the planner plans over, so every tick planned toward the grid's border instead (most
+    often a goal given in another frame or unit)."""
+    xy = np.asarray(trajectory_xy, dtype=np.float64).reshape(-1, 2)
+    if xy.shape[0] == 0:
+        return None
+    reach_m = 0.5 * grid.size_cells * grid.cell_m
+    nearest = float(np.min(np.hypot(xy[:, 0] - goal_xy[0], xy[:, 1] - goal_xy[1])))
+    if not nearest > reach_m:
+        return None
+    return (f"goal ({goal_xy[0]:g}, {goal_xy[1]:g}) is {nearest:.1f} m from the nearest pose of the "
+            f"corrected trajectory, beyond the grid's half side ({reach_m:g} m): it was never on the "
+            "planner's grid, which planned toward its border on every tick")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -60,14 +61,15 @@ def carmen_log(tmp_path: Path) -> Path:
     return p
 
 
-def write_mcap_bag(tmp_path: Path, n: int = 40) -> Path:
+def write_mcap_bag(tmp_path: Path, n: int = 40, stamps: list[int] | None = None) -> Path:
+    """A ROS 2 MCAP bag of scans alone, stamped 5 s + 0.1 s i (or ``stamps``)."""
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types
     path = tmp_path / "scans"
+    stamps = stamps if stamps is not None else [5 * NS_PER_S + i * 100_000_000 for i in range(n)]
     with Writer2(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
         c = w.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=ts)
-        for i in range(n):
-            t = 5 * NS_PER_S + i * 100_000_000
+        for t in stamps:
             hdr = T["std_msgs/msg/Header"](
                 stamp=T["builtin_interfaces/msg/Time"](sec=t // NS_PER_S, nanosec=t % NS_PER_S), frame_id="l"
             )
@@ -108,6 +110,8 @@ def test_info_table(carmen_log: Path) -> None:
     assert "180.0 deg" in out
     assert "ODOM (interpolated at scan stamps)" in out
     assert "FLASER" in out and "5.00 Hz" in out  # 30 scans, one every 0.2 s
+    assert "start" in out and "1000.000000 s (1970-01-01 00:16:40.000 UTC)" in out
+    assert "scan rate" in out and "5.00 Hz (median period 200.0 ms; average 5.00 Hz)" in out
 
 
 def test_info_json(carmen_log: Path) -> None:
@@ -265,3 +269,80 @@ def test_the_installed_entry_point_gives_no_traceback(datasets: Path) -> None:
     assert proc.stdout == ""
     assert proc.stderr.count("\n") == 1 and "laser_scan_matcher_demo.bag" in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+# ------------------------------------------------------------------------------------------------------------
+# the scan rate (median period), the dates, a synthetic clock
+
+
+def jittered(start_ns: int, n: int, period_ns: int, gap_after: int | None = None,
+             gap_ns: int = 0) -> list[int]:
+    """Stamps one period apart with a recorded clock's jitter (up to +-0.9 ms, deterministic), and a gap."""
+    return [start_ns + i * period_ns + (i * 7919 % 19 - 9) * 100_000
+            + (gap_ns if gap_after is not None and i > gap_after else 0) for i in range(n)]
+
+
+def carmen_at(tmp_path: Path, stamps: list[int], name: str = "clock.clf") -> Path:
+    angles = -math.pi / 2 + np.arange(181) * math.pi / 180
+    ticks = [Tick(i, t, Scan(t, np.full(181, 4.0), angles, 20.0), Pose2D(0.1 * i, 0.0, 0.0))
+             for i, t in enumerate(stamps)]
+    p = tmp_path / name
+    write_carmen(p, ticks)
+    return p
+
+
+def test_the_scan_rate_is_the_median_period_with_the_average_beside_it(tmp_path: Path) -> None:
+    """10 Hz with a 20 s gap: count / duration says 3.7 Hz, the median period says what the laser does."""
+    start = 1_300_000_000 * NS_PER_S + 123_456_000
+    stamps = jittered(start, 120, 100_000_000, gap_after=59, gap_ns=20 * NS_PER_S)
+    d = info_json(carmen_at(tmp_path, stamps))
+    assert d["scan_period_s"] == pytest.approx(0.1, abs=1e-3)
+    assert d["scan_rate_hz"] == pytest.approx(10.0, rel=0.01)
+    assert d["average_rate_hz"] == pytest.approx(119 / d["duration_s"]) and d["average_rate_hz"] < 4.0
+    scan = next(s for s in d["streams"] if s["role"] == "scan")
+    assert scan["rate_hz"] == pytest.approx(d["scan_rate_hz"])
+    assert scan["average_hz"] == pytest.approx(d["average_rate_hz"])
+    assert d["synthetic_clock"] is False and not any("synthetic" in w for w in d["warnings"])
+    assert d["start_utc"] == "2011-03-13T07:06:40.122Z"  # 1.3e9 s + 123.456 ms - 0.9 ms of jitter
+    out = runner.invoke(app, ["info", str(carmen_at(tmp_path, stamps))], env={"COLUMNS": "200"}).stdout
+    assert re.search(r"scan rate +10\.0\d Hz \(median period 99\.\d ms; average 3\.7\d Hz\)", out), out
+    assert "synthetic" not in out
+
+
+def test_a_generated_clock_is_a_warning_in_the_table_and_the_json(carmen_log: Path) -> None:
+    """The fixture's stamps are 1000 s + 0.2 s i, exactly: a simulator's or a converter's clock."""
+    d = info_json(carmen_log)
+    assert d["synthetic_clock"] is True
+    expected = "synthetic clock: all 30 scan stamps are exactly 0.2 s apart from a round start (1000 s)"
+    assert any(w.startswith(expected) for w in d["warnings"]) and d["clock_warning"].startswith(expected)
+    assert d["start_utc"] == "1970-01-01T00:16:40.000Z" and d["end_utc"] == "1970-01-01T00:16:45.800Z"
+    out = runner.invoke(app, ["info", str(carmen_log)], env={"COLUMNS": "300"}).stdout
+    assert f"clock                   {expected}" in out
+
+
+def test_periodic_stamps_from_a_start_that_is_not_round_are_not_flagged(tmp_path: Path) -> None:
+    periodic = [1000 * NS_PER_S + 123_457 + i * 200_000_000 for i in range(30)]
+    assert info_json(carmen_at(tmp_path, periodic))["synthetic_clock"] is False
+    two = [1000 * NS_PER_S, 1000 * NS_PER_S + 200_000_000]  # too few to say
+    assert info_json(carmen_at(tmp_path, two, "two.clf"))["synthetic_clock"] is False
+
+
+def test_a_bag_gets_the_median_rate_the_dates_and_the_clock_warning(tmp_path: Path) -> None:
+    start = 1_700_000_000 * NS_PER_S + 5_000_000
+    stamps = jittered(start, 40, 100_000_000, gap_after=19, gap_ns=10 * NS_PER_S)
+    recorded = write_mcap_bag(tmp_path / "rec", stamps=stamps)
+    d = info_json(recorded)
+    assert d["scan_rate_hz"] == pytest.approx(10.0, rel=0.01) and d["average_rate_hz"] < 3.0
+    assert d["streams"][0]["rate_hz"] == pytest.approx(d["scan_rate_hz"]) and d["synthetic_clock"] is False
+    assert d["start_utc"] == "2023-11-14T22:13:20.004Z"
+    generated = info_json(write_mcap_bag(tmp_path / "gen"))  # 5 s + 0.1 s i
+    assert generated["synthetic_clock"] is True and generated["scan_rate_hz"] == pytest.approx(10.0)
+    assert "exactly 0.1 s apart from a round start (5 s)" in generated["clock_warning"]
+
+
+def test_a_bag_from_the_reader_tests_is_periodic_but_recorded(tmp_path: Path) -> None:
+    from test_io_rosbag import T0, write_bag
+
+    d = info_json(write_bag(tmp_path, "ros1"))  # exactly 0.1 s apart, from T0 = ... .123456789 s
+    assert d["synthetic_clock"] is False and d["scan_rate_hz"] == pytest.approx(10.0)
+    assert d["start_s"] == pytest.approx(T0 / NS_PER_S) and d["start_utc"] == "2023-11-14T22:13:20.123Z"

@@ -78,6 +78,11 @@ LOG = "nope.clf"  # options are checked before the log is opened
     (["simulate", "u_trp"], ("u_trp: no such scenario file or shipped scenario", "(did you mean 'u_trap'?)")),
     (["simulate", "u_trap", "--mode", "folow"], ("(did you mean 'follow'?)",)),
     (["bogus"], ("No such command 'bogus'",)),
+    (["simulate", "u_trap", "--seed", "x"], ("Invalid value for '--seed'",)),  # typer's own parameter error
+    (["batch", LOG, "--jobs", "two"], ("Invalid value for '--jobs'",)),
+    (["info"], ("Missing argument 'log'",)),
+    (["run", LOG, "--until"], ("Option '--until' requires an argument",)),
+    (["run", LOG, "--json=1"], ("Option '--json' does not take a value",)),
 ])
 def test_a_bad_option_value_is_one_line(tmp_path: Path, monkeypatch: Any, args: list[str],
                                         needles: tuple[str, ...]) -> None:
@@ -120,3 +125,19 @@ def test_the_option_bounds_are_the_library_bounds() -> None:
     assert cli._MAX_POSITION_M == MAX_ABS_SUBGOAL_M
     assert cli._MAX_SECONDS == MAX_ABS_TIME_NS / 1e9
     assert cli._MAX_SCENARIO_TIME_S == MAX_TIME_S and MIN_TIME_LIMIT_S == 0.1  # --time-limit: 0.1 to 1e6
+
+
+def test_a_misspelt_toml_key_or_section_gets_a_suggestion(tmp_path: Path, monkeypatch: Any) -> None:
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "key.toml").write_text("[reactor]\nsecurty_m = 0.4\n")
+    (tmp_path / "section.toml").write_text("[reactr]\nsecurity_m = 0.4\n")
+    refused(["run", LOG, "--config", "key.toml"],
+            "key.toml: unknown key 'reactor.securty_m' (did you mean 'security_m'?)")
+    refused(["scanmatch", LOG, "--config", "section.toml"], "unknown key 'reactr' (did you mean 'reactor'?)")
+
+
+def test_a_misspelt_log_format_gets_a_suggestion(tmp_path: Path) -> None:
+    log = tmp_path / "run.clf"
+    log.write_text("")
+    refused(["info", str(log), "--format", "carmn"], "unknown format 'carmn'", "(did you mean 'carmen'?)")
+    refused(["run", str(log), "--format", "ros-2"], "unknown format 'ros-2'", "(did you mean 'ros2'?)")

@@ -512,7 +512,8 @@ def test_a_full_disk_during_report_is_one_line(finished_run: Path, tmp_path: Pat
 def test_a_full_disk_during_simulate_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     _fail_writing(monkeypatch, "result.json", errno.ENOSPC)
     out = tmp_path / "sim"
-    line = one_error_line(*cli("simulate", "u_trap", "--out", out, "--time-limit", "0.5", "--no-figures"))
+    line = one_error_line(*cli("simulate", "u_trap", "--out", out, "--time-limit", "0.5", "--no-figures",
+                               "--progress", "none"))
     assert line.startswith(f"gndreplay: error: {out}: cannot write (No space left on device)"), line
     assert list(tmp_path.iterdir()) == []
 

@@ -288,20 +288,22 @@ def test_cli_shows_a_python_warning_as_one_line(capsys: pytest.CaptureFixture[st
 def test_run_progress_says_compiling_once_and_takes_its_total_from_the_log(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    """Off a terminal the progress is silent but for one compile notice (cold numba cache); --quiet and
-    --json silence it too. The bar's total is --until, or the log's duration when its format knows it."""
+    """Off a terminal the warm-up says one compile notice (cold numba cache); style "none" (--progress none,
+    --quiet, --json) silences it. The total is --until, or the log's duration when its format knows it."""
     from types import SimpleNamespace
 
-    from gndreplay.cli import _RunProgress
+    from gndreplay.cli import _LogProgress, _Progress
 
-    with _RunProgress(enabled=True, label="log", until_s=None) as p:
+    with _Progress("plain") as shown:
+        p = _LogProgress(shown, "log", until_s=None)
         p.on_stage("warm-up")
         p.on_compile("plan")
         p.on_compile("nd_step")
         p.on_open(SimpleNamespace(start_ns=0, end_ns=90 * 10**9, streams=(), scan_stream="x"))
         assert p.total == 90.0 and p.compiled == 2
     assert capsys.readouterr().err.splitlines() == ["gndreplay: compiling (first run only)..."]
-    with _RunProgress(enabled=False, label="log", until_s=30.0) as p:
+    with _Progress("none") as shown:
+        p = _LogProgress(shown, "log", until_s=30.0)
         p.on_compile("plan")
         p.on_open(SimpleNamespace(start_ns=0, end_ns=90 * 10**9, streams=(), scan_stream="x"))
         assert p.total == 30.0
@@ -313,7 +315,7 @@ def test_carmen_progress_follows_the_share_of_the_file_read(tmp_path: Path) -> N
     file for .gz/.bz2, in steps of their blocks), rising steadily to the end, with a total of 100 %."""
     import bz2
 
-    from gndreplay.cli import _RunProgress
+    from gndreplay.cli import _LogProgress, _Progress
     from gndreplay.io import open_log
 
     plain = tmp_path / "office.clf"
@@ -321,7 +323,8 @@ def test_carmen_progress_follows_the_share_of_the_file_read(tmp_path: Path) -> N
     with open_log(plain) as reader:
         desc = reader.describe()
         assert desc.start_ns is None and desc.end_ns is None
-        with _RunProgress(enabled=True, label="log", until_s=None) as p:
+        with _Progress("plain") as shown:
+            p = _LogProgress(shown, "log", until_s=None)
             p.on_open(reader)
             assert (p.total, p.unit) == (100.0, "%")
         seen = [reader.fraction_read() for k, _ in enumerate(reader.ticks()) if k % 50 == 0]

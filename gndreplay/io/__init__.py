@@ -16,7 +16,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path, PurePath
 
-from ..errors import LogFormatError
+from ..errors import LogFormatError, did_you_mean
 from ..types import Tick
 from .base import LogDescription, LogReader, ReadReport, StreamInfo, special_file_kind
 from .carmen import CarmenReader, write_carmen
@@ -129,7 +129,7 @@ def detect_format(path: Path, fmt: str | None = None) -> tuple[str, Path]:
         if name not in READERS:
             raise LogFormatError(
                 f"{path}: unknown format {fmt!r}; known formats: {', '.join(READERS)} "
-                "(and 'rosbag' for any ROS bag)"
+                f"(and 'rosbag' for any ROS bag){did_you_mean(fmt, [*READERS, *_ALIASES])}"
             )
         ros2 = _ros2_dir(path)
         return name, ros2 if (ros2 is not None and name == "rosbag2") else path

@@ -18,7 +18,7 @@ from .. import detmath as dm
 from ..errors import ScanMatchError
 from ..evaluation import Relations, RelationStats, relation_errors, write_tum
 from ..fsutil import check_output_dir, resolve_output_dir, staging_dir
-from ..io import DEFAULT_READ, ReadOptions, open_log
+from ..io import DEFAULT_READ, LogReader, ReadOptions, open_log
 from ..types import Tick
 from .base import Matcher, OdomMatcher
 from .idc import IdcMatcher, IdcParams
@@ -160,13 +160,21 @@ def matcher_report(traj: CorrectedTrajectory, relations: Relations | None = None
     return MatcherReport(traj.method, int(traj.t_ns.size), traj.failures, med, p99, stats, tum_path)
 
 
-def log_ticks(log: Path, read: ReadOptions = DEFAULT_READ) -> Callable[[], Iterator[Tick]]:
+def log_ticks(log: Path, read: ReadOptions = DEFAULT_READ, *,
+              on_open: Callable[[LogReader], None] | None = None,
+              on_tick: Callable[[Tick], None] | None = None) -> Callable[[], Iterator[Tick]]:
     """A factory of fresh tick streams of ``log`` (``run_scanmatch``'s ``ticks_factory``): each call opens
-    the log for one matcher's pass (an unreadable log or a bad topic fails on the first)."""
+    the log for one matcher's pass (an unreadable log or a bad topic fails on the first). ``on_open`` hears
+    each opened reader and ``on_tick`` each tick as it is handed out (progress displays)."""
 
     def ticks() -> Iterator[Tick]:
         with open_log(log, options=read) as reader:
-            yield from reader.ticks()
+            if on_open is not None:
+                on_open(reader)
+            for tick in reader.ticks():
+                if on_tick is not None:
+                    on_tick(tick)
+                yield tick
 
     return ticks
 
@@ -175,7 +183,8 @@ def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence
                   relations: Relations | None = None, out_dir: str | os.PathLike[str] | None = None,
                   idc: IdcParams | None = None, kiss: KissParams | None = None,
                   tol_s: float = 1e-4, relations_name: str = "relations", overwrite: bool = False,
-                  inputs: Sequence[str | os.PathLike[str]] = ()) -> list[MatcherReport]:
+                  inputs: Sequence[str | os.PathLike[str]] = (),
+                  on_pass: Callable[[str], None] | None = None) -> list[MatcherReport]:
     """The ``gndreplay scanmatch`` command as a function: each matcher over the same log, one report each.
 
     Args:
@@ -192,6 +201,7 @@ def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence
         relations_name: how error messages name the relations (their file).
         overwrite: replace an earlier gndreplay output at ``out_dir``.
         inputs: the input files (log, relations), which ``out_dir`` must not contain.
+        on_pass: hears each matcher's name before its pass over the log (progress displays).
 
     Raises:
         ScanMatchError: unknown method, or relations given of which none matches a scan of the log (a table
@@ -206,6 +216,8 @@ def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence
     rows: list[MatcherReport] = []
     trajs: list[CorrectedTrajectory] = []
     for method in methods:
+        if on_pass is not None:
+            on_pass(method)
         traj = correct_trajectory(ticks_factory(), make_matcher(method, idc=idc, kiss=kiss))
         row = matcher_report(traj, relations, tol_s=tol_s)
         if relations is not None and row.relations is not None and row.relations.matched == 0:
