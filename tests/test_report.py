@@ -411,8 +411,7 @@ def _check_run_dir(out: Path, ticks: int) -> None:
     with AnyReader([out / "results.mcap"]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
     assert counts["/gndreplay/odom"] == counts["/cmd_vel"] == counts["/tf"] == ticks
-    duration = json.loads((out / "summary.json").read_text())["duration_s"]
-    assert abs(counts["/gndreplay/grid"] - duration) <= 0.1 * duration + 2
+    assert 1 <= counts["/gndreplay/grid"] <= ticks  # the grid of each tick that changed it
     maps = load_maps(out / "maps.npz")
     assert maps.scans == ticks and maps.snapshot is not None
     # report rebuilds the same figures from the files alone

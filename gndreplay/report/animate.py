@@ -225,7 +225,7 @@ def _frames(rd: _Reader, start: int, stop: int, keep: set[int], t0: int) -> Iter
         m = {k: rd.decode(c, raw) for k, (c, raw) in msgs.items() if k in _TICK_TOPICS}
         if any(k not in m for k in _TICK_TOPICS):
             continue
-        p = m[_TICK].pose.pose
+        p, goal = m[_TICK].pose.pose, m["/gndreplay/goal"].pose.position
         tw = m["/cmd_vel"].twist
         cells, origin, cell_m = _grid_cells(latest("/gndreplay/grid"))
         path = np.zeros((0, 2))
@@ -240,7 +240,7 @@ def _frames(rd: _Reader, start: int, stop: int, keep: set[int], t0: int) -> Iter
             t_ns=t, t_s=(t - t0) / NS_PER_S,
             pose=Pose2D(float(p.position.x), float(p.position.y), _yaw(p.orientation)),
             cells=cells, origin_xy=origin, cell_m=cell_m, scan_xy=scan, path_xy=path,
-            goal_xy=(float(m["/gndreplay/goal"].point.x), float(m["/gndreplay/goal"].point.y)),
+            goal_xy=(float(goal.x), float(goal.y)),
             command=Command(t, float(tw.linear.x), float(tw.angular.z), float(tw.linear.y)),
             mode=m["/gndreplay/mode"].data, situation=m["/gndreplay/situation"].data,
             flags=tuple(f for f in m["/gndreplay/flags"].data.split("|") if f),

@@ -5,9 +5,10 @@ command sweeps over the braking horizon, titled with the time, the mode and why.
 
 - ``DecisionInput``: what the stack saw and decided at one tick, taken from a replay's tick, result and
   grid (``decision_input``) or read back from results.mcap (``report.animate``).
-- ``decision_view``: that tick with what the configuration says about it (ND+'s diagram of the grid's
-  obstacles, ``pipeline.nd.nd_diagram``; the footprint; the poses of the swept-area check,
-  ``pipeline.supervisor.arc_poses`` over ``braking_time_s``), cropped to the view.
+- ``decision_geometry``: what the configuration says about a tick (ND+'s diagram of the grid's obstacles,
+  ``pipeline.nd.nd_diagram``; the poses of the swept-area check, ``pipeline.supervisor.arc_poses`` over
+  ``braking_time_s``); results.mcap's decision markers are drawn from it too.
+- ``decision_view``: that tick with its geometry and the footprint, cropped to the view.
 - ``draw_decision``: the view on a matplotlib Axes. The view is world-aligned and centred on the robot, as
   the grid is; the robot-frame parts (scan, diagram, footprint, swept area, direction) are turned by the
   robot's heading.
@@ -36,8 +37,8 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-__all__ = ["DecisionInput", "DecisionView", "decision_figure", "decision_input", "decision_reason",
-           "decision_view", "draw_decision", "grid_from_cells"]
+__all__ = ["DecisionInput", "DecisionView", "decision_figure", "decision_geometry", "decision_input",
+           "decision_reason", "decision_view", "draw_decision", "grid_from_cells"]
 
 F64 = NDArray[np.float64]
 
@@ -170,6 +171,19 @@ def _crop(inp: DecisionInput, radius_m: float) -> tuple[NDArray[np.uint8], tuple
     return inp.cells[r0:r1, c0:c1], (x0, x0 + (c1 - c0) * c, y0, y0 + (r1 - r0) * c)
 
 
+def decision_geometry(grid: RobotCentredGrid, pose: Pose2D, command: Command,
+                      cfg: Config) -> tuple[NdDiagram, F64]:
+    """ND+'s diagram of the grid's occupied cells within the reactor's range at ``pose`` (what GND's reactor
+    sees), and the robot-frame poses (P, 3) x, y, theta of the footprint along the command's arc over the
+    reflexive check's braking horizon ((0, 3) for a still command)."""
+    diagram = nd_diagram(grid.occupied_points(pose, cfg.reactor.max_range_m), cfg.robot, cfg.reactor)
+    c = command
+    if c.v_mps == 0.0 and c.vy_mps == 0.0 and c.w_radps == 0.0:
+        return diagram, np.zeros((0, 3))
+    t_end = braking_time_s(c.v_mps, c.vy_mps, c.w_radps, cfg.robot, cfg.supervisor)
+    return diagram, np.column_stack(arc_poses(c.v_mps, c.vy_mps, c.w_radps, t_end, cfg.robot))
+
+
 def decision_view(inp: DecisionInput, cfg: Config, *, headline: str = "",
                   radius_m: float = 5.0) -> DecisionView:
     """The view of ``inp`` under the run's configuration: ND+'s diagram of the grid's occupied cells within
@@ -177,13 +191,7 @@ def decision_view(inp: DecisionInput, cfg: Config, *, headline: str = "",
     reflexive check's braking horizon, the grid cropped to a square of ``radius_m``. ``headline`` (the
     event) leads the title."""
     grid = grid_from_cells(inp.cells, inp.origin_xy, inp.cell_m)
-    diagram = nd_diagram(grid.occupied_points(inp.pose, cfg.reactor.max_range_m), cfg.robot, cfg.reactor)
-    c = inp.command
-    if c.v_mps == 0.0 and c.vy_mps == 0.0 and c.w_radps == 0.0:
-        sweep = np.zeros((0, 3))
-    else:
-        t_end = braking_time_s(c.v_mps, c.vy_mps, c.w_radps, cfg.robot, cfg.supervisor)
-        sweep = np.column_stack(arc_poses(c.v_mps, c.vy_mps, c.w_radps, t_end, cfg.robot))
+    diagram, sweep = decision_geometry(grid, inp.pose, inp.command, cfg)
     cells, extent = _crop(inp, radius_m)
     head = f"t = {inp.t_s:.2f} s" + (f"  —  {headline}" if headline else "")
     return DecisionView(
