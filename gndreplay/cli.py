@@ -24,7 +24,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, NoReturn, ParamSpec, TextIO, TypeVar, cast
+from typing import TYPE_CHECKING, Annotated, Any, Literal, NoReturn, ParamSpec, TextIO, TypeVar, cast
 
 import typer
 from rich.markup import escape
@@ -904,7 +904,8 @@ def run(
 
     goal_xy = _parse_goal(goal, goal_ahead)
     window = _window(t_from, t_to, figures=figures)
-    grid_every = choose("--mcap-grid", mcap_grid, _MCAP_GRID)
+    every_tick = choose("--mcap-grid", mcap_grid, _MCAP_GRID) == "every"
+    grid_every: int | Literal["change"] = 1 if every_tick else "change"
     cfg = setup.config(matcher=matcher, enforce_budgets=enforce_budgets)
     log_path = log if log is not None else sample_log()
     out_dir = out if out is not None else Path("out") / _log_stem(log_path)
@@ -915,7 +916,7 @@ def run(
         watch = _LogProgress(shown, log_path.name, until_s=until)
         sinks = default_sinks(figures=figures, mcap=mcap, enforce_budgets=cfg.supervisor.enforce_budgets,
                               on_draw=watch.on_draw, snapshots=_snapshot_options(snapshots, figures=figures),
-                              mcap_grid=grid_every)
+                              config=cfg, mcap_grid=grid_every)
         summary = run_log(log_path, cfg, out_dir, options=options, read=read, sinks=sinks,
                           overwrite=overwrite, **watch.callbacks())
         if window:
