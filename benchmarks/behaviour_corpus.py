@@ -6,7 +6,7 @@ scanmatch), and every shipped scenario x preset x planner for the seeds asked (a
 navigation mode than GND runs once per preset). The manifest lists the SHA-256 of every behaviour file:
 commands.csv, the TUM trajectories, result.json, log.mcap, results.mcap, config.toml, maps.npz, and
 summary.json without its wall-clock sections (``latency_ms``, ``over_budget``), and results.mcap's messages
-without its wall-clock ``/gndreplay/timing`` topic. Timing files are left out.
+(topic, stamp, payload: the same whatever the file's chunking). Timing files are left out.
 
 The CLI is driven as a user runs it (``gndreplay.cli:main``, the console script's entry), so the same
 script measures any tree:
@@ -33,7 +33,6 @@ PLANNERS = ("nf1", "tunnel")
 PRESETS = ("wheelchair", "xr4000")
 SKIP_FILES = {"timing.csv", "sim_timing.json", "report.md"}
 WALL_CLOCK_KEYS = ("latency_ms", "over_budget")
-WALL_CLOCK_TOPICS = ("/gndreplay/timing",)
 
 
 def gnd(*args: str) -> list[str]:
@@ -77,19 +76,18 @@ def jobs_for(out: Path, seeds: list[int], with_logs: bool) -> list[tuple[str, li
 
 
 def mcap_digest(path: Path) -> str:
-    """SHA-256 of an MCAP file's messages (topic, log time, payload) in file order, wall-clock topics out."""
+    """SHA-256 of an MCAP file's messages (topic, log time, payload) in file order."""
     from mcap.reader import make_reader
 
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for _, channel, message in make_reader(f).iter_messages(log_time_order=False):
-            if channel.topic not in WALL_CLOCK_TOPICS:
-                h.update(channel.topic.encode() + message.log_time.to_bytes(8, "little") + message.data)
+            h.update(channel.topic.encode() + message.log_time.to_bytes(8, "little") + message.data)
     return h.hexdigest()
 
 
 def digest(path: Path) -> str:
-    """SHA-256 of a behaviour file; summary.json and results.mcap without their wall-clock parts."""
+    """SHA-256 of a behaviour file; summary.json without its wall-clock parts, results.mcap by message."""
     if path.name == "results.mcap":
         return mcap_digest(path)
     data = path.read_bytes()

@@ -5,8 +5,8 @@ The frames come from the run directory's results.mcap (``gndreplay run --mcap``)
 the command (/gndreplay/odom, /cmd_vel), the goal, the planned path, the robot-centred grid (the latest one:
 it is recorded at intervals), mode, situation, flags, the active mode and the takeover reason, and the scan
 when the file has a sensor_msgs/LaserScan topic (placed with /tf_static). The robot and the stack's settings
-come from the run's config.toml. ND+'s chosen region and direction are not in the file: the frames show
-ND+'s diagram of the grid (sectors, gaps, security zone) without them.
+come from the run's config.toml. The frames show ND+'s diagram of the grid (sectors, gaps, security zone)
+without its chosen region and direction (the /gndreplay/decision markers hold them; they are not read here).
 
 Memory stays bounded: the file is read as a stream, one tick's messages at a time, and each frame goes to
 the encoder as it is drawn (the GIF is written frame by frame, ``_gif_stream``).
