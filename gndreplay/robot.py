@@ -6,8 +6,14 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
+from numpy.typing import NDArray
+
+from . import detmath as dm
+
 __all__ = [
-    "WHEELCHAIR_LASER", "WHEELCHAIR_ROBOT", "XR4000_LASER", "XR4000_ROBOT", "LaserConfig", "RobotConfig",
+    "CIRCLE_VERTICES", "WHEELCHAIR_LASER", "WHEELCHAIR_ROBOT", "XR4000_LASER", "XR4000_ROBOT", "LaserConfig",
+    "RobotConfig", "footprint_outline",
 ]
 
 
@@ -111,3 +117,15 @@ class LaserConfig:
 WHEELCHAIR_LASER = LaserConfig()
 XR4000_LASER = LaserConfig(period_s=0.15)
 
+
+CIRCLE_VERTICES = 32
+"""Vertices of a circular footprint's outline."""
+
+
+def footprint_outline(robot: RobotConfig) -> NDArray[np.float64]:
+    """(K, 2) vertices of the footprint in the robot frame, counter-clockwise (a 32-gon for a circle)."""
+    if robot.shape == "circle":
+        a = np.arange(CIRCLE_VERTICES) * (2.0 * math.pi / CIRCLE_VERTICES)
+        return np.column_stack([robot.radius_m * dm.cos_a(a), robot.radius_m * dm.sin_a(a)])
+    hw = robot.width_m / 2.0
+    return np.array([[robot.front_m, -hw], [robot.front_m, hw], [-robot.rear_m, hw], [-robot.rear_m, -hw]])

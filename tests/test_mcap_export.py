@@ -40,7 +40,6 @@ from gndreplay.report.mcap_export import (
     TRIANGLE_LIST,
     Marker,
     decision_markers,
-    footprint_outline,
     hits_to_occupancy,
     marker_array_cdr,
     path_status,
@@ -48,6 +47,7 @@ from gndreplay.report.mcap_export import (
     scan_beams,
 )
 from gndreplay.report.sinks import default_sinks
+from gndreplay.robot import footprint_outline
 from gndreplay.types import Command, Flag, Mode, Pose2D, Scan, Tick
 
 PERIOD_NS = 200_000_000  # 5 Hz

@@ -66,7 +66,7 @@ from ..geometry import compose, inverse, relative, transform_points
 from ..pipeline.model import RobotCentredGrid
 from ..pipeline.nd import NdDiagram, sector_angles
 from ..pipeline.stack import TickResult
-from ..robot import RobotConfig
+from ..robot import RobotConfig, footprint_outline
 from ..types import REFLEXIVE_MODES, Flag, Pose2D, Tick
 from .decision import decision_geometry
 from .foxglove import LAYOUT_FILE, LayoutSpec, write_layout
@@ -75,7 +75,7 @@ from .rundir import recorded_flags
 
 __all__ = [
     "MCAP_FILE", "TOPICS", "GridEvery", "Marker", "McapSink", "RosMessages", "decision_markers",
-    "footprint_outline", "grid_to_occupancy", "hits_to_occupancy", "layout_spec", "marker_array_cdr",
+    "grid_to_occupancy", "hits_to_occupancy", "layout_spec", "marker_array_cdr",
     "path_status", "region_labels", "scan_beams",
 ]
 
@@ -358,8 +358,6 @@ DIRECTION_M = 1.0
 """Length of the chosen-direction arrow [m]."""
 SWEPT_POSES = 6
 """Footprints drawn along the command's arc over its braking horizon (the first now, the last at its end)."""
-CIRCLE_VERTICES = 32
-"""Vertices of a circular footprint's outline."""
 
 
 @functools.lru_cache(maxsize=4)
@@ -376,15 +374,6 @@ def _xyz(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
     out[:, 0], out[:, 1], out[:, 2] = x, y, _Z
     out[:, :2] = np.rint(out[:, :2] / MARKER_RESOLUTION_M) * MARKER_RESOLUTION_M
     return out
-
-
-def footprint_outline(robot: RobotConfig) -> NDArray[np.float64]:
-    """(K, 2) vertices of the footprint in the robot frame, counter-clockwise (a 32-gon for a circle)."""
-    if robot.shape == "circle":
-        a = np.arange(CIRCLE_VERTICES) * (2.0 * math.pi / CIRCLE_VERTICES)
-        return np.column_stack([robot.radius_m * dm.cos_a(a), robot.radius_m * dm.sin_a(a)])
-    hw = robot.width_m / 2.0
-    return np.array([[robot.front_m, -hw], [robot.front_m, hw], [-robot.rear_m, hw], [-robot.rear_m, -hw]])
 
 
 def region_labels(gaps: NDArray[np.bool_]) -> NDArray[np.int64]:

@@ -11,10 +11,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .. import detmath as dm
-from ..config import Config
 from ..geometry import compose
-from .geometry import footprint_vertices
+from ..robot import footprint_outline
 
 if TYPE_CHECKING:
     from .closedloop import ClosedLoop
@@ -38,15 +36,6 @@ def _draw_modes(ax: Any, loop: ClosedLoop, truth: np.ndarray, tt: np.ndarray) ->
         ax.plot(truth[sel, 0], truth[sel, 1], "-", color="#e41a1c", lw=3.0, alpha=0.7,
                 label="local navigation" if first else None)
         first = False
-
-
-def footprint_outline(cfg: Config) -> np.ndarray:
-    """The footprint's outline in the robot frame (a 32-gon for a circle), for drawing."""
-    r = cfg.robot
-    if r.shape == "circle":
-        a = np.linspace(0.0, 2.0 * math.pi, 33)[:-1]
-        return np.column_stack([r.radius_m * dm.cos_a(a), r.radius_m * dm.sin_a(a)])
-    return footprint_vertices(r.front_m, r.rear_m, r.width_m)
 
 
 def draw_world(path: Path, loop: ClosedLoop, result: dict[str, Any]) -> Path:
@@ -97,7 +86,7 @@ def draw_world(path: Path, loop: ClosedLoop, result: dict[str, Any]) -> Path:
     tt = np.asarray(rec.truth_t)
     ax.plot(truth[:, 0], truth[:, 1], "-", color="#377eb8", lw=1.2, label="trajectory (truth)")
     _draw_modes(ax, loop, truth, tt)
-    outline = footprint_outline(loop.cfg)
+    outline = footprint_outline(loop.cfg.robot)
     local = np.column_stack([outline, np.zeros(len(outline))])
     for t in np.arange(0.0, (tt[-1] if len(tt) else 0.0) + 1e-9, 1.0):
         k = min(int(np.searchsorted(tt, t)), len(truth) - 1)
