@@ -88,7 +88,7 @@ def test_run_passes_snapshots_the_mcap_grid_and_the_window(tmp_path: Path, monke
                               "--from", "0.5", "--to", "1.5"])
     assert res.exit_code == 0, res.output
     kw = sinks.calls[-1][1]
-    assert isinstance(kw["snapshots"], snapshots_module) and kw["mcap_grid"] == "every" and kw["mcap"]
+    assert isinstance(kw["snapshots"], snapshots_module) and kw["mcap_grid"] == 1 and kw["mcap"]
     assert build.calls == [((tmp_path / "a",), {"require_marker": True, "t_from": 0.5, "t_to": 1.5})]
     res = runner.invoke(app, [*base, "--out", str(tmp_path / "b"), "--no-snapshots"])
     assert res.exit_code == 0 and sinks.calls[-1][1]["snapshots"] is None
