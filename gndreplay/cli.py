@@ -521,6 +521,15 @@ SnapshotsOpt = Annotated[
         show_default=False,
     ),
 ]
+McapOpt = Annotated[
+    bool,
+    typer.Option(
+        "--mcap",
+        help="Also write results.mcap (ROS 2: scan, odometry, grids, the decision; opens in Foxglove with "
+        "results.foxglove.json).",
+        rich_help_panel=_RUN_PANEL,
+    ),
+]
 McapGridOpt = Annotated[
     str,
     typer.Option(
@@ -785,6 +794,13 @@ def _window(t_from: float | None, t_to: float | None, *, figures: bool) -> bool:
     return True
 
 
+def _grid_every(value: str) -> int | Literal["change"]:
+    """``--mcap-grid``: the robot-centred grid in results.mcap on every tick (1) or when it changed."""
+    from .config import choose
+
+    return 1 if choose("--mcap-grid", value, _MCAP_GRID) == "every" else "change"
+
+
 def _snapshot_options(snapshots: bool | None, *, figures: bool) -> Any:
     """The event snapshots ``default_sinks`` draws: on with the figures unless --no-snapshots (None: off)."""
     if not (figures if snapshots is None else snapshots):
@@ -865,12 +881,7 @@ def run(
     overwrite: OverwriteOpt = False,
     until: UntilOpt = None,
     every: EveryOpt = 1,
-    mcap: Annotated[
-        bool,
-        typer.Option(
-            "--mcap", help="Also write results.mcap (ROS 2, opens in Foxglove).", rich_help_panel=_RUN_PANEL
-        ),
-    ] = False,
+    mcap: McapOpt = False,
     figures: FiguresOpt = True,
     snapshots: SnapshotsOpt = None,
     mcap_grid: McapGridOpt = "change",
@@ -895,7 +906,6 @@ def run(
       gndreplay run run.bag --preset xr4000 --config mine.toml --until 60 --mcap
       gndreplay run run.bag --mode teleop         # would the stack have taken over?
     """
-    from .config import choose
     from .replay import RunOptions, far_goal_warning, run_log
     from .report.build import build_report
     from .report.sinks import default_sinks
@@ -904,8 +914,7 @@ def run(
 
     goal_xy = _parse_goal(goal, goal_ahead)
     window = _window(t_from, t_to, figures=figures)
-    every_tick = choose("--mcap-grid", mcap_grid, _MCAP_GRID) == "every"
-    grid_every: int | Literal["change"] = 1 if every_tick else "change"
+    grid_every = _grid_every(mcap_grid)
     cfg = setup.config(matcher=matcher, enforce_budgets=enforce_budgets)
     log_path = log if log is not None else sample_log()
     out_dir = out if out is not None else Path("out") / _log_stem(log_path)
@@ -1148,6 +1157,8 @@ def simulate(
     time_limit: TimeLimitOpt = None,
     figures: FiguresOpt = True,
     snapshots: SnapshotsOpt = None,
+    mcap: McapOpt = False,
+    mcap_grid: McapGridOpt = "change",
     overwrite: OverwriteOpt = False,
     list_: Annotated[bool, typer.Option("--list", help="List the shipped scenarios and exit.")] = False,
     progress: ProgressOpt = "auto",
@@ -1190,7 +1201,8 @@ def simulate(
             spec, out_dir=out_dir, cfg=cfg, seed=seed, latency_s=latency_s, perfect_odometry=perfect_odometry,
             time_limit_s=time_limit, figures=figures, overwrite=overwrite, on_tick=watch.on_tick,
             run_kwargs={"on_stage": watch.on_stage, "on_compile": watch.on_compile},
-            snapshots=_snapshot_options(snapshots, figures=figures),
+            snapshots=_snapshot_options(snapshots, figures=figures), mcap=mcap,
+            mcap_grid=_grid_every(mcap_grid),
         )
     _said_moved(out_dir, result.out_dir, silent=json_out)
     if json_out:

@@ -631,3 +631,28 @@ def test_path_status_says_why_there_is_no_path() -> None:
         "GOAL_IN_OBSTACLE"
     assert path_status(empty) == "no planner (teleop)"
     assert path_status(dataclasses.replace(empty, desired_mode="gnd")) == "no path"
+
+
+def test_a_closed_loop_run_writes_results_mcap_the_animation_reads(tmp_path: Path) -> None:
+    """``simulate --mcap``: a scenario run has results.mcap with the scan, the decision and a layout; its
+    animation (``report --animate``) has one frame per tick of the window."""
+    from PIL import Image
+    from typer.testing import CliRunner
+
+    from gndreplay.cli import app
+
+    out = tmp_path / "fig3"
+    args = ["simulate", "gnd_fig3_passage_closes", "--preset", "xr4000", "--time-limit", "4", "--mcap",
+            "--no-figures", "--progress", "none", "--out", str(out)]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code in (0, 1), res.output  # a 4 s time limit ends it before the goal
+    with AnyReader([out / "results.mcap"]) as reader:
+        topics = {c.topic: c.msgtype for c in reader.connections}
+    assert topics["/scan"] == "sensor_msgs/msg/LaserScan"
+    assert topics["/gndreplay/decision"] == "visualization_msgs/msg/MarkerArray"
+    assert layout_topics(json.loads((out / LAYOUT_FILE).read_text())) <= set(topics)
+    ticks = len((out / "commands.csv").read_text().splitlines()) - 1
+    res = CliRunner().invoke(app, ["report", str(out), "--animate", "--progress", "none"])
+    assert res.exit_code == 0, res.output
+    with Image.open(out / "animation.gif") as gif:
+        assert gif.n_frames == ticks

@@ -32,6 +32,7 @@ from .geometry import warm_up as warm_up_geometry
 from .scenario_file import ScenarioSpec, resolve_scenario
 
 if TYPE_CHECKING:
+    from ..report.mcap_export import GridEvery
     from ..report.snapshots import SnapshotOptions
 
 __all__ = [
@@ -220,6 +221,8 @@ def simulate_scenario(
     params: SimParams | None = None,
     run_kwargs: dict[str, Any] | None = None,
     snapshots: SnapshotOptions | None = None,
+    mcap: bool = False,
+    mcap_grid: GridEvery = "change",
 ) -> SimOutcome:
     """Run one scenario in closed loop and write its run directory.
 
@@ -238,6 +241,8 @@ def simulate_scenario(
         on_tick: also called with each TickResult (progress bars).
         run_kwargs: extra keyword arguments for ``run_replay`` (e.g. ``on_stage``).
         snapshots: write snapshots/ of the key events (``report.snapshots``); None: none.
+        mcap: also write results.mcap (``report.mcap_export``; its robot-centred grid per ``mcap_grid``), from
+            which ``gndreplay report --animate`` draws.
 
     Raises:
         ConfigError: a bad scenario file (one line naming the file and the key).
@@ -256,7 +261,8 @@ def simulate_scenario(
         if on_tick is not None:
             on_tick(r)
 
-    sinks = default_sinks(figures=figures, extra=[SimSink(loop, figure=figures)], snapshots=snapshots)
+    sinks = default_sinks(figures=figures, extra=[SimSink(loop, figure=figures)], snapshots=snapshots,
+                          mcap=mcap, config=loop.cfg, mcap_grid=mcap_grid)
     summary = run_replay(loop.ticks(), loop.cfg, Path(out_dir), log=Path(spec.source),
                          options=RunOptions(goal_xy=spec.goal, subgoals=spec.subgoals), on_tick=tick_done,
                          sinks=sinks, overwrite=overwrite, **(run_kwargs or {}))
