@@ -203,6 +203,7 @@ _MAX_SECONDS = 4.5e9
 _MAX_SCENARIO_TIME_S = 1e6
 _MAX_EVERY = 1_000_000
 _MAX_JOBS = 4096
+_MAX_SNAPSHOTS = 100_000
 #: ``--progress`` values, and the seconds between two plain progress lines while the total is unknown.
 _PROGRESS_STYLES = ("auto", "plain", "none")
 #: ``--mcap-grid`` values: results.mcap's robot-centred grid on every tick, or when it changed.
@@ -222,6 +223,7 @@ _CONFIG_PANEL = "Configuration"
 _MODE_PANEL = "Navigation mode (multi-loop)"
 _RUN_PANEL = "Run"
 _SIM_PANEL = "Scenarios"
+_SNAPSHOT_PANEL = "Snapshots"
 
 
 def cli_errors(fn: Callable[P, R]) -> Callable[P, R]:
@@ -517,8 +519,26 @@ SnapshotsOpt = Annotated[
     typer.Option(
         "--snapshots/--no-snapshots",
         help="Draw a figure of each key event into snapshots/ (default: with the figures).",
-        rich_help_panel=_RUN_PANEL,
+        rich_help_panel=_SNAPSHOT_PANEL,
         show_default=False,
+    ),
+]
+SnapshotEveryOpt = Annotated[
+    float,
+    typer.Option(
+        "--snapshot-every",
+        callback=_bounded("--snapshot-every", 0.0, _MAX_SECONDS),
+        help="At most one snapshot of each kind of event per this many seconds of log time.",
+        rich_help_panel=_SNAPSHOT_PANEL,
+    ),
+]
+SnapshotMaxOpt = Annotated[
+    int,
+    typer.Option(
+        "--snapshot-max",
+        callback=_bounded("--snapshot-max", 0, _MAX_SNAPSHOTS),
+        help="At most this many snapshots per run.",
+        rich_help_panel=_SNAPSHOT_PANEL,
     ),
 ]
 McapOpt = Annotated[
@@ -801,13 +821,14 @@ def _grid_every(value: str) -> int | Literal["change"]:
     return 1 if choose("--mcap-grid", value, _MCAP_GRID) == "every" else "change"
 
 
-def _snapshot_options(snapshots: bool | None, *, figures: bool) -> Any:
-    """The event snapshots ``default_sinks`` draws: on with the figures unless --no-snapshots (None: off)."""
+def _snapshot_options(snapshots: bool | None, *, figures: bool, every_s: float = 10.0, most: int = 40) -> Any:
+    """The event snapshots ``default_sinks`` draws: on with the figures unless --no-snapshots (None: off), at
+    most one per kind of event per ``every_s`` seconds of log time and ``most`` per run."""
     if not (figures if snapshots is None else snapshots):
         return None
     from .report.snapshots import SnapshotOptions
 
-    return SnapshotOptions()
+    return SnapshotOptions(min_interval_s=every_s, max_snapshots=most)
 
 
 def _corrected_xy(run_dir: Path) -> Any:
@@ -884,6 +905,8 @@ def run(
     mcap: McapOpt = False,
     figures: FiguresOpt = True,
     snapshots: SnapshotsOpt = None,
+    snapshot_every: SnapshotEveryOpt = 10.0,
+    snapshot_max: SnapshotMaxOpt = 40,
     mcap_grid: McapGridOpt = "change",
     t_from: FromOpt = None,
     t_to: ToOpt = None,
@@ -924,7 +947,9 @@ def run(
     with _Progress(style) as shown:
         watch = _LogProgress(shown, log_path.name, until_s=until)
         sinks = default_sinks(figures=figures, mcap=mcap, enforce_budgets=cfg.supervisor.enforce_budgets,
-                              on_draw=watch.on_draw, snapshots=_snapshot_options(snapshots, figures=figures),
+                              on_draw=watch.on_draw,
+                              snapshots=_snapshot_options(snapshots, figures=figures, every_s=snapshot_every,
+                                                          most=snapshot_max),
                               config=cfg, mcap_grid=grid_every)
         summary = run_log(log_path, cfg, out_dir, options=options, read=read, sinks=sinks,
                           overwrite=overwrite, **watch.callbacks())
@@ -1157,6 +1182,8 @@ def simulate(
     time_limit: TimeLimitOpt = None,
     figures: FiguresOpt = True,
     snapshots: SnapshotsOpt = None,
+    snapshot_every: SnapshotEveryOpt = 10.0,
+    snapshot_max: SnapshotMaxOpt = 40,
     mcap: McapOpt = False,
     mcap_grid: McapGridOpt = "change",
     overwrite: OverwriteOpt = False,
@@ -1201,7 +1228,9 @@ def simulate(
             spec, out_dir=out_dir, cfg=cfg, seed=seed, latency_s=latency_s, perfect_odometry=perfect_odometry,
             time_limit_s=time_limit, figures=figures, overwrite=overwrite, on_tick=watch.on_tick,
             run_kwargs={"on_stage": watch.on_stage, "on_compile": watch.on_compile},
-            snapshots=_snapshot_options(snapshots, figures=figures), mcap=mcap,
+            snapshots=_snapshot_options(snapshots, figures=figures, every_s=snapshot_every,
+                                        most=snapshot_max),
+            mcap=mcap,
             mcap_grid=_grid_every(mcap_grid),
         )
     _said_moved(out_dir, result.out_dir, silent=json_out)

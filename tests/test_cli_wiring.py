@@ -36,7 +36,8 @@ def snapshots_module(monkeypatch: pytest.MonkeyPatch) -> type:
     """A stand-in for ``gndreplay.report.snapshots`` holding ``SnapshotOptions``."""
 
     class SnapshotOptions:
-        pass
+        def __init__(self, **given: Any) -> None:
+            self.__dict__.update(given)
 
     module = types.ModuleType("gndreplay.report.snapshots")
     module.SnapshotOptions = SnapshotOptions  # type: ignore[attr-defined]
@@ -113,3 +114,17 @@ def test_bad_window_or_grid_options_are_one_line(tmp_path: Path, monkeypatch: py
     res = runner.invoke(app, args)
     assert res.exit_code == 2 and res.stderr.startswith(f"gndreplay: error: {message}"), res.stderr
     assert len(res.stderr.splitlines()) == 1 and list(tmp_path.iterdir()) == []
+
+
+def test_snapshot_limits_reach_the_sink(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                        snapshots_module: type) -> None:
+    sinks = Seen([])
+    monkeypatch.setattr(gndreplay.report.sinks, "default_sinks", sinks)
+    res = runner.invoke(app, ["run", str(SAMPLE), "--until", "2", "-q", "--out", str(tmp_path / "a"),
+                              "--snapshot-every", "2.5", "--snapshot-max", "3"])
+    assert res.exit_code == 0, res.output
+    options = sinks.calls[-1][1]["snapshots"]
+    assert isinstance(options, snapshots_module)
+    assert (options.min_interval_s, options.max_snapshots) == (2.5, 3)
+    bad = runner.invoke(app, ["run", str(SAMPLE), "--snapshot-max", "-1"])
+    assert bad.exit_code == 2 and "--snapshot-max: must be from 0 to" in bad.stderr
