@@ -1,4 +1,5 @@
-"""Trajectory evaluation: the SLAM-benchmark relations metric and a TUM trajectory writer.
+"""Trajectory evaluation: the SLAM-benchmark relations metric, SE(2) ground-truth metrics (ATE, RPE) and
+TUM trajectory reading and writing.
 
 The relations metric is the one of Kümmerle et al., "On measuring the accuracy of SLAM algorithms" (Autonomous
 Robots 2009): for each relation (t1, t2, δ*) with δ* the reference pose of the scan at t2 in the frame of the
@@ -9,6 +10,15 @@ benchmark reports the mean ± standard deviation of both over all relations (the
 
 Scans are identified by their timestamp (CARMEN ipc_timestamp, ROS header stamp); a relation end matches the
 nearest scan stamp within ``tol_s`` (the relation files print 1e-5 s or 1e-6 s).
+
+Against a ground-truth trajectory (:func:`trajectory_errors`) each estimated pose is paired with the truth
+pose nearest in time within ``tol_s`` (no interpolation: a run's truth is stamped at its scans, so pairs are
+exact, and nothing is invented across a gap of the truth). The estimate is then aligned to the truth by the
+closed-form SE(2) Umeyama fit (rotation about z and translation, no scale: :func:`align_se2`) or placed on
+the truth's first paired pose (:func:`align_origin`). ATE is the translational distance of each aligned pose
+from its truth pose; RPE compares the motion over each pair of poses ``delta_s`` apart (the first pose at or
+after t + delta_s, kept when the pair spans at most 1.5 delta_s, so gaps do not make long pairs). RPE does not
+depend on the alignment (a rigid transform of the whole estimate keeps its relative poses).
 """
 
 from __future__ import annotations
@@ -25,12 +35,13 @@ from numpy.typing import ArrayLike, NDArray
 from . import detmath as dm
 from .errors import GndReplayError, one_line
 from .fsutil import atomic_write_text, format_stamp
-from .geometry import relative, wrap_angle
+from .geometry import compose, inverse, relative, wrap_angle
 from .io.base import MAX_ABS_TIME_NS
 from .io.userfile import brief, read_text
 
-__all__ = ["MAX_RELATIONS_BYTES", "MAX_TUM_BYTES", "SPANS", "RelationStats", "Relations", "SpanStats",
-           "load_relations", "read_tum", "relation_errors", "relations_from_trajectory", "write_tum"]
+__all__ = ["ALIGNMENTS", "MAX_RELATIONS_BYTES", "MAX_TUM_BYTES", "SPANS", "RelationStats", "Relations",
+           "SpanStats", "TrajectoryErrors", "align_origin", "align_se2", "associate", "load_relations",
+           "read_tum", "relation_errors", "relations_from_trajectory", "trajectory_errors", "write_tum"]
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -267,6 +278,150 @@ def relation_errors(t_ns: ArrayLike, poses: ArrayLike, relations: Relations, *,
     span_s = np.abs(relations.t2_ns[ok] - relations.t1_ns[ok]) / NS_PER_S
     return RelationStats(n_ok, m - n_ok, tm, ts_, tx, rm, rs, rx, index, e_t, e_r,
                          _span_stats(span_s, e_t, e_r))
+
+
+ALIGNMENTS = ("se2", "origin")
+"""How :func:`trajectory_errors` aligns the estimate: SE(2) Umeyama fit, or its first pose on the truth's."""
+
+
+@dataclass(frozen=True, eq=False)
+class TrajectoryErrors:
+    """Errors of an estimated trajectory against ground truth (:func:`trajectory_errors`).
+
+    Attributes:
+        alignment: one of :data:`ALIGNMENTS`.
+        matched, unmatched: estimated poses with / without a truth pose within the tolerance.
+        transform: (3,) the SE(2) transform (x, y [m], yaw [rad]) applied to the estimate.
+        ate_rmse_m, ate_mean_m, ate_median_m, ate_max_m: translational error of the aligned poses [m]
+            (nan when none matched).
+        rpe_delta_s: the span of an RPE pair [s]; rpe_pairs: pose pairs that far apart.
+        rpe_trans_rmse_m, rpe_trans_mean_m, rpe_trans_max_m: translational error of a pair's motion [m].
+        rpe_rot_rmse_deg, rpe_rot_mean_deg, rpe_rot_max_deg: its rotational error [deg].
+        t_ns: (matched,) stamps of the matched estimated poses; ate_m: (matched,) their error [m].
+    """
+
+    alignment: str
+    matched: int
+    unmatched: int
+    transform: F64
+    ate_rmse_m: float
+    ate_mean_m: float
+    ate_median_m: float
+    ate_max_m: float
+    rpe_delta_s: float
+    rpe_pairs: int
+    rpe_trans_rmse_m: float
+    rpe_trans_mean_m: float
+    rpe_trans_max_m: float
+    rpe_rot_rmse_deg: float
+    rpe_rot_mean_deg: float
+    rpe_rot_max_deg: float
+    t_ns: I64
+    ate_m: F64
+
+    def to_dict(self) -> dict[str, Any]:
+        """Summary numbers (no per-pose arrays), JSON-ready."""
+        return {
+            "alignment": self.alignment, "matched": self.matched, "unmatched": self.unmatched,
+            "transform": [float(v) for v in self.transform],
+            "ate_rmse_m": self.ate_rmse_m, "ate_mean_m": self.ate_mean_m, "ate_median_m": self.ate_median_m,
+            "ate_max_m": self.ate_max_m, "rpe_delta_s": self.rpe_delta_s, "rpe_pairs": self.rpe_pairs,
+            "rpe_trans_rmse_m": self.rpe_trans_rmse_m, "rpe_trans_mean_m": self.rpe_trans_mean_m,
+            "rpe_trans_max_m": self.rpe_trans_max_m, "rpe_rot_rmse_deg": self.rpe_rot_rmse_deg,
+            "rpe_rot_mean_deg": self.rpe_rot_mean_deg, "rpe_rot_max_deg": self.rpe_rot_max_deg,
+        }
+
+
+def associate(t_est: ArrayLike, t_ref: ArrayLike, *, tol_s: float = 0.01) -> tuple[I64, I64]:
+    """Pair each estimated stamp with the nearest reference stamp within ``tol_s``: indices (into the
+    arguments, any order) of the pairs, in the order of the estimate's stamps."""
+    te = np.asarray(t_est, dtype=np.int64)
+    tr = np.asarray(t_ref, dtype=np.int64)
+    if te.size == 0 or tr.size == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    order_e = np.argsort(te, kind="stable")
+    order_r = np.argsort(tr, kind="stable")
+    j, gap = _nearest(tr[order_r], te[order_e])
+    ok = gap <= round(tol_s * NS_PER_S)
+    return order_e[ok].astype(np.int64), order_r[j[ok]].astype(np.int64)
+
+
+def align_se2(est_xy: ArrayLike, ref_xy: ArrayLike) -> F64:
+    """The SE(2) transform (x, y, yaw) T minimising sum ||ref - T(est)||² over paired (N, 2) positions:
+    Umeyama's closed form restricted to a rotation about z (no scale). Identity for no pair; a single pair
+    (or all estimated positions equal) fixes the translation only."""
+    p = np.asarray(est_xy, dtype=np.float64).reshape(-1, 2)
+    q = np.asarray(ref_xy, dtype=np.float64).reshape(-1, 2)
+    if p.shape != q.shape:
+        raise ValueError(f"paired positions must have one shape, got {p.shape} and {q.shape}")
+    if p.shape[0] == 0:
+        return np.zeros(3)
+    mp, mq = p.mean(axis=0), q.mean(axis=0)
+    pc, qc = p - mp, q - mq
+    cross = float(np.sum(pc[:, 0] * qc[:, 1] - pc[:, 1] * qc[:, 0]))
+    dot = float(np.sum(pc[:, 0] * qc[:, 0] + pc[:, 1] * qc[:, 1]))
+    yaw = dm.atan2(cross, dot) if cross or dot else 0.0
+    c, s = dm.cos(yaw), dm.sin(yaw)
+    return np.array([mq[0] - (c * mp[0] - s * mp[1]), mq[1] - (s * mp[0] + c * mp[1]), yaw])
+
+
+def align_origin(est_pose: ArrayLike, ref_pose: ArrayLike) -> F64:
+    """The SE(2) transform that puts the estimated pose ``est_pose`` on ``ref_pose`` (the "unaligned"
+    comparison: both trajectories start together)."""
+    return compose(np.asarray(ref_pose, dtype=np.float64), inverse(np.asarray(est_pose, dtype=np.float64)))
+
+
+def _rms_mean_median_max(x: F64) -> tuple[float, float, float, float]:
+    if x.size == 0:
+        return math.nan, math.nan, math.nan, math.nan
+    return (float(np.sqrt(np.mean(x * x))), float(np.mean(x)), float(np.median(x)), float(np.max(x)))
+
+
+def _rpe(t_ns: I64, est: F64, ref: F64, delta_s: float) -> tuple[F64, F64]:
+    """Translational [m] and rotational [deg] error of the motion over each pair of poses ``delta_s`` apart
+    (sorted stamps): the first pose at or after t + delta_s, kept when the pair spans at most 1.5 delta_s."""
+    d_ns = round(delta_s * NS_PER_S)
+    j = np.searchsorted(t_ns, t_ns + d_ns, side="left")
+    i = np.flatnonzero(j < t_ns.shape[0])
+    j = j[i]
+    keep = (t_ns[j] - t_ns[i]) <= round(1.5 * d_ns)
+    i, j = i[keep], j[keep]
+    err = relative(relative(ref[i], ref[j]), relative(est[i], est[j])).reshape(-1, 3)
+    return np.hypot(err[:, 0], err[:, 1]), np.degrees(np.abs(err[:, 2]))
+
+
+def trajectory_errors(t_est: ArrayLike, est: ArrayLike, t_ref: ArrayLike, ref: ArrayLike, *,
+                      alignment: str = "se2", tol_s: float = 0.01, rpe_delta_s: float = 1.0
+                      ) -> TrajectoryErrors:
+    """ATE and RPE of the estimated trajectory (``t_est`` (N,) int ns, ``est`` (N, 3)) against the truth
+    (``t_ref``, ``ref``), paired by time within ``tol_s`` (:func:`associate`) and aligned by ``alignment``
+    (see the module docstring).
+
+    Raises:
+        ValueError: shapes disagree, an unknown alignment, or a delta that is not positive.
+    """
+    te, pe = _trajectory_arrays(t_est, est)
+    tr, pr = _trajectory_arrays(t_ref, ref)
+    if alignment not in ALIGNMENTS:
+        raise ValueError(f"alignment must be one of {', '.join(ALIGNMENTS)}, got {alignment!r}")
+    if not rpe_delta_s > 0.0:
+        raise ValueError(f"rpe_delta_s must be positive, got {rpe_delta_s}")
+    ie, ir = associate(te, tr, tol_s=tol_s)
+    t, p, q = te[ie], pe[ie], pr[ir]
+    if t.size == 0:
+        transform = np.zeros(3)
+    elif alignment == "se2":
+        transform = align_se2(p[:, :2], q[:, :2])
+    else:
+        transform = align_origin(p[0], q[0])
+    aligned = compose(transform, p).reshape(-1, 3)
+    ate = np.hypot(aligned[:, 0] - q[:, 0], aligned[:, 1] - q[:, 1])
+    e_t, e_r = _rpe(t, p, q, rpe_delta_s)
+    a = _rms_mean_median_max(ate)
+    rt = _rms_mean_median_max(e_t)
+    rr = _rms_mean_median_max(e_r)
+    return TrajectoryErrors(alignment, int(t.size), int(te.size - t.size), transform, *a, rpe_delta_s,
+                            int(e_t.size), rt[0], rt[1], rt[3], rr[0], rr[1], rr[3], t, ate)
 
 
 def _trajectory_arrays(t_ns: ArrayLike, poses: ArrayLike) -> tuple[I64, F64]:

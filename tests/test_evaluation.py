@@ -1,4 +1,5 @@
-"""Relations metric and TUM writer: known answers, matching by stamp, error messages, round trip."""
+"""Relations metric, SE(2) ATE / RPE against truth and TUM writer: known answers, matching by stamp, error
+messages, round trip."""
 
 from __future__ import annotations
 
@@ -9,8 +10,17 @@ import numpy as np
 import pytest
 
 from gndreplay.errors import GndReplayError
-from gndreplay.evaluation import load_relations, relation_errors, relations_from_trajectory, write_tum
-from gndreplay.geometry import relative
+from gndreplay.evaluation import (
+    align_origin,
+    align_se2,
+    associate,
+    load_relations,
+    relation_errors,
+    relations_from_trajectory,
+    trajectory_errors,
+    write_tum,
+)
+from gndreplay.geometry import compose, inverse, relative
 
 T0 = 1_134_864_629_895_182_000  # a CSAIL-like stamp (ns): floats would lose the last digits
 
@@ -173,3 +183,103 @@ def test_write_tum_is_deterministic(tmp_path: Path) -> None:
 def test_write_tum_shape_error(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"poses must be \(N, 3\)"):
         write_tum(tmp_path / "x.tum", np.array([1, 2]), np.zeros((2, 2)))
+
+
+# ---- SE(2) ATE / RPE against ground truth ---------------------------------------------------------------
+
+
+def _truth_path(n: int = 200, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """A wandering planar path at 10 Hz: stamps [ns] and (n, 3) poses."""
+    rng = np.random.default_rng(seed)
+    t = T0 + np.arange(n, dtype=np.int64) * 100_000_000
+    yaw = np.cumsum(rng.normal(0.0, 0.05, n))
+    x = np.cumsum(0.1 * np.cos(yaw))
+    y = np.cumsum(0.1 * np.sin(yaw))
+    return t, np.column_stack([x, y, yaw])
+
+
+def _umeyama_se3(p: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Independent reference: Umeyama's SE(3) fit (no scale) of (N, 3) points p onto q (SVD)."""
+    mp, mq = p.mean(axis=0), q.mean(axis=0)
+    u, _, vt = np.linalg.svd((q - mq).T @ (p - mp))
+    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    r = u @ d @ vt
+    return r, mq - r @ mp
+
+
+def test_se2_alignment_recovers_a_known_transform() -> None:
+    t, truth = _truth_path()
+    known = np.array([3.0, -2.0, 0.7])
+    est = compose(known, truth)  # the truth seen from another frame
+    inv = inverse(known)
+    np.testing.assert_allclose(align_se2(est[:, :2], truth[:, :2]), inv, atol=1e-9)
+    e = trajectory_errors(t, est, t, truth)
+    assert e.matched == 200 and e.unmatched == 0
+    np.testing.assert_allclose(e.transform, inv, atol=1e-9)
+    assert e.ate_max_m < 1e-9 and e.ate_rmse_m < 1e-9
+    assert e.rpe_trans_max_m < 1e-9 and e.rpe_rot_max_deg < 1e-6
+    o = trajectory_errors(t, est, t, truth, alignment="origin")  # first poses put together: also exact
+    assert o.ate_max_m < 1e-9
+
+
+def test_constant_offset_gives_that_ate() -> None:
+    t, truth = _truth_path()
+    est = truth + np.array([0.3, -0.4, 0.0])  # 0.5 m off everywhere, in the world frame
+    unaligned = trajectory_errors(t, est, t, truth, alignment="origin")
+    assert unaligned.ate_rmse_m == pytest.approx(0.0, abs=1e-9)  # the first pose absorbs a constant offset
+    shifted = est.copy()
+    shifted[100:, :2] += [0.3, -0.4]  # half the run another 0.5 m off
+    e = trajectory_errors(t, shifted, t, est, alignment="origin")
+    assert e.ate_median_m == pytest.approx(0.25) and e.ate_max_m == pytest.approx(0.5)
+    assert e.ate_mean_m == pytest.approx(0.25) and e.ate_rmse_m == pytest.approx(math.sqrt(0.125))
+    a = trajectory_errors(t, shifted, t, est)  # the least-squares fit can only do better than the origin
+    assert a.ate_rmse_m < e.ate_rmse_m
+    assert e.rpe_pairs == a.rpe_pairs == 190  # pairs 1 s apart; 10 of them straddle the step
+    assert e.rpe_trans_max_m == pytest.approx(0.5) and e.rpe_trans_mean_m == pytest.approx(5.0 / 190)
+    assert a.rpe_trans_mean_m == pytest.approx(e.rpe_trans_mean_m) and e.rpe_rot_max_deg < 1e-9
+
+
+def test_se2_alignment_matches_se3_umeyama_on_planar_data() -> None:
+    t, truth = _truth_path(300, seed=5)
+    rng = np.random.default_rng(9)
+    est = compose([1.5, 0.5, -2.0], truth) + np.column_stack([rng.normal(0, 0.05, (300, 2)), np.zeros(300)])
+    r, tr = _umeyama_se3(np.column_stack([est[:, :2], np.zeros(300)]),
+                         np.column_stack([truth[:, :2], np.zeros(300)]))
+    aligned3 = (r @ np.column_stack([est[:, :2], np.zeros(300)]).T).T + tr
+    ate3 = np.linalg.norm(aligned3 - np.column_stack([truth[:, :2], np.zeros(300)]), axis=1)
+    e = trajectory_errors(t, est, t, truth)
+    assert abs(r[2, 2] - 1.0) < 1e-12  # planar data: SE(3) Umeyama rotates about z only
+    assert e.transform[2] == pytest.approx(math.atan2(r[1, 0], r[0, 0]), abs=1e-12)
+    np.testing.assert_allclose(e.transform[:2], tr[:2], atol=1e-9)
+    assert e.ate_rmse_m == pytest.approx(float(np.sqrt(np.mean(ate3**2))), rel=1e-9)
+    assert e.ate_max_m == pytest.approx(float(ate3.max()), rel=1e-9)
+    assert e.ate_median_m == pytest.approx(float(np.median(ate3)), rel=1e-9)
+
+
+def test_association_nearest_within_tolerance() -> None:
+    t_ref = np.array([0, 100, 200, 300], dtype=np.int64) * 1_000_000
+    t_est = np.array([305, 2, 150, 99], dtype=np.int64) * 1_000_000  # any order; 150 ms is 50 ms from both
+    ie, ir = associate(t_est, t_ref, tol_s=0.01)
+    assert ie.tolist() == [1, 3, 0] and ir.tolist() == [0, 1, 3]
+    e = trajectory_errors(t_est, np.zeros((4, 3)), t_ref, np.zeros((4, 3)))
+    assert e.matched == 3 and e.unmatched == 1
+
+
+def test_rpe_skips_gaps_and_measures_rotation() -> None:
+    t = np.concatenate([np.arange(20), 100 + np.arange(20)]).astype(np.int64) * 100_000_000  # 8 s gap
+    truth = np.zeros((40, 3))
+    est = truth.copy()
+    est[:, 2] = np.radians(np.arange(40) * 0.5)  # drifts 0.5 deg a pose, 5 deg a second
+    e = trajectory_errors(t, est, t, truth)
+    assert e.rpe_pairs == 20  # 10 pairs 1 s apart in each stretch, none across the gap
+    assert e.rpe_rot_max_deg == pytest.approx(5.0) and e.rpe_rot_mean_deg == pytest.approx(5.0)
+
+
+def test_trajectory_errors_empty_and_bad_input() -> None:
+    e = trajectory_errors(np.zeros(0, np.int64), np.zeros((0, 3)), [0], [[0.0, 0.0, 0.0]])
+    assert e.matched == 0 and math.isnan(e.ate_rmse_m) and e.rpe_pairs == 0
+    assert e.to_dict()["ate_rmse_m"] != e.to_dict()["ate_rmse_m"]  # NaN in JSON
+    with pytest.raises(ValueError, match="alignment"):
+        trajectory_errors([0], [[0, 0, 0]], [0], [[0, 0, 0]], alignment="sim3")
+    np.testing.assert_allclose(align_origin([1.0, 0.0, 0.5], [0.0, 0.0, 0.0]),
+                               compose([0, 0, 0], [-np.cos(0.5), np.sin(0.5), -0.5]), atol=1e-12)
