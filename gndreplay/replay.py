@@ -307,7 +307,7 @@ def run_replay(
             with tick_tables(tmp, enforce_budgets=enforce) as write_tick:
                 pairs = assign_goals(corrected_stream(ticks, cfg, options), options)
                 for k, (m, goal) in enumerate(pairs):
-                    traj.add(m.tick.t_ns, m.tick.odom, m.pose)
+                    traj.add(m.tick.t_ns, m.tick.odom, m.pose, m.tick.truth)
                     for sink in sinks:
                         sink.add_scan(m.tick, m.pose)
                     if k % options.every:
@@ -322,7 +322,7 @@ def run_replay(
                         on_tick(r)
             stage("write")
             traj.write(tmp)
-            summary = summarise(rec, cfg, log_path, options, read_report())
+            summary = summarise(rec, cfg, log_path, options, read_report(), traj.arrays())
             write_summary(tmp, summary)
             write_config(tmp, cfg)
             for sink in sinks:

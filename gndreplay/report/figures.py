@@ -13,7 +13,9 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from ..evaluation import align_origin, associate
 from ..fsutil import atomic_path
+from ..geometry import compose
 from ..types import REFLEXIVE_MODES
 from .plots import (
     COMMAND_COLORS,
@@ -53,13 +55,15 @@ __all__ = [
     "figure_timing",
     "save_figure",
     "scan_period_s",
+    "truth_on_corrected",
     "window_figure_name",
 ]
 
 DPI = 120
 FIGURES: Mapping[str, str] = {
-    "fig_model.png": "Model: scan hits placed at the corrected poses, corrected and raw trajectories, "
-    "and the robot-centred grid at one tick (Fig. 5b).",
+    "fig_model.png": "Model: scan hits placed at the corrected poses, corrected and raw trajectories (and "
+    "the ground truth, when the log has it, started on the corrected pose), and the robot-centred grid at "
+    "one tick (Fig. 5b).",
     "fig_raw.png": "Raw laser data placed with the raw odometry, and the odometry trajectory (Fig. 5c).",
     "fig_commands.png": "Motion commands v and w over time, GND mode and ND+ situation bands, and the "
     "ticks where each flag fired (Fig. 5d).",
@@ -78,7 +82,7 @@ as its range and mean per column (``plots.plot_series``)."""
 LegendLoc = Literal["outside right upper", "outside right center"]
 Box = tuple[float, float, float, float]  # x0, x1, y0, y1 [m]
 _START, _END, _GOAL = "#2ca02c", "#d62728", "#ffbf00"
-_CORRECTED, _RAW = "#1f77b4", "#ff7f0e"
+_CORRECTED, _RAW, _TRUTH = "#1f77b4", "#ff7f0e", "#222222"
 
 
 def budgets_ms(summary: Mapping[str, Any]) -> dict[str, float]:
@@ -184,6 +188,22 @@ def _no_data(ax: Axes, text: str) -> None:
     ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", fontsize=9, color="0.4")
 
 
+def truth_on_corrected(data: RunData) -> NDArray[np.float64] | None:
+    """The ground-truth trajectory ((M, 4) t, x, y, yaw) in the corrected frame: moved rigidly so that its
+    first pose paired with a corrected pose (nearest stamp, ``evaluation.associate``) lies on that pose,
+    so the gap between the two lines is the corrected trajectory's drift. None without truth or pair."""
+    truth = data.traj_truth
+    if truth is None or truth.shape[0] == 0 or data.traj_corrected.shape[0] == 0:
+        return None
+    to_ns = np.round(np.asarray(data.traj_corrected[:, 0]) * 1e9).astype(np.int64)
+    ic, it = associate(to_ns, np.round(truth[:, 0] * 1e9).astype(np.int64))
+    if ic.size == 0:
+        return None
+    first = int(np.argmin(truth[it, 0]))
+    move = align_origin(truth[it[first], 1:], data.traj_corrected[ic[first], 1:])
+    return np.column_stack([truth[:, 0], compose(move, truth[:, 1:]).reshape(-1, 3)])
+
+
 def figure_model(data: RunData) -> Figure:
     """Fig. 5b: the global model map with both trajectories, and the robot-centred grid at one tick (of a
     window: the map around the window's poses, the grid only when its tick lies in the window)."""
@@ -192,8 +212,9 @@ def figure_model(data: RunData) -> Figure:
     w = data.window
     if snap is not None and w is not None and not w.start_s <= snap.elapsed_s <= w.end_s:
         snap = None
+    truth = truth_on_corrected(data)
     box = _map_box(data, maps.corrected_extent if maps is not None else None, data.traj_corrected,
-                   data.traj_odom)
+                   data.traj_odom, *(() if truth is None else (truth,)))
     ax_g: Axes | None = None
     if w is not None and snap is None:
         fig = _new_figure(9.0, _map_height(box, 8.4) + 1.3)
@@ -208,6 +229,8 @@ def figure_model(data: RunData) -> Figure:
     plot_trajectory(ax, data.traj_odom[:, 1:3], label="raw odometry", style="--", color=_RAW, linewidth=1.0,
                     alpha=0.9)
     plot_trajectory(ax, data.traj_corrected[:, 1:3], label="corrected", color=_CORRECTED, linewidth=1.4)
+    if truth is not None:
+        plot_trajectory(ax, truth[:, 1:3], label="ground truth", style=":", color=_TRUTH, linewidth=1.4)
     _ends(ax, data.traj_corrected)
     goal = data.summary.get("options", {}).get("goal")
     if goal:

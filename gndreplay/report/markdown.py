@@ -14,7 +14,7 @@ from .figures import FIGURES, budgets_ms, scan_period_s
 from .rundir import RunData
 from .snapshots import SNAPSHOTS_DIR, SnapshotEntry, read_snapshot_index
 
-__all__ = ["interventions_section", "render_report", "timeline_section", "trajectory_gap"]
+__all__ = ["interventions_section", "render_report", "timeline_section", "trajectory_gap", "truth_section"]
 
 _LATENCY_ROWS = ("match", "model", "planner", "reactor", "stack", "total")
 _OVER = {"match": "MATCH_OVER_BUDGET", "model": "MODEL_OVER_BUDGET", "planner": "PLANNER_OVER_BUDGET",
@@ -93,6 +93,27 @@ def interventions_section(iv: Mapping[str, Any] | None, n: int) -> list[str]:
     out += ["Times are seconds since the first tick; an episode lasts until the tick after it (one tick "
             "period past its last tick when it runs to the end).", ""]
     return out
+
+
+def truth_section(truth: Mapping[str, Any] | None) -> list[str]:
+    """The errors of the odometry and the corrected trajectory against ground truth (summary.json's
+    ``truth``), aligned (SE(2) Umeyama) and unaligned (from the first pose); nothing without truth."""
+    if not isinstance(truth, Mapping):
+        return []
+    rows = []
+    for name in ("odom", "corrected"):
+        for how, e in (truth.get(name) or {}).items():
+            if isinstance(e, Mapping):
+                rows.append((name, how, _num(e.get("matched")),
+                             *(_num(e.get(k), ".3f") for k in ("ate_rmse_m", "ate_mean_m", "ate_median_m",
+                                                               "ate_max_m", "rpe_trans_rmse_m")),
+                             _num(e.get("rpe_rot_rmse_deg"), ".3f"), _num(e.get("rpe_pairs"))))
+    return ["## Ground truth", "",
+            *_table(("trajectory", "alignment", "poses", "ATE RMSE [m]", "mean", "median", "max",
+                     "RPE 1 s RMSE [m]", "RPE 1 s RMSE [deg]", "RPE pairs"), rows),
+            "ATE: translational error of each pose after aligning the trajectory to the truth (aligned: "
+            "SE(2) least squares; unaligned: first poses put together). RPE: error of the motion over 1 s.",
+            ""]
 
 
 def timeline_section(entries: Sequence[SnapshotEntry] | None) -> list[str]:
@@ -202,6 +223,7 @@ def render_report(data: RunData, figures: Iterable[str] = tuple(FIGURES), *, nam
              "max_gap_m": "corrected vs odometry, max [m]"}
     rows += [(names[k], f"{v:.3f}") for k, v in gap.items()]
     out += ["## Scan matching", "", *_table(("", ""), rows)]
+    out += truth_section(s.get("truth"))
 
     rr = s.get("read_report")
     if isinstance(rr, Mapping) and rr:

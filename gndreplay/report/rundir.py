@@ -6,7 +6,9 @@ that read them back, each file's writer beside its reader.
   work and the wall-clock ``*_OVER_BUDGET`` flags. Written a row per tick by :func:`tick_tables`, read by
   :func:`read_commands` and :func:`read_timing`.
 - trajectory_odom.tum, trajectory_corrected.tum: the raw-odometry and the corrected pose of every scan (TUM,
-  as evo reads it). Written by :class:`TrajectoryWriter`, read by :func:`read_tum`.
+  as evo reads it); trajectory_truth.tum, only when the log carries ground truth (CARMEN TRUEPOS, a truth
+  topic, the simulator's world pose): the true pose of every scan that has one. Written by
+  :class:`TrajectoryWriter`, read by :func:`read_tum`.
 - summary.json (built by :func:`gndreplay.report.summary.summarise`): written by :func:`write_summary`, read
   by :func:`read_summary`.
 - config.toml, the resolved configuration: written by :func:`write_config`, read by
@@ -61,6 +63,7 @@ __all__ = [
     "SUMMARY_FILE",
     "TIMING_FILE",
     "TIMING_HEADER",
+    "TRUTH_TRAJECTORY_FILE",
     "Commands",
     "RunData",
     "RunDirError",
@@ -96,6 +99,7 @@ COMMANDS_FILE = "commands.csv"
 TIMING_FILE = "timing.csv"
 ODOM_TRAJECTORY_FILE = "trajectory_odom.tum"
 CORRECTED_TRAJECTORY_FILE = "trajectory_corrected.tum"
+TRUTH_TRAJECTORY_FILE = "trajectory_truth.tum"
 SUMMARY_FILE = "summary.json"
 CONFIG_FILE = "config.toml"
 
@@ -206,26 +210,41 @@ def tick_tables(run_dir: Path, *, enforce_budgets: bool
 
 
 class TrajectoryWriter:
-    """Raw-odometry and corrected poses of every scan (7 numbers a scan), written as TUM at the end."""
+    """Raw-odometry, corrected and (where the log has it) true poses of every scan, written as TUM at the
+    end."""
 
     def __init__(self) -> None:
         self.t_ns: list[int] = []
         self.odom: list[tuple[float, float, float]] = []
         self.corrected: list[tuple[float, float, float]] = []
+        self.truth_t_ns: list[int] = []
+        self.truth: list[tuple[float, float, float]] = []
 
-    def add(self, t_ns: int, odom: Pose2D, corrected: Pose2D) -> None:
-        """A scan's stamp, raw-odometry pose and corrected pose."""
+    def add(self, t_ns: int, odom: Pose2D, corrected: Pose2D, truth: Pose2D | None = None) -> None:
+        """A scan's stamp, raw-odometry pose, corrected pose and ground-truth pose (None: none at it)."""
         self.t_ns.append(t_ns)
         self.odom.append((odom.x, odom.y, odom.theta))
         self.corrected.append((corrected.x, corrected.y, corrected.theta))
+        if truth is not None:
+            self.truth_t_ns.append(t_ns)
+            self.truth.append((truth.x, truth.y, truth.theta))
 
-    def write(self, run_dir: Path) -> None:
-        """trajectory_odom.tum and trajectory_corrected.tum into ``run_dir``."""
+    def arrays(self) -> dict[str, tuple[NDArray[np.int64], F64]]:
+        """file name -> (stamps [ns], (N, 3) poses) of each trajectory; the truth only when a scan had one."""
         n = len(self.t_ns)
         t = np.asarray(self.t_ns, dtype=np.int64)
-        for name, poses in ((ODOM_TRAJECTORY_FILE, self.odom), (CORRECTED_TRAJECTORY_FILE, self.corrected)):
-            arr = np.asarray(poses, dtype=np.float64).reshape(n, 3)
-            write_tum(run_dir / name, t, arr)
+        out = {ODOM_TRAJECTORY_FILE: (t, np.asarray(self.odom, dtype=np.float64).reshape(n, 3)),
+               CORRECTED_TRAJECTORY_FILE: (t, np.asarray(self.corrected, dtype=np.float64).reshape(n, 3))}
+        if self.truth:
+            out[TRUTH_TRAJECTORY_FILE] = (np.asarray(self.truth_t_ns, dtype=np.int64),
+                                          np.asarray(self.truth, dtype=np.float64).reshape(-1, 3))
+        return out
+
+    def write(self, run_dir: Path) -> None:
+        """trajectory_odom.tum, trajectory_corrected.tum and (with ground truth) trajectory_truth.tum into
+        ``run_dir``."""
+        for name, (t, poses) in self.arrays().items():
+            write_tum(run_dir / name, t, poses)
 
 
 def write_summary(run_dir: Path, summary: Mapping[str, Any]) -> None:
@@ -325,6 +344,7 @@ class RunData:
         run_dir: the directory.
         commands, timing: the per-tick tables.
         traj_odom, traj_corrected: (M, 4) t [s], x, y [m], yaw [rad] from the TUM files (every scan).
+        traj_truth: the same from trajectory_truth.tum, or None when the run has no ground truth.
         summary: summary.json.
         maps: maps.npz, or None when the run was written without it.
         window: the stretch of the run the tables and trajectories hold (:func:`window_run`); None: all of
@@ -339,6 +359,7 @@ class RunData:
     summary: dict[str, Any]
     maps: MapsData | None
     window: TimeWindow | None = None
+    traj_truth: F64 | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -432,6 +453,7 @@ def window_run(data: RunData, t_from: float | None, t_to: float | None) -> RunDa
         traj_odom=data.traj_odom[inside(data.traj_odom[:, 0])],
         traj_corrected=data.traj_corrected[inside(data.traj_corrected[:, 0])],
         summary=data.summary, maps=data.maps, window=TimeWindow(origin, start, end),
+        traj_truth=None if data.traj_truth is None else data.traj_truth[inside(data.traj_truth[:, 0])],
     )
 
 
@@ -592,6 +614,13 @@ def _interventions_ok(x: Any) -> bool:
             and _episodes_ok(x.get("takeovers", []), "reason")
             and _episodes_ok(x.get("emergencies", []), "rule"))
 
+def _truth_ok(x: Any) -> bool:
+    """summary.json's truth section: per trajectory, per alignment, a table of numbers (and its labels)."""
+    return isinstance(x, dict) and all(
+        _table_of(_table_of(lambda v: _is_num(v) or isinstance(v, str | list)))(x.get(k, {}))
+        for k in ("odom", "corrected"))
+
+
 #: summary.json key -> (what it must be, a test); keys the report reads, each optional.
 _SUMMARY_FIELDS: Mapping[str, tuple[str, Any]] = {
     "ticks": ("a count (integer >= 0)", _is_count),
@@ -604,6 +633,7 @@ _SUMMARY_FIELDS: Mapping[str, tuple[str, Any]] = {
                    _table_of(_opt(_table_of(_opt(_is_num))))),
     "agreement": ("a table of numbers", _opt(_table_of(_opt(_is_num)))),
     "interventions": ("a table of mode counts and takeovers / emergencies lists", _interventions_ok),
+    "truth": ("a table of trajectory errors per trajectory and alignment", _opt(_truth_ok)),
     "config": ("a table", lambda x: isinstance(x, dict)
                and all(isinstance(x.get(k), dict | None) for k in ("supervisor", "scanmatch"))),
     "options": ("a table", lambda x: isinstance(x, dict)
@@ -644,7 +674,8 @@ def load_run(run_dir: Path) -> RunData:
     """Read a run directory.
 
     Raises:
-        RunDirError: a required file is missing or malformed (maps.npz is optional).
+        RunDirError: a required file is missing or malformed (maps.npz and trajectory_truth.tum are
+            optional).
     """
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
@@ -664,4 +695,5 @@ def load_run(run_dir: Path) -> RunData:
         traj_corrected=read_tum(run_dir / CORRECTED_TRAJECTORY_FILE),
         summary=summary,
         maps=maps,
+        traj_truth=read_tum(truth) if (truth := run_dir / TRUTH_TRAJECTORY_FILE).is_file() else None,
     )

@@ -6,13 +6,17 @@ The assisted-navigation audit (the multi-loop paper's takeovers) is part of it: 
 aggregates commands.csv's desired and active navigation modes and takeover reasons into ticks per active
 mode, the takeovers and the reflexive overrides, each with its start, duration and reason. Everything but
 ``latency_ms`` and ``over_budget`` (the wall clock) is a pure function of the ticks.
+
+With ground truth in the log, ``truth`` (:func:`truth_section`) scores the odometry and the corrected
+trajectory against it: ATE and RPE per second in SE(2), after the SE(2) Umeyama alignment ("aligned") and
+from the first pose ("unaligned"), see ``gndreplay.evaluation.trajectory_errors``.
 """
 
 from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -22,10 +26,19 @@ from numpy.typing import NDArray
 from .. import __version__
 from .. import detmath as dm
 from ..config import Config, config_to_dict
+from ..evaluation import trajectory_errors
 from ..geometry import relative, wrap_angle
 from ..pipeline.stack import MODULES, TickResult
 from ..types import BUDGET_FLAGS, REFLEXIVE_MODES, Flag, Subgoal
-from .rundir import csv_text, episodes, recorded_flags, tick_edges
+from .rundir import (
+    CORRECTED_TRAJECTORY_FILE,
+    ODOM_TRAJECTORY_FILE,
+    TRUTH_TRAJECTORY_FILE,
+    csv_text,
+    episodes,
+    recorded_flags,
+    tick_edges,
+)
 
 __all__ = [
     "COMMAND_GAP_WARN_SHARE",
@@ -37,7 +50,13 @@ __all__ = [
     "interventions",
     "motion_agreement",
     "summarise",
+    "truth_section",
 ]
+
+#: summary.json's truth section: trajectory name -> its TUM file in the run directory
+TRUTH_SCORED = (("odom", ODOM_TRAJECTORY_FILE), ("corrected", CORRECTED_TRAJECTORY_FILE))
+#: summary.json's names of the two alignments (``evaluation.ALIGNMENTS``)
+TRUTH_ALIGNMENTS = (("aligned", "se2"), ("unaligned", "origin"))
 
 
 class SummaryOptions(Protocol):
@@ -226,11 +245,30 @@ def command_gap_warning(summary: dict[str, Any]) -> str | None:
             f"command ({missing} none or not finite, {stale} stale): the robot stood still on them")
 
 
+def truth_section(
+    trajectories: Mapping[str, tuple[NDArray[np.int64], NDArray[np.float64]]],
+) -> dict[str, Any] | None:
+    """summary.json's ``truth``: ATE / RPE of the odometry and the corrected trajectory against the truth,
+    aligned and unaligned; None without truth. ``trajectories``: TUM file name -> (stamps [ns], (N, 3) poses)
+    (``rundir.TrajectoryWriter.arrays``)."""
+    truth = trajectories.get(TRUTH_TRAJECTORY_FILE)
+    if truth is None or truth[0].size == 0:
+        return None
+    out: dict[str, Any] = {"poses": int(truth[0].size)}
+    for name, file in TRUTH_SCORED:
+        t, poses = trajectories[file]
+        out[name] = {label: trajectory_errors(t, poses, *truth, alignment=how).to_dict()
+                     for label, how in TRUTH_ALIGNMENTS}
+    return out
+
+
 def summarise(
-    rec: SummaryRecorder, cfg: Config, log: Path, options: SummaryOptions, read_report: Any
+    rec: SummaryRecorder, cfg: Config, log: Path, options: SummaryOptions, read_report: Any,
+    trajectories: Mapping[str, tuple[NDArray[np.int64], NDArray[np.float64]]] | None = None,
 ) -> dict[str, Any]:
-    """summary.json: counts, histograms, agreement and (last, the only non-deterministic part) latency and
-    the ticks over each module's time budget. ``flags`` counts what commands.csv records."""
+    """summary.json: counts, histograms, agreement, the errors against ground truth (``trajectories``, see
+    :func:`truth_section`) and (last, the only non-deterministic part) latency and the ticks over each
+    module's time budget. ``flags`` counts what commands.csv records."""
     n = len(rec.t_s)
     timing = np.asarray(rec.timing, dtype=np.float64).reshape(n, len(MODULES))
     latency = {m: _latency(timing[:, k]) for k, m in enumerate(MODULES)}
@@ -253,6 +291,7 @@ def summarise(
         },
         "interventions": interventions(rec.t_ns, desired, active, reasons, modes),
         "agreement": agreement,
+        "truth": truth_section(trajectories) if trajectories is not None else None,
         "read_report": read_report,
         "options": {
             "goal": list(options.goal_xy) if options.goal_xy else None,
