@@ -116,3 +116,15 @@ def test_trajectory_writer_truth_only_where_given() -> None:
     empty = TrajectoryWriter()
     empty.add(10, p, p)
     assert TRUTH_TRAJECTORY_FILE not in empty.arrays() and truth_section(empty.arrays()) is None
+
+
+def test_closed_loop_run_writes_the_world_pose_as_truth(tmp_path: Path) -> None:
+    from gndreplay.sim.runner import simulate_scenario
+
+    out = simulate_scenario("u_trap", out_dir=tmp_path / "run", seed=0, time_limit_s=2.0, figures=False)
+    t_ns, truth = read_tum(out.out_dir / TRUTH_TRAJECTORY_FILE)
+    t_odom, _ = read_tum(out.out_dir / ODOM_TRAJECTORY_FILE)
+    assert np.array_equal(t_ns, t_odom) and t_ns.size > 5
+    section = load_run(out.out_dir).summary["truth"]
+    assert section["poses"] == truth.shape[0] and section["corrected"]["aligned"]["matched"] == t_ns.size
+    assert section["odom"]["unaligned"]["ate_max_m"] < 0.1  # 2 s of simulated odometry drift
