@@ -21,20 +21,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from .io import DEFAULT_READ, ReadOptions, detect_format, open_log
 from .io.base import LogDescription, ReadReport
+from .io.clock import scan_clock
 from .types import NS_PER_S, Pose2D, Scan
 
 __all__ = ["LogInfo", "StreamStat", "log_info", "scan_clock", "stream_rows", "summary_rows"]
 
 DEFAULT_SAMPLE = 500
-#: A clock is synthetic when its first stamp is a multiple of this (a whole millisecond) and every scan
-#: period is the same to the nanosecond (over at least ``_MIN_SYNTHETIC_SCANS`` scans): a recorded clock
-#: jitters.
-_ROUND_START_NS = 1_000_000
-_MIN_SYNTHETIC_SCANS = 3
 
 
 @dataclass(frozen=True, slots=True)
@@ -256,25 +251,6 @@ def _streams(
     return tuple(out)
 
 
-def scan_clock(stamps: ArrayLike) -> tuple[float | None, str | None]:
-    """The median period of the scan ``stamps`` [s] (int ns, any order; None under two) and a warning when
-    the clock is synthetic: every period the same to the nanosecond from a round start (a whole
-    millisecond), as a generator or a converter writes them; a recorded clock jitters."""
-    t = np.sort(np.asarray(stamps, dtype=np.int64))
-    if t.size < 2:
-        return None, None
-    periods = np.diff(t)
-    median = float(np.median(periods)) / NS_PER_S
-    period = int(periods[0])
-    synthetic = (t.size >= _MIN_SYNTHETIC_SCANS and period > 0 and int(t[0]) % _ROUND_START_NS == 0
-                 and bool(np.all(periods == period)))
-    if not synthetic:
-        return median, None
-    return median, (f"synthetic clock: all {t.size} scan stamps are exactly {_fmt_ns(period)} s apart from "
-                    f"a round start ({_fmt_ns(int(t[0]))} s): generated, not recorded, so the rate and the "
-                    "gaps describe the generator, not the sensor")
-
-
 def _carmen_info(path: Path, size: int, opts: ReadOptions) -> LogInfo:
     from .io.carmen import CarmenReader
 
@@ -451,11 +427,6 @@ def _fmt_t(t_ns: int | None) -> str:
     if t_ns is None:
         return "-"
     return f"{t_ns // NS_PER_S}.{t_ns % NS_PER_S // 1000:06d} s ({_utc(t_ns, ' ')} UTC)"
-
-
-def _fmt_ns(ns: int) -> str:
-    """Nanoseconds as seconds with as many decimals as they need (up to nine)."""
-    return f"{ns // NS_PER_S}.{ns % NS_PER_S:09d}".rstrip("0").rstrip(".")
 
 
 def _utc(t_ns: int | None, sep: str) -> str | None:
