@@ -30,6 +30,14 @@ from .types import NS_PER_S, Pose2D, Scan
 __all__ = ["LogInfo", "StreamStat", "log_info", "scan_clock", "stream_rows", "summary_rows"]
 
 DEFAULT_SAMPLE = 500
+#: Start bearings closer than this are one [rad] (a bag's float32 fields round at ~1e-7 rad).
+_SAME_START_RAD = 1e-5
+#: At most this many distinct start bearings are told apart (a log's scanner has a handful).
+_MAX_STARTS = 16
+#: A scan's beams are unevenly spaced when a step departs from the scan's mean step by more than this share.
+_UNEVEN_STEP = 0.01
+#: Interleaved: consecutive scans start at different bearings in at least this share of the pairs seen.
+_INTERLEAVED_SHARE = 0.25
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,6 +74,11 @@ class LogInfo:
         range_min_m, range_max_m: sensor range limits (of the first scan).
         invalid_fraction, no_return_fraction: fraction of beams that are nan / +inf.
         stats_scans: scans the beam statistics were computed on (< scans when sampled).
+        start_angles_deg: the distinct first-beam bearings, most frequent first (at most 16).
+        start_pairs, start_changes: consecutive scan pairs seen (all, or the sampled scan and the next one)
+            and how many of them start at different bearings: a scanner whose start bearing alternates
+            (``interleaved``) takes each scan at other bearings.
+        uneven_scans: scans whose beam spacing is not even (a step more than 1 % off the scan's mean).
         laser_pose: the laser pose in the robot frame (x [m], y [m], theta [rad]).
         laser_pose_source: where it comes from (``ReadReport.sensor_pose_source``: log, tf, config default,
             none).
@@ -121,6 +134,16 @@ class LogInfo:
     notes: tuple[str, ...] = field(default=())
     scan_period_s: float | None = None
     clock_warning: str | None = None
+    start_angles_deg: tuple[float, ...] = ()
+    start_pairs: int = 0
+    start_changes: int = 0
+    uneven_scans: int = 0
+
+    @property
+    def interleaved(self) -> bool:
+        """Consecutive scans start at different bearings in at least a quarter of the pairs seen."""
+        return (len(self.start_angles_deg) > 1 and self.start_pairs > 0
+                and self.start_changes >= _INTERLEAVED_SHARE * self.start_pairs)
 
     @property
     def sampled(self) -> bool:
@@ -150,6 +173,7 @@ class LogInfo:
         d["start_utc"], d["end_utc"] = _utc(self.start_ns, "T"), _utc(self.end_ns, "T")
         d["scan_rate_hz"], d["average_rate_hz"] = self.scan_rate_hz, self.average_rate_hz
         d["synthetic_clock"] = self.synthetic_clock
+        d["interleaved"] = self.interleaved
         out: dict[str, Any] = _jsonable(d)
         return out
 
@@ -187,6 +211,40 @@ class _BeamStats:
         self.no_return += int(np.count_nonzero(np.isposinf(r)))
         if self.first is None:
             self.first = scan
+
+
+@dataclass(slots=True)
+class _StartStats:
+    """Accumulates the scans' start bearings, their changes between consecutive scans, and uneven spacing."""
+
+    starts: dict[int, list[float]] = field(default_factory=dict)  # start // _SAME_START_RAD -> [scans, rad]
+    pairs: int = 0
+    changes: int = 0
+    uneven: int = 0
+    prev: int | None = None
+
+    def add(self, scan: Scan, *, follows: bool) -> None:
+        """``follows``: the scan comes right after the last one added (a consecutive pair)."""
+        a = scan.angles_rad
+        if a.size == 0:
+            self.prev = None
+            return
+        key = round(float(a[0]) / _SAME_START_RAD)
+        if key in self.starts:
+            self.starts[key][0] += 1
+        elif len(self.starts) < _MAX_STARTS:
+            self.starts[key] = [1, float(a[0])]
+        if follows and self.prev is not None:
+            self.pairs += 1
+            self.changes += key != self.prev
+        self.prev = key
+        if a.size > 2:
+            mean = (float(a[-1]) - float(a[0])) / (a.size - 1)
+            self.uneven += bool(np.max(np.abs(np.diff(a) - mean)) > _UNEVEN_STEP * abs(mean))
+
+    def angles_deg(self) -> tuple[float, ...]:
+        ranked = sorted(self.starts.items(), key=lambda kv: (-kv[1][0], kv[0]))
+        return tuple(math.degrees(v[1]) for _, v in ranked)
 
 
 def _geometry(
@@ -254,12 +312,13 @@ def _streams(
 def _carmen_info(path: Path, size: int, opts: ReadOptions) -> LogInfo:
     from .io.carmen import CarmenReader
 
-    stats = _BeamStats()
+    stats, starts = _BeamStats(), _StartStats()
     stamps = array("q")
     with open_log(path, options=opts) as log:
         assert isinstance(log, CarmenReader)
         for tick in log.ticks():
             stats.add(tick.scan)
+            starts.add(tick.scan, follows=True)
             stamps.append(tick.t_ns)
         desc, rep, counts = log.describe(), log.report, log.message_counts
     first_t, last_t = (stamps[0], stamps[-1]) if stamps else (None, None)
@@ -271,6 +330,7 @@ def _carmen_info(path: Path, size: int, opts: ReadOptions) -> LogInfo:
         desc,
         rep,
         stats,
+        starts,
         stamps,
         duration,
         counts,
@@ -288,6 +348,7 @@ def _assemble(
     desc: LogDescription,
     rep: ReadReport,
     stats: _BeamStats,
+    starts: _StartStats,
     stamps: array[int],
     duration: float,
     counts: dict[str, int] | None,
@@ -319,7 +380,9 @@ def _assemble(
         max_gap_s=rep.max_gap_s if max_gap_s is None else max_gap_s, gap_threshold_s=gap_ns / NS_PER_S,
         malformed=rep.malformed, malformed_examples=rep.malformed_examples, scans_without_odom_before=before,
         scans_without_odom_after=after, index_clock=rep.index_clock, summary_source=source,
-        warnings=rep.warnings + ((clock,) if clock else ()), notes=desc.notes + notes
+        warnings=rep.warnings + ((clock,) if clock else ()), notes=desc.notes + notes,
+        start_angles_deg=starts.angles_deg(), start_pairs=starts.pairs, start_changes=starts.changes,
+        uneven_scans=starts.uneven,
     )
 
 
@@ -396,12 +459,15 @@ def _ros_info(path: Path, fmt: str, size: int, opts: ReadOptions, *, sample: int
                 stamps = [min(stamps[0], s), max(stamps[1], s)] if stamps else [s, s]
             odom_span = (stamps[0], stamps[1]) if stamps else None
         every = max(1, math.ceil(n_scans / max(sample, 1)))
-        beams, times = _BeamStats(), _StampStats(opts.sync.gap_ns, odom_span)
+        beams, times, starts = _BeamStats(), _StampStats(opts.sync.gap_ns, odom_span), _StartStats()
         for i, (t_log, raw) in enumerate(log.raw_messages(log.scan_topic)):
             try:
                 times.add(check_time(log.header_stamp(raw) or t_log))
-                if i % every == 0:
-                    beams.add(log.decode_scan(raw, t_log))
+                if i % every == 0 or (every > 1 and i % every == 1):  # the sample, each with the next scan
+                    scan = log.decode_scan(raw, t_log)
+                    starts.add(scan, follows=every == 1 or i % every == 1)
+                    if i % every == 0:
+                        beams.add(scan)
             except errors as err:
                 bad(i + 1, log.scan_topic, err)
         if times.seen == 0:
@@ -412,7 +478,7 @@ def _ros_info(path: Path, fmt: str, size: int, opts: ReadOptions, *, sample: int
     duration = (last_t - first_t) / NS_PER_S if first_t is not None and last_t is not None else 0.0
     note = (f"beam statistics from {beams.n} of {times.seen} scans (every {every}th)",) if every > 1 else ()
     return _assemble(
-        path, fmt, size, desc, rep, beams, times.stamps, duration, counts,
+        path, fmt, size, desc, rep, beams, starts, times.stamps, duration, counts,
         opts.sync.gap_ns, source, times.before if odom_span else None, times.after if odom_span else None,
         reversals=times.reversals, gaps=times.gaps, max_gap_s=times.max_gap_ns / NS_PER_S, notes=note,
     )  # fmt: skip
@@ -445,6 +511,22 @@ def _fmt_rate(info: LogInfo) -> str:
     return f"{info.scan_rate_hz:.2f} Hz (median period {1000 * info.scan_period_s:.1f} ms{average})"
 
 
+def _fmt_starts(info: LogInfo) -> str:
+    """The beam geometry row: one start bearing, or the distinct ones and how often consecutive scans differ;
+    uneven spacing."""
+    starts = info.start_angles_deg
+    if not starts:
+        return "-"
+    if len(starts) == 1:
+        out = f"every scan starts at {starts[0]:.3f} deg"
+    else:
+        kind = "interleaved: " if info.interleaved else ""
+        out = (f"{kind}{len(starts)} start bearings ({', '.join(f'{a:.3f}' for a in starts)} deg), "
+               f"different in {info.start_changes} of {info.start_pairs} consecutive scan pairs")
+    uneven = f"; uneven beam spacing in {info.uneven_scans} scans" if info.uneven_scans else "; evenly spaced"
+    return out + uneven
+
+
 def summary_rows(info: LogInfo) -> list[tuple[str, str]]:
     """(label, value) rows for the summary table (the same facts as ``to_dict``)."""
     x, y, th = info.laser_pose
@@ -463,6 +545,7 @@ def summary_rows(info: LogInfo) -> list[tuple[str, str]]:
             f"{info.fov_deg:.1f} deg ({info.angle_min_deg:.2f} to {info.angle_max_deg:.2f} deg, "
             f"{info.resolution_deg:.3f} deg steps)",
         ),
+        ("beam geometry", _fmt_starts(info)),
         ("range limits", f"{info.range_min_m:g} - {info.range_max_m:g} m"),
         ("invalid beams", f"{100 * info.invalid_fraction:.2f} %{sampled}"),
         ("no-return beams", f"{100 * info.no_return_fraction:.2f} %{sampled}"),
