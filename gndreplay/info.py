@@ -38,6 +38,9 @@ _MAX_STARTS = 16
 _UNEVEN_STEP = 0.01
 #: Interleaved: consecutive scans start at different bearings in at least this share of the pairs seen.
 _INTERLEAVED_SHARE = 0.25
+#: The header stamps' median offset from the bag's record times shown in the table from this size on [s]
+#: (a recorder writes within milliseconds of the stamp; a converter may not).
+_LARGE_OFFSET_S = 1.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -79,6 +82,8 @@ class LogInfo:
             and how many of them start at different bearings: a scanner whose start bearing alternates
             (``interleaved``) takes each scan at other bearings.
         uneven_scans: scans whose beam spacing is not even (a step more than 1 % off the scan's mean).
+        record_offset_s, record_offset_max_s: ROS bags / MCAP: the scans' header stamp minus the record
+            (log) time, median and largest in magnitude [s]; None for CARMEN or without header stamps.
         laser_pose: the laser pose in the robot frame (x [m], y [m], theta [rad]).
         laser_pose_source: where it comes from (``ReadReport.sensor_pose_source``: log, tf, config default,
             none).
@@ -138,6 +143,8 @@ class LogInfo:
     start_pairs: int = 0
     start_changes: int = 0
     uneven_scans: int = 0
+    record_offset_s: float | None = None
+    record_offset_max_s: float | None = None
 
     @property
     def interleaved(self) -> bool:
@@ -402,6 +409,14 @@ class _StampStats:
     before: int = 0
     after: int = 0
     stamps: array[int] = field(default_factory=lambda: array("q"))
+    offsets: array[int] = field(default_factory=lambda: array("q"))  # header stamp - record time [ns]
+
+    def offset_s(self) -> tuple[float | None, float | None]:
+        """The median and the largest-magnitude header - record time offset [s] (None without any)."""
+        if not self.offsets:
+            return None, None
+        d = np.frombuffer(self.offsets, dtype=np.int64)
+        return float(np.median(d)) / NS_PER_S, float(d[np.argmax(np.abs(d))]) / NS_PER_S
 
     def add(self, t: int) -> None:
         self.seen += 1
@@ -462,7 +477,10 @@ def _ros_info(path: Path, fmt: str, size: int, opts: ReadOptions, *, sample: int
         beams, times, starts = _BeamStats(), _StampStats(opts.sync.gap_ns, odom_span), _StartStats()
         for i, (t_log, raw) in enumerate(log.raw_messages(log.scan_topic)):
             try:
-                times.add(check_time(log.header_stamp(raw) or t_log))
+                stamp = log.header_stamp(raw)
+                times.add(check_time(stamp or t_log))
+                if stamp:
+                    times.offsets.append(stamp - t_log)
                 if i % every == 0 or (every > 1 and i % every == 1):  # the sample, each with the next scan
                     scan = log.decode_scan(raw, t_log)
                     starts.add(scan, follows=every == 1 or i % every == 1)
@@ -477,11 +495,13 @@ def _ros_info(path: Path, fmt: str, size: int, opts: ReadOptions, *, sample: int
     first_t, last_t = times.first, times.last
     duration = (last_t - first_t) / NS_PER_S if first_t is not None and last_t is not None else 0.0
     note = (f"beam statistics from {beams.n} of {times.seen} scans (every {every}th)",) if every > 1 else ()
-    return _assemble(
+    info = _assemble(
         path, fmt, size, desc, rep, beams, starts, times.stamps, duration, counts,
         opts.sync.gap_ns, source, times.before if odom_span else None, times.after if odom_span else None,
         reversals=times.reversals, gaps=times.gaps, max_gap_s=times.max_gap_ns / NS_PER_S, notes=note,
     )  # fmt: skip
+    offset, largest = times.offset_s()
+    return replace(info, record_offset_s=offset, record_offset_max_s=largest)
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -571,6 +591,10 @@ def summary_rows(info: LogInfo) -> list[tuple[str, str]]:
     if info.malformed_examples:
         malformed += " (" + "; ".join(info.malformed_examples) + ")"
     rows.append(("malformed records", malformed))
+    if info.record_offset_s is not None and abs(info.record_offset_s) >= _LARGE_OFFSET_S:
+        side = "after" if info.record_offset_s > 0 else "before"
+        rows.append(("header vs record time", f"scan header stamps {abs(info.record_offset_s):.3f} s {side} "
+                     f"the bag's record times (median; largest {info.record_offset_max_s:+.3f} s)"))
     if info.index_clock:
         rows.append(("clock", "index clock (no timestamps in the log)"))
     if info.clock_warning is not None:

@@ -62,9 +62,9 @@ def carmen_log(tmp_path: Path) -> Path:
 
 
 def write_mcap_bag(tmp_path: Path, n: int = 40, stamps: list[int] | None = None,
-                   angle_mins: tuple[float, ...] = (-1.0,)) -> Path:
+                   angle_mins: tuple[float, ...] = (-1.0,), record_offset_ns: int = 0) -> Path:
     """A ROS 2 MCAP bag of scans alone, stamped 5 s + 0.1 s i (or ``stamps``), scan i starting at
-    ``angle_mins[i % len(angle_mins)]``."""
+    ``angle_mins[i % len(angle_mins)]``, recorded ``record_offset_ns`` after its stamp."""
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types
     path = tmp_path / "scans"
@@ -87,7 +87,7 @@ def write_mcap_bag(tmp_path: Path, n: int = 40, stamps: list[int] | None = None,
                 ranges=np.array([1, 2, np.nan, 20, 3], np.float32),
                 intensities=np.zeros(0, np.float32),
             )
-            w.write(c, t, ts.serialize_cdr(msg, "sensor_msgs/msg/LaserScan"))
+            w.write(c, t + record_offset_ns, ts.serialize_cdr(msg, "sensor_msgs/msg/LaserScan"))
     return path
 
 
@@ -386,3 +386,18 @@ def test_interleaved_start_bearings_in_a_sampled_bag(tmp_path: Path) -> None:
     assert full.start_pairs == 39 and full.start_changes == 39 and full.stats_scans == 40
     one = log_info(write_mcap_bag(tmp_path / "one"), sample=10)
     assert not one.interleaved and one.start_changes == 0 and one.stats_scans == 10
+
+
+def test_header_stamps_far_from_the_record_times_are_reported(tmp_path: Path) -> None:
+    """A converter recording on its own clock: the offset is in the JSON always, in the table when large."""
+    late = write_mcap_bag(tmp_path / "late", record_offset_ns=3600 * NS_PER_S)
+    d = info_json(late)
+    assert d["record_offset_s"] == -3600.0 and d["record_offset_max_s"] == -3600.0
+    out = runner.invoke(app, ["info", str(late)], env={"COLUMNS": "300"}).stdout
+    assert re.search(r"header vs record time +scan header stamps 3600\.000 s before the bag's record times "
+                     r"\(median; largest -3600\.000 s\)", out), out
+    same = write_mcap_bag(tmp_path / "same")
+    assert info_json(same)["record_offset_s"] == 0.0
+    assert "header vs record time" not in runner.invoke(app, ["info", str(same)]).stdout
+    carmen = robotlaser_log(tmp_path / "c.clf", (-90.0,))
+    assert info_json(carmen)["record_offset_s"] is None
