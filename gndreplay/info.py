@@ -24,10 +24,10 @@ import numpy as np
 
 from .io import DEFAULT_READ, ReadOptions, detect_format, open_log
 from .io.base import LogDescription, ReadReport
-from .io.clock import scan_clock
+from .io.clock import fmt_ns, scan_clock
 from .types import NS_PER_S, Pose2D, Scan
 
-__all__ = ["LogInfo", "StreamStat", "log_info", "scan_clock", "stream_rows", "summary_rows"]
+__all__ = ["LogInfo", "StreamStat", "differences", "log_info", "scan_clock", "stream_rows", "summary_rows"]
 
 DEFAULT_SAMPLE = 500
 #: Start bearings closer than this are one [rad] (a bag's float32 fields round at ~1e-7 rad).
@@ -616,3 +616,45 @@ def stream_rows(info: LogInfo) -> list[tuple[str, str, str, str, str, str]]:
         )
         for s in info.streams
     ]
+
+
+#: What :func:`differences` calls the same: bearings [deg], lengths [m], the laser's heading [rad].
+_SAME_DEG, _SAME_M, _SAME_RAD = 1e-3, 1e-4, 1e-4
+
+
+def differences(a: LogInfo, b: LogInfo) -> list[str]:
+    """Where two logs of the same recording (a CARMEN file and a bag converted from it, say) disagree in
+    what a replay reads: scan count and beams, bearings, range limits, the laser's mounting, the stamps'
+    start and clock, start-bearing interleaving. One line per difference, ``a`` first; empty when none."""
+    out: list[str] = []
+
+    def differ(what: str, x: object, y: object) -> None:
+        out.append(f"{what}: {x} against {y}")
+
+    if a.scans != b.scans:
+        differ("scans", a.scans, b.scans)
+    if a.beams != b.beams:
+        differ("beams per scan", ", ".join(map(str, a.beams)), ", ".join(map(str, b.beams)))
+    for what, x, y, unit in (("first bearing", a.angle_min_deg, b.angle_min_deg, "deg"),
+                             ("last bearing", a.angle_max_deg, b.angle_max_deg, "deg"),
+                             ("beam step", a.resolution_deg, b.resolution_deg, "deg")):
+        if not math.isclose(x, y, rel_tol=0.0, abs_tol=_SAME_DEG):
+            differ(what, f"{x:.4f} {unit}", f"{y:.4f} {unit}")
+    if a.interleaved != b.interleaved:
+        differ("interleaved start bearings", a.interleaved, b.interleaved)
+    for what, x, y in (("range min", a.range_min_m, b.range_min_m),
+                       ("range max", a.range_max_m, b.range_max_m)):
+        if not math.isclose(x, y, rel_tol=0.0, abs_tol=_SAME_M):
+            differ(what, f"{x:g} m", f"{y:g} m")
+    (ax, ay, ath), (bx, by, bth) = a.laser_pose, b.laser_pose
+    if (abs(ax - bx) > _SAME_M or abs(ay - by) > _SAME_M
+            or abs(math.remainder(ath - bth, 2.0 * math.pi)) > _SAME_RAD):
+        differ("laser pose in robot",
+               f"({ax:g} m, {ay:g} m, {math.degrees(ath):g} deg) from {a.laser_pose_source}",
+               f"({bx:g} m, {by:g} m, {math.degrees(bth):g} deg) from {b.laser_pose_source}")
+    if a.start_ns is not None and b.start_ns is not None and a.start_ns != b.start_ns:
+        d = b.start_ns - a.start_ns
+        out.append(f"first scan stamp: {'+' if d > 0 else ''}{fmt_ns(d)} s in the second")
+    if a.synthetic_clock != b.synthetic_clock:
+        differ("synthetic clock", a.synthetic_clock, b.synthetic_clock)
+    return out
