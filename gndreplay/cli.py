@@ -1023,6 +1023,7 @@ def scanmatch(
     cfg = setup.config()
     refs = load_relations(relations) if relations is not None else None
     out_dir = out if out is not None else Path("out") / f"{_log_stem(log)}-scanmatch"
+    said: list[str] = []
 
     with _Progress(_progress_style(progress, json_out=json_out)) as shown:
         watch = _LogProgress(shown, log.name, until_s=None)
@@ -1031,7 +1032,10 @@ def scanmatch(
             methods, relations=refs, out_dir=out_dir, idc=cfg.scanmatch.idc, kiss=cfg.scanmatch.kiss,
             relations_name=str(relations), overwrite=overwrite, on_pass=watch.on_pass,
             inputs=[Path(log)] + ([relations] if relations is not None else []),
+            on_warning=said.append,
         )
+    for line in said:  # after the progress display, which would overwrite it
+        typer.echo(f"gndreplay: warning: {line}", err=True)
     _said_moved(out_dir, Path(rows[0].tum_path).parent if rows and rows[0].tum_path else out_dir)
     if json_out:
         _print_json([r.to_dict() for r in rows])

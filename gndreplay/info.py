@@ -21,20 +21,26 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from .io import DEFAULT_READ, ReadOptions, detect_format, open_log
 from .io.base import LogDescription, ReadReport
+from .io.clock import fmt_ns, scan_clock
 from .types import NS_PER_S, Pose2D, Scan
 
-__all__ = ["LogInfo", "StreamStat", "log_info", "scan_clock", "stream_rows", "summary_rows"]
+__all__ = ["LogInfo", "StreamStat", "differences", "log_info", "scan_clock", "stream_rows", "summary_rows"]
 
 DEFAULT_SAMPLE = 500
-#: A clock is synthetic when its first stamp is a multiple of this (a whole millisecond) and every scan
-#: period is the same to the nanosecond (over at least ``_MIN_SYNTHETIC_SCANS`` scans): a recorded clock
-#: jitters.
-_ROUND_START_NS = 1_000_000
-_MIN_SYNTHETIC_SCANS = 3
+#: Start bearings closer than this are one [rad] (a bag's float32 fields round at ~1e-7 rad).
+_SAME_START_RAD = 1e-5
+#: At most this many distinct start bearings are told apart (a log's scanner has a handful).
+_MAX_STARTS = 16
+#: A scan's beams are unevenly spaced when a step departs from the scan's mean step by more than this share.
+_UNEVEN_STEP = 0.01
+#: Interleaved: consecutive scans start at different bearings in at least this share of the pairs seen.
+_INTERLEAVED_SHARE = 0.25
+#: The header stamps' median offset from the bag's record times shown in the table from this size on [s]
+#: (a recorder writes within milliseconds of the stamp; a converter may not).
+_LARGE_OFFSET_S = 1.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,6 +77,13 @@ class LogInfo:
         range_min_m, range_max_m: sensor range limits (of the first scan).
         invalid_fraction, no_return_fraction: fraction of beams that are nan / +inf.
         stats_scans: scans the beam statistics were computed on (< scans when sampled).
+        start_angles_deg: the distinct first-beam bearings, most frequent first (at most 16).
+        start_pairs, start_changes: consecutive scan pairs seen (all, or the sampled scan and the next one)
+            and how many of them start at different bearings: a scanner whose start bearing alternates
+            (``interleaved``) takes each scan at other bearings.
+        uneven_scans: scans whose beam spacing is not even (a step more than 1 % off the scan's mean).
+        record_offset_s, record_offset_max_s: ROS bags / MCAP: the scans' header stamp minus the record
+            (log) time, median and largest in magnitude [s]; None for CARMEN or without header stamps.
         laser_pose: the laser pose in the robot frame (x [m], y [m], theta [rad]).
         laser_pose_source: where it comes from (``ReadReport.sensor_pose_source``: log, tf, config default,
             none).
@@ -126,6 +139,18 @@ class LogInfo:
     notes: tuple[str, ...] = field(default=())
     scan_period_s: float | None = None
     clock_warning: str | None = None
+    start_angles_deg: tuple[float, ...] = ()
+    start_pairs: int = 0
+    start_changes: int = 0
+    uneven_scans: int = 0
+    record_offset_s: float | None = None
+    record_offset_max_s: float | None = None
+
+    @property
+    def interleaved(self) -> bool:
+        """Consecutive scans start at different bearings in at least a quarter of the pairs seen."""
+        return (len(self.start_angles_deg) > 1 and self.start_pairs > 0
+                and self.start_changes >= _INTERLEAVED_SHARE * self.start_pairs)
 
     @property
     def sampled(self) -> bool:
@@ -155,6 +180,7 @@ class LogInfo:
         d["start_utc"], d["end_utc"] = _utc(self.start_ns, "T"), _utc(self.end_ns, "T")
         d["scan_rate_hz"], d["average_rate_hz"] = self.scan_rate_hz, self.average_rate_hz
         d["synthetic_clock"] = self.synthetic_clock
+        d["interleaved"] = self.interleaved
         out: dict[str, Any] = _jsonable(d)
         return out
 
@@ -192,6 +218,40 @@ class _BeamStats:
         self.no_return += int(np.count_nonzero(np.isposinf(r)))
         if self.first is None:
             self.first = scan
+
+
+@dataclass(slots=True)
+class _StartStats:
+    """Accumulates the scans' start bearings, their changes between consecutive scans, and uneven spacing."""
+
+    starts: dict[int, list[float]] = field(default_factory=dict)  # start // _SAME_START_RAD -> [scans, rad]
+    pairs: int = 0
+    changes: int = 0
+    uneven: int = 0
+    prev: int | None = None
+
+    def add(self, scan: Scan, *, follows: bool) -> None:
+        """``follows``: the scan comes right after the last one added (a consecutive pair)."""
+        a = scan.angles_rad
+        if a.size == 0:
+            self.prev = None
+            return
+        key = round(float(a[0]) / _SAME_START_RAD)
+        if key in self.starts:
+            self.starts[key][0] += 1
+        elif len(self.starts) < _MAX_STARTS:
+            self.starts[key] = [1, float(a[0])]
+        if follows and self.prev is not None:
+            self.pairs += 1
+            self.changes += key != self.prev
+        self.prev = key
+        if a.size > 2:
+            mean = (float(a[-1]) - float(a[0])) / (a.size - 1)
+            self.uneven += bool(np.max(np.abs(np.diff(a) - mean)) > _UNEVEN_STEP * abs(mean))
+
+    def angles_deg(self) -> tuple[float, ...]:
+        ranked = sorted(self.starts.items(), key=lambda kv: (-kv[1][0], kv[0]))
+        return tuple(math.degrees(v[1]) for _, v in ranked)
 
 
 def _geometry(
@@ -256,34 +316,16 @@ def _streams(
     return tuple(out)
 
 
-def scan_clock(stamps: ArrayLike) -> tuple[float | None, str | None]:
-    """The median period of the scan ``stamps`` [s] (int ns, any order; None under two) and a warning when
-    the clock is synthetic: every period the same to the nanosecond from a round start (a whole
-    millisecond), as a generator or a converter writes them; a recorded clock jitters."""
-    t = np.sort(np.asarray(stamps, dtype=np.int64))
-    if t.size < 2:
-        return None, None
-    periods = np.diff(t)
-    median = float(np.median(periods)) / NS_PER_S
-    period = int(periods[0])
-    synthetic = (t.size >= _MIN_SYNTHETIC_SCANS and period > 0 and int(t[0]) % _ROUND_START_NS == 0
-                 and bool(np.all(periods == period)))
-    if not synthetic:
-        return median, None
-    return median, (f"synthetic clock: all {t.size} scan stamps are exactly {_fmt_ns(period)} s apart from "
-                    f"a round start ({_fmt_ns(int(t[0]))} s): generated, not recorded, so the rate and the "
-                    "gaps describe the generator, not the sensor")
-
-
 def _carmen_info(path: Path, size: int, opts: ReadOptions) -> LogInfo:
     from .io.carmen import CarmenReader
 
-    stats = _BeamStats()
+    stats, starts = _BeamStats(), _StartStats()
     stamps = array("q")
     with open_log(path, options=opts) as log:
         assert isinstance(log, CarmenReader)
         for tick in log.ticks():
             stats.add(tick.scan)
+            starts.add(tick.scan, follows=True)
             stamps.append(tick.t_ns)
         desc, rep, counts = log.describe(), log.report, log.message_counts
     first_t, last_t = (stamps[0], stamps[-1]) if stamps else (None, None)
@@ -295,6 +337,7 @@ def _carmen_info(path: Path, size: int, opts: ReadOptions) -> LogInfo:
         desc,
         rep,
         stats,
+        starts,
         stamps,
         duration,
         counts,
@@ -312,6 +355,7 @@ def _assemble(
     desc: LogDescription,
     rep: ReadReport,
     stats: _BeamStats,
+    starts: _StartStats,
     stamps: array[int],
     duration: float,
     counts: dict[str, int] | None,
@@ -343,7 +387,9 @@ def _assemble(
         max_gap_s=rep.max_gap_s if max_gap_s is None else max_gap_s, gap_threshold_s=gap_ns / NS_PER_S,
         malformed=rep.malformed, malformed_examples=rep.malformed_examples, scans_without_odom_before=before,
         scans_without_odom_after=after, index_clock=rep.index_clock, summary_source=source,
-        warnings=rep.warnings + ((clock,) if clock else ()), notes=desc.notes + notes
+        warnings=rep.warnings + ((clock,) if clock else ()), notes=desc.notes + notes,
+        start_angles_deg=starts.angles_deg(), start_pairs=starts.pairs, start_changes=starts.changes,
+        uneven_scans=starts.uneven,
     )
 
 
@@ -363,6 +409,14 @@ class _StampStats:
     before: int = 0
     after: int = 0
     stamps: array[int] = field(default_factory=lambda: array("q"))
+    offsets: array[int] = field(default_factory=lambda: array("q"))  # header stamp - record time [ns]
+
+    def offset_s(self) -> tuple[float | None, float | None]:
+        """The median and the largest-magnitude header - record time offset [s] (None without any)."""
+        if not self.offsets:
+            return None, None
+        d = np.frombuffer(self.offsets, dtype=np.int64)
+        return float(np.median(d)) / NS_PER_S, float(d[np.argmax(np.abs(d))]) / NS_PER_S
 
     def add(self, t: int) -> None:
         self.seen += 1
@@ -420,12 +474,18 @@ def _ros_info(path: Path, fmt: str, size: int, opts: ReadOptions, *, sample: int
                 stamps = [min(stamps[0], s), max(stamps[1], s)] if stamps else [s, s]
             odom_span = (stamps[0], stamps[1]) if stamps else None
         every = max(1, math.ceil(n_scans / max(sample, 1)))
-        beams, times = _BeamStats(), _StampStats(opts.sync.gap_ns, odom_span)
+        beams, times, starts = _BeamStats(), _StampStats(opts.sync.gap_ns, odom_span), _StartStats()
         for i, (t_log, raw) in enumerate(log.raw_messages(log.scan_topic)):
             try:
-                times.add(check_time(log.header_stamp(raw) or t_log))
-                if i % every == 0:
-                    beams.add(log.decode_scan(raw, t_log))
+                stamp = log.header_stamp(raw)
+                times.add(check_time(stamp or t_log))
+                if stamp:
+                    times.offsets.append(stamp - t_log)
+                if i % every == 0 or (every > 1 and i % every == 1):  # the sample, each with the next scan
+                    scan = log.decode_scan(raw, t_log)
+                    starts.add(scan, follows=every == 1 or i % every == 1)
+                    if i % every == 0:
+                        beams.add(scan)
             except errors as err:
                 bad(i + 1, log.scan_topic, err)
         if times.seen == 0:
@@ -435,11 +495,13 @@ def _ros_info(path: Path, fmt: str, size: int, opts: ReadOptions, *, sample: int
     first_t, last_t = times.first, times.last
     duration = (last_t - first_t) / NS_PER_S if first_t is not None and last_t is not None else 0.0
     note = (f"beam statistics from {beams.n} of {times.seen} scans (every {every}th)",) if every > 1 else ()
-    return _assemble(
-        path, fmt, size, desc, rep, beams, times.stamps, duration, counts,
+    info = _assemble(
+        path, fmt, size, desc, rep, beams, starts, times.stamps, duration, counts,
         opts.sync.gap_ns, source, times.before if odom_span else None, times.after if odom_span else None,
         reversals=times.reversals, gaps=times.gaps, max_gap_s=times.max_gap_ns / NS_PER_S, notes=note,
     )  # fmt: skip
+    offset, largest = times.offset_s()
+    return replace(info, record_offset_s=offset, record_offset_max_s=largest)
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -451,11 +513,6 @@ def _fmt_t(t_ns: int | None) -> str:
     if t_ns is None:
         return "-"
     return f"{t_ns // NS_PER_S}.{t_ns % NS_PER_S // 1000:06d} s ({_utc(t_ns, ' ')} UTC)"
-
-
-def _fmt_ns(ns: int) -> str:
-    """Nanoseconds as seconds with as many decimals as they need (up to nine)."""
-    return f"{ns // NS_PER_S}.{ns % NS_PER_S:09d}".rstrip("0").rstrip(".")
 
 
 def _utc(t_ns: int | None, sep: str) -> str | None:
@@ -472,6 +529,22 @@ def _fmt_rate(info: LogInfo) -> str:
         return "-"
     average = "" if info.average_rate_hz is None else f"; average {info.average_rate_hz:.2f} Hz"
     return f"{info.scan_rate_hz:.2f} Hz (median period {1000 * info.scan_period_s:.1f} ms{average})"
+
+
+def _fmt_starts(info: LogInfo) -> str:
+    """The beam geometry row: one start bearing, or the distinct ones and how often consecutive scans differ;
+    uneven spacing."""
+    starts = info.start_angles_deg
+    if not starts:
+        return "-"
+    if len(starts) == 1:
+        out = f"every scan starts at {starts[0]:.3f} deg"
+    else:
+        kind = "interleaved: " if info.interleaved else ""
+        out = (f"{kind}{len(starts)} start bearings ({', '.join(f'{a:.3f}' for a in starts)} deg), "
+               f"different in {info.start_changes} of {info.start_pairs} consecutive scan pairs")
+    uneven = f"; uneven beam spacing in {info.uneven_scans} scans" if info.uneven_scans else "; evenly spaced"
+    return out + uneven
 
 
 def summary_rows(info: LogInfo) -> list[tuple[str, str]]:
@@ -492,6 +565,7 @@ def summary_rows(info: LogInfo) -> list[tuple[str, str]]:
             f"{info.fov_deg:.1f} deg ({info.angle_min_deg:.2f} to {info.angle_max_deg:.2f} deg, "
             f"{info.resolution_deg:.3f} deg steps)",
         ),
+        ("beam geometry", _fmt_starts(info)),
         ("range limits", f"{info.range_min_m:g} - {info.range_max_m:g} m"),
         ("invalid beams", f"{100 * info.invalid_fraction:.2f} %{sampled}"),
         ("no-return beams", f"{100 * info.no_return_fraction:.2f} %{sampled}"),
@@ -517,6 +591,10 @@ def summary_rows(info: LogInfo) -> list[tuple[str, str]]:
     if info.malformed_examples:
         malformed += " (" + "; ".join(info.malformed_examples) + ")"
     rows.append(("malformed records", malformed))
+    if info.record_offset_s is not None and abs(info.record_offset_s) >= _LARGE_OFFSET_S:
+        side = "after" if info.record_offset_s > 0 else "before"
+        rows.append(("header vs record time", f"scan header stamps {abs(info.record_offset_s):.3f} s {side} "
+                     f"the bag's record times (median; largest {info.record_offset_max_s:+.3f} s)"))
     if info.index_clock:
         rows.append(("clock", "index clock (no timestamps in the log)"))
     if info.clock_warning is not None:
@@ -538,3 +616,45 @@ def stream_rows(info: LogInfo) -> list[tuple[str, str, str, str, str, str]]:
         )
         for s in info.streams
     ]
+
+
+#: What :func:`differences` calls the same: bearings [deg], lengths [m], the laser's heading [rad].
+_SAME_DEG, _SAME_M, _SAME_RAD = 1e-3, 1e-4, 1e-4
+
+
+def differences(a: LogInfo, b: LogInfo) -> list[str]:
+    """Where two logs of the same recording (a CARMEN file and a bag converted from it, say) disagree in
+    what a replay reads: scan count and beams, bearings, range limits, the laser's mounting, the stamps'
+    start and clock, start-bearing interleaving. One line per difference, ``a`` first; empty when none."""
+    out: list[str] = []
+
+    def differ(what: str, x: object, y: object) -> None:
+        out.append(f"{what}: {x} against {y}")
+
+    if a.scans != b.scans:
+        differ("scans", a.scans, b.scans)
+    if a.beams != b.beams:
+        differ("beams per scan", ", ".join(map(str, a.beams)), ", ".join(map(str, b.beams)))
+    for what, x, y, unit in (("first bearing", a.angle_min_deg, b.angle_min_deg, "deg"),
+                             ("last bearing", a.angle_max_deg, b.angle_max_deg, "deg"),
+                             ("beam step", a.resolution_deg, b.resolution_deg, "deg")):
+        if not math.isclose(x, y, rel_tol=0.0, abs_tol=_SAME_DEG):
+            differ(what, f"{x:.4f} {unit}", f"{y:.4f} {unit}")
+    if a.interleaved != b.interleaved:
+        differ("interleaved start bearings", a.interleaved, b.interleaved)
+    for what, x, y in (("range min", a.range_min_m, b.range_min_m),
+                       ("range max", a.range_max_m, b.range_max_m)):
+        if not math.isclose(x, y, rel_tol=0.0, abs_tol=_SAME_M):
+            differ(what, f"{x:g} m", f"{y:g} m")
+    (ax, ay, ath), (bx, by, bth) = a.laser_pose, b.laser_pose
+    if (abs(ax - bx) > _SAME_M or abs(ay - by) > _SAME_M
+            or abs(math.remainder(ath - bth, 2.0 * math.pi)) > _SAME_RAD):
+        differ("laser pose in robot",
+               f"({ax:g} m, {ay:g} m, {math.degrees(ath):g} deg) from {a.laser_pose_source}",
+               f"({bx:g} m, {by:g} m, {math.degrees(bth):g} deg) from {b.laser_pose_source}")
+    if a.start_ns is not None and b.start_ns is not None and a.start_ns != b.start_ns:
+        d = b.start_ns - a.start_ns
+        out.append(f"first scan stamp: {'+' if d > 0 else ''}{fmt_ns(d)} s in the second")
+    if a.synthetic_clock != b.synthetic_clock:
+        differ("synthetic clock", a.synthetic_clock, b.synthetic_clock)
+    return out

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
@@ -19,7 +20,7 @@ from typer.testing import CliRunner
 
 from gndreplay import __version__
 from gndreplay.cli import app
-from gndreplay.info import log_info
+from gndreplay.info import differences, log_info
 from gndreplay.io.carmen import write_carmen
 from gndreplay.io.rosbag import RosbagReader
 from gndreplay.types import NS_PER_S, Pose2D, Scan, Tick
@@ -61,21 +62,23 @@ def carmen_log(tmp_path: Path) -> Path:
     return p
 
 
-def write_mcap_bag(tmp_path: Path, n: int = 40, stamps: list[int] | None = None) -> Path:
-    """A ROS 2 MCAP bag of scans alone, stamped 5 s + 0.1 s i (or ``stamps``)."""
+def write_mcap_bag(tmp_path: Path, n: int = 40, stamps: list[int] | None = None,
+                   angle_mins: tuple[float, ...] = (-1.0,), record_offset_ns: int = 0) -> Path:
+    """A ROS 2 MCAP bag of scans alone, stamped 5 s + 0.1 s i (or ``stamps``), scan i starting at
+    ``angle_mins[i % len(angle_mins)]``, recorded ``record_offset_ns`` after its stamp."""
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types
     path = tmp_path / "scans"
     stamps = stamps if stamps is not None else [5 * NS_PER_S + i * 100_000_000 for i in range(n)]
     with Writer2(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
         c = w.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=ts)
-        for t in stamps:
+        for i, t in enumerate(stamps):
             hdr = T["std_msgs/msg/Header"](
                 stamp=T["builtin_interfaces/msg/Time"](sec=t // NS_PER_S, nanosec=t % NS_PER_S), frame_id="l"
             )
             msg = T["sensor_msgs/msg/LaserScan"](
                 header=hdr,
-                angle_min=-1.0,
+                angle_min=angle_mins[i % len(angle_mins)],
                 angle_max=1.0,
                 angle_increment=0.5,
                 time_increment=0.0,
@@ -85,7 +88,7 @@ def write_mcap_bag(tmp_path: Path, n: int = 40, stamps: list[int] | None = None)
                 ranges=np.array([1, 2, np.nan, 20, 3], np.float32),
                 intensities=np.zeros(0, np.float32),
             )
-            w.write(c, t, ts.serialize_cdr(msg, "sensor_msgs/msg/LaserScan"))
+            w.write(c, t + record_offset_ns, ts.serialize_cdr(msg, "sensor_msgs/msg/LaserScan"))
     return path
 
 
@@ -158,7 +161,7 @@ def test_info_on_mcap_reads_the_summary_and_samples_scans(
     monkeypatch.setattr(RosbagReader, "ticks", no_streaming)
     info = log_info(bag, sample=8)
     assert info.scans == 40 and info.beams == (5,) and info.stats_scans == 8 and info.sampled
-    assert len(decoded) == 8
+    assert len(decoded) == 16  # each sampled scan and the next one (the start bearings' consecutive pairs)
     assert info.summary_source == "MCAP summary section"
     assert info.invalid_fraction == pytest.approx(0.2) and info.no_return_fraction == pytest.approx(0.2)
     assert info.duration_s == pytest.approx(3.9) and info.odom_source == "none"
@@ -346,3 +349,84 @@ def test_a_bag_from_the_reader_tests_is_periodic_but_recorded(tmp_path: Path) ->
     d = info_json(write_bag(tmp_path, "ros1"))  # exactly 0.1 s apart, from T0 = ... .123456789 s
     assert d["synthetic_clock"] is False and d["scan_rate_hz"] == pytest.approx(10.0)
     assert d["start_s"] == pytest.approx(T0 / NS_PER_S) and d["start_utc"] == "2023-11-14T22:13:20.123Z"
+
+
+def robotlaser_log(path: Path, starts_deg: tuple[float, ...], n: int = 40) -> Path:
+    """ROBOTLASER1 scans of 181 beams 1 deg apart, scan i starting at ``starts_deg[i % len(starts_deg)]``."""
+    lines = []
+    for i in range(n):
+        start, t = math.radians(starts_deg[i % len(starts_deg)]), 100.0 + 0.2 * i + 1e-5 * (i % 3)
+        pose = f"{0.1 * i} 0.0 0.0"
+        lines.append(f"ROBOTLASER1 0 {start!r} {math.pi!r} {math.radians(1.0)!r} 30.0 0.01 0 181 "
+                     f"{' '.join(['4.0'] * 181)} 0 {pose} {pose} 0.1 0.0 0.5 0.2 0.0 {t:.6f} host {t:.6f}\n")
+    path.write_text("".join(lines))
+    return path
+
+
+def test_interleaved_start_bearings_are_reported(tmp_path: Path) -> None:
+    """A scanner that shifts its start by a quarter degree each scan (four interleaved bearing sets)."""
+    starts = (-90.0, -89.75, -89.5, -89.25)
+    d = info_json(robotlaser_log(tmp_path / "inter.clf", starts))
+    assert d["interleaved"] is True and d["start_pairs"] == 39 and d["start_changes"] == 39
+    assert d["start_angles_deg"] == pytest.approx(list(starts), abs=1e-3) and d["uneven_scans"] == 0
+    out = runner.invoke(app, ["info", str(tmp_path / "inter.clf")], env={"COLUMNS": "300"}).stdout
+    assert ("beam geometry           interleaved: 4 start bearings (-90.000, -89.750, -89.500, -89.250 deg), "
+            "different in 39 of 39 consecutive scan pairs; evenly spaced") in out
+    steady = info_json(robotlaser_log(tmp_path / "steady.clf", (-90.0,)))
+    assert steady["interleaved"] is False and steady["start_changes"] == 0
+    assert steady["start_angles_deg"] == pytest.approx([-90.0])
+
+
+def test_interleaved_start_bearings_in_a_sampled_bag(tmp_path: Path) -> None:
+    """A bag's sample decodes each sampled scan with the next one, so alternation shows at any sampling."""
+    bag = write_mcap_bag(tmp_path / "alt", n=40, angle_mins=(-1.0, -0.75))
+    d = log_info(bag, sample=10)  # every 4th scan: the sampled ones alone all start at -1.0
+    assert d.interleaved and d.start_pairs == 10 and d.start_changes == 10
+    assert d.start_angles_deg == pytest.approx((math.degrees(-1.0), math.degrees(-0.75)))
+    full = log_info(bag)
+    assert full.start_pairs == 39 and full.start_changes == 39 and full.stats_scans == 40
+    one = log_info(write_mcap_bag(tmp_path / "one"), sample=10)
+    assert not one.interleaved and one.start_changes == 0 and one.stats_scans == 10
+
+
+def test_header_stamps_far_from_the_record_times_are_reported(tmp_path: Path) -> None:
+    """A converter recording on its own clock: the offset is in the JSON always, in the table when large."""
+    late = write_mcap_bag(tmp_path / "late", record_offset_ns=3600 * NS_PER_S)
+    d = info_json(late)
+    assert d["record_offset_s"] == -3600.0 and d["record_offset_max_s"] == -3600.0
+    out = runner.invoke(app, ["info", str(late)], env={"COLUMNS": "300"}).stdout
+    assert re.search(r"header vs record time +scan header stamps 3600\.000 s before the bag's record times "
+                     r"\(median; largest -3600\.000 s\)", out), out
+    same = write_mcap_bag(tmp_path / "same")
+    assert info_json(same)["record_offset_s"] == 0.0
+    assert "header vs record time" not in runner.invoke(app, ["info", str(same)]).stdout
+    carmen = robotlaser_log(tmp_path / "c.clf", (-90.0,))
+    assert info_json(carmen)["record_offset_s"] is None
+
+
+def test_differences_name_what_two_containers_disagree_on(tmp_path: Path) -> None:
+    base = log_info(robotlaser_log(tmp_path / "a.clf", (-90.0,)))
+    assert differences(base, base) == []
+    other = log_info(robotlaser_log(tmp_path / "b.clf", (-90.0, -89.75)))
+    assert differences(base, other) == ["interleaved start bearings: False against True"]
+    shifted = dataclasses.replace(base, start_ns=base.start_ns + 1500, resolution_deg=1.0056, range_min_m=0.3,
+                                  laser_pose=(0.2, 0.0, math.pi), laser_pose_source="tf")
+    assert differences(base, shifted) == [
+        "beam step: 1.0000 deg against 1.0056 deg",
+        "range min: 0 m against 0.3 m",
+        "laser pose in robot: (0 m, 0 m, 0 deg) from log against (0.2 m, 0 m, 180 deg) from tf",
+        "first scan stamp: +0.0000015 s in the second",
+    ]
+
+
+def test_differences_between_the_aces_file_and_its_bags(datasets: Path) -> None:
+    """The bags of ACES space its 180 beams over 180 deg (pi / 179 apart), CARMEN's readlog.c 1 deg apart."""
+    clf = log_info(datasets / "carmen" / "aces.clf.bz2")
+    assert differences(clf, log_info(datasets / "rosbag1" / "aces.sort.bag")) == [
+        "last bearing: 89.0000 deg against 90.0000 deg",
+        "beam step: 1.0000 deg against 1.0056 deg",
+        "range min: 0 m against 0.3 m",
+    ]
+    synthetic = differences(clf, log_info(datasets / "rosbag1" / "aces.clf2bag.bag"))
+    assert synthetic[-2:] == ["first scan stamp: +999999929.7101 s in the second",
+                              "synthetic clock: False against True"]

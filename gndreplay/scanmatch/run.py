@@ -19,16 +19,20 @@ from ..errors import ScanMatchError
 from ..evaluation import Relations, RelationStats, relation_errors, write_tum
 from ..fsutil import check_output_dir, resolve_output_dir, staging_dir
 from ..io import DEFAULT_READ, LogReader, ReadOptions, open_log
+from ..io.clock import fmt_ns, scan_clock
 from ..types import Tick
 from .base import Matcher, OdomMatcher
 from .idc import IdcMatcher, IdcParams
 from .kiss import KissIcpMatcher, KissParams
 
 __all__ = ["METHODS", "CorrectedTrajectory", "MatcherReport", "correct_trajectory", "keep_by_travel",
-           "log_ticks", "make_matcher", "matcher_report", "run_scanmatch"]
+           "log_ticks", "make_matcher", "matcher_report", "relations_time_base", "run_scanmatch"]
 
 Method = Literal["idc", "kiss-icp", "odom"]
 METHODS: tuple[Method, ...] = ("odom", "idc", "kiss-icp")
+#: Under this share of the relations matching the log's scan stamps, ``scanmatch`` warns (the errors
+#: describe a few relations only: likely another clock, or relations of another log).
+FEW_MATCHED = 0.5
 
 
 def make_matcher(method: Method, *, idc: IdcParams | None = None, kiss: KissParams | None = None) -> Matcher:
@@ -160,6 +164,30 @@ def matcher_report(traj: CorrectedTrajectory, relations: Relations | None = None
     return MatcherReport(traj.method, int(traj.t_ns.size), traj.failures, med, p99, stats, tum_path)
 
 
+def _span(t_ns: NDArray[np.int64]) -> str:
+    lo, hi = int(t_ns.min()), int(t_ns.max())
+    return f"{fmt_ns(lo)} to {fmt_ns(hi)} s ({(hi - lo) / 1e9:.1f} s)"
+
+
+def relations_time_base(t_ns: NDArray[np.int64], relations: Relations, matched: int, *, tol_s: float,
+                        name: str = "relations") -> str | None:
+    """One line when under :data:`FEW_MATCHED` of ``relations`` (``matched`` of them) match the scan stamps
+    ``t_ns``: the log's and the relations' time ranges side by side, and the log's clock when it looks
+    synthetic (:func:`gndreplay.io.clock.scan_clock`): relations are stamped on the recording's clock.
+    None when enough match or there are no relations or scans."""
+    if len(relations) == 0 or t_ns.size == 0 or matched >= FEW_MATCHED * len(relations):
+        return None
+    ends = np.concatenate([relations.t1_ns, relations.t2_ns])
+    period, clock = scan_clock(t_ns)
+    synthetic = (f"; the log's clock looks synthetic (all {t_ns.size} scans exactly {period:g} s apart from "
+                 "a round start: generated, not recorded; relations stamped on a recorded clock cannot match)"
+                 if clock else "; the log's clock looks recorded (not synthetic)")
+    head = (f"none of its {len(relations)} relations matches" if matched == 0
+            else f"only {matched} of its {len(relations)} relations match")
+    return (f"{name}: {head} two scan stamps of the log within {tol_s:g} s: the log's scans span "
+            f"{_span(t_ns)}, the relations {_span(ends)}{synthetic}")
+
+
 def log_ticks(log: Path, read: ReadOptions = DEFAULT_READ, *,
               on_open: Callable[[LogReader], None] | None = None,
               on_tick: Callable[[Tick], None] | None = None) -> Callable[[], Iterator[Tick]]:
@@ -184,7 +212,8 @@ def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence
                   idc: IdcParams | None = None, kiss: KissParams | None = None,
                   tol_s: float = 1e-4, relations_name: str = "relations", overwrite: bool = False,
                   inputs: Sequence[str | os.PathLike[str]] = (),
-                  on_pass: Callable[[str], None] | None = None) -> list[MatcherReport]:
+                  on_pass: Callable[[str], None] | None = None,
+                  on_warning: Callable[[str], None] | None = None) -> list[MatcherReport]:
     """The ``gndreplay scanmatch`` command as a function: each matcher over the same log, one report each.
 
     Args:
@@ -202,10 +231,12 @@ def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence
         overwrite: replace an earlier gndreplay output at ``out_dir``.
         inputs: the input files (log, relations), which ``out_dir`` must not contain.
         on_pass: hears each matcher's name before its pass over the log (progress displays).
+        on_warning: hears, once, :func:`relations_time_base`'s line when few relations match.
 
     Raises:
         ScanMatchError: unknown method, or relations given of which none matches a scan of the log (a table
-            of NaN would hide a wrong relations file or a wrong ``tol_s``).
+            of NaN would hide a wrong relations file or a wrong ``tol_s``); the message sets the log's and
+            the relations' time ranges side by side (:func:`relations_time_base`).
         OutputError: ``out_dir`` is unsafe to write.
     """
     out = None if out_dir is None else Path(out_dir)
@@ -220,9 +251,13 @@ def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence
             on_pass(method)
         traj = correct_trajectory(ticks_factory(), make_matcher(method, idc=idc, kiss=kiss))
         row = matcher_report(traj, relations, tol_s=tol_s)
-        if relations is not None and row.relations is not None and row.relations.matched == 0:
-            raise ScanMatchError(f"{relations_name}: none of its {len(relations)} relations matches two scan "
-                                 f"stamps of the log within {tol_s:g} s")
+        if relations is not None and row.relations is not None and not rows:
+            note = relations_time_base(traj.t_ns, relations, row.relations.matched, tol_s=tol_s,
+                                       name=relations_name)
+            if row.relations.matched == 0:
+                raise ScanMatchError(note or f"{relations_name}: no relation matches (the log has no scans)")
+            if note is not None and on_warning is not None:
+                on_warning(note)
         rows.append(row)
         trajs.append(traj)
     if out is None or target is None:
