@@ -27,7 +27,7 @@ from .io.base import LogDescription, ReadReport
 from .io.clock import fmt_ns, scan_clock
 from .types import NS_PER_S, Pose2D, Scan
 
-__all__ = ["LogInfo", "StreamStat", "differences", "log_info", "scan_clock", "stream_rows", "summary_rows"]
+__all__ = ["LogInfo", "StreamStat", "differences", "log_info", "stream_rows", "summary_rows"]
 
 DEFAULT_SAMPLE = 500
 #: Start bearings closer than this are one [rad] (a bag's float32 fields round at ~1e-7 rad).
