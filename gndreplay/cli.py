@@ -802,15 +802,19 @@ def _parse_goal(value: str | None, goal_ahead: float | None) -> tuple[float, flo
 
 
 def _window(t_from: float | None, t_to: float | None, *, figures: bool) -> bool:
-    """Whether ``--from`` / ``--to`` ask for a window of the time-series figures (refused without them).
+    """Whether ``--from`` / ``--to`` ask for a window of the time-series figures, checked before any work
+    (refused without the figures, or empty: the run's span is checked when it is drawn).
 
     Raises:
-        ConfigError: a window with --no-figures.
+        ConfigError: a window with --no-figures, or one ``report.rundir.check_window`` refuses.
     """
     if t_from is None and t_to is None:
         return False
     if not figures:
         raise ConfigError("--from / --to choose the figures' window: not with --no-figures")
+    from .report.rundir import check_window
+
+    check_window(t_from, t_to, name="--from / --to")
     return True
 
 
