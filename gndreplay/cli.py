@@ -936,7 +936,7 @@ def run(
     from .replay import RunOptions, far_goal_warning, run_log
     from .report.build import build_report
     from .report.sinks import default_sinks
-    from .report.summary import command_gap_warning
+    from .report.summary import command_gap_warning, matcher_warning
     from .sim.scenario import sample_log
 
     goal_xy = _parse_goal(goal, goal_ahead)
@@ -962,13 +962,13 @@ def run(
             build_report(summary.out_dir, require_marker=True, t_from=t_from, t_to=t_to)
     _said_moved(out_dir, summary.out_dir, silent=quiet or json_out)
     far = None if goal_xy is None else far_goal_warning(goal_xy, _corrected_xy(summary.out_dir), cfg.grid)
-    for warning in (far, command_gap_warning(summary.data)):
-        if warning is not None:
-            typer.echo(f"gndreplay: warning: {warning}", err=True)
     if json_out:
         _print_json(summary.data)
     elif not quiet:
         _print_run(summary.data, summary.out_dir)
+    for warning in (far, command_gap_warning(summary.data), matcher_warning(summary.data)):  # last: seen
+        if warning is not None:
+            typer.echo(f"gndreplay: warning: {warning}", err=True)
 
 
 @app.command(cls=_Command)
@@ -1045,50 +1045,84 @@ def scanmatch(
         _print_json([r.to_dict() for r in rows])
     else:
         _print_scanmatch(rows, relations is not None)
+    for r in rows:  # last: the line a user must not miss
+        if r.health is not None and r.health.warning:
+            typer.echo(f"gndreplay: warning: {r.health.warning}", err=True)
+
+
+_RELATION_COLUMNS = ("trans err (m)", "trans max", "rot err (deg)", "rot max", "relations", "<1 s m",
+                     "1-10 s m", ">10 s m", "<1 s rot max")
+_TRUTH_COLUMNS = ("ATE RMSE (m)", "ATE max", "RPE (m)", "RPE (deg)")
+
+
+def _scanmatch_cells(r: MatcherReport, with_relations: bool, with_truth: bool) -> list[str]:
+    """One row of the scanmatch table: timings and failures, then the relation and ground-truth errors."""
+    d = r.to_dict()
+    cells = [d["method"], f"{d['ms_median']:.2f}", f"{d['ms_p99']:.2f}", str(d["failures"])]
+    rel = d["relations"]
+    if with_relations and rel is not None:
+        cells += [
+            f"{rel['trans_mean_m']:.3f} ± {rel['trans_std_m']:.3f}",
+            f"{rel['trans_max_m']:.3f}",
+            f"{rel['rot_mean_deg']:.2f} ± {rel['rot_std_deg']:.2f}",
+            f"{rel['rot_max_deg']:.2f}",
+            f"{rel['matched']}/{rel['matched'] + rel['unmatched']}",
+        ]
+        spans = {sp["label"]: sp for sp in rel["by_span"]}
+        cells += [_num(spans.get(k, {}).get("trans_mean_m"), "{:.3f}") for k in ("<1 s", "1-10 s", ">10 s")]
+        cells.append(_num(spans.get("<1 s", {}).get("rot_max_deg"), "{:.2f}"))
+    if with_truth:
+        e = r.truth
+        cells += (["-"] * 4 if e is None else
+                  [_num(e.ate_rmse_m, "{:.3f}"), _num(e.ate_max_m, "{:.3f}"),
+                   _num(e.rpe_trans_rmse_m, "{:.4f}"), _num(e.rpe_rot_rmse_deg, "{:.3f}")])
+    return cells
 
 
 def _print_scanmatch(rows: Sequence[MatcherReport], with_relations: bool) -> None:
+    """The side-by-side table (with the errors against the relations and the ground truth when there are),
+    the matchers' health and where the trajectories went."""
     from rich.table import Table
 
+    with_truth = any(r.truth is not None for r in rows)
     table = Table(title="scan matching, side by side in one run", title_justify="left")
     cols = ["matcher", "ms median", "ms p99", "failures"]
-    if with_relations:
-        cols += [
-            "trans err (m)",
-            "trans max",
-            "rot err (deg)",
-            "rot max",
-            "relations",
-            "<1 s m",
-            "1-10 s m",
-            ">10 s m",
-            "<1 s rot max",
-        ]
+    cols += [*(_RELATION_COLUMNS if with_relations else ()), *(_TRUTH_COLUMNS if with_truth else ())]
     for c in cols:
         table.add_column(c, justify="left" if c == "matcher" else "right")
     for r in rows:
-        d = r.to_dict()
-        cells = [d["method"], f"{d['ms_median']:.2f}", f"{d['ms_p99']:.2f}", str(d["failures"])]
-        rel = d["relations"]
-        if with_relations and rel is not None:
-            cells += [
-                f"{rel['trans_mean_m']:.3f} ± {rel['trans_std_m']:.3f}",
-                f"{rel['trans_max_m']:.3f}",
-                f"{rel['rot_mean_deg']:.2f} ± {rel['rot_std_deg']:.2f}",
-                f"{rel['rot_max_deg']:.2f}",
-                f"{rel['matched']}/{rel['matched'] + rel['unmatched']}",
-            ]
-            spans = {sp["label"]: sp for sp in rel["by_span"]}
-            spans_m = [spans.get(k, {}).get("trans_mean_m") for k in ("<1 s", "1-10 s", ">10 s")]
-            cells += [_num(m, "{:.3f}") for m in spans_m]
-            cells.append(_num(spans.get("<1 s", {}).get("rot_max_deg"), "{:.2f}"))
-        table.add_row(*cells)
+        table.add_row(*_scanmatch_cells(r, with_relations, with_truth))
     console = _console()
     console.print(table)
+    if with_truth:
+        console.print("ATE: aligned to the ground truth (SE(2) least squares); RPE: RMSE of the motion over "
+                      "1 s.", highlight=False)
+    _print_health(console, rows)
     for r in rows:
-        d = r.to_dict()
-        if d["tum_path"]:
-            console.print(f"{d['method']}: {d['scans']} scans -> {d['tum_path']}", highlight=False)
+        if r.tum_path:
+            console.print(f"{r.method}: {r.scans} scans -> {r.tum_path}", highlight=False)
+
+
+def _print_health(console: Console, rows: Sequence[MatcherReport]) -> None:
+    """The matchers' health side by side (``evaluation.matcher_health``)."""
+    from rich.table import Table
+
+    healths = [r.health for r in rows if r.health is not None]
+    if not healths:
+        return
+    table = Table(title="scan matcher health (every scan)", title_justify="left")
+    for c in ("matcher", "failed", "refused", "longest without a match", "vs odometry per scan p95 / max",
+              f"worst {healths[0].window_s:g} s window", "verdict"):
+        table.add_column(c, justify="left" if c in ("matcher", "verdict") else "right")
+    for h in healths:
+        longest = f"{h.longest_s:.1f} s ({h.longest_scans} scans)" if h.longest_scans else "-"
+        step = (f"{_num(h.step_trans_m[1], '{:.3f}')} / {_num(h.step_trans_m[2], '{:.3f}')} m, "
+                f"{_num(h.step_rot_deg[1], '{:.2f}')} / {_num(h.step_rot_deg[2], '{:.2f}')} deg")
+        window = f"{_num(h.window_sigmas, '{:.1f}')} sigma"
+        verdict = ("warning" if h.warning else "ok") + (" (measured)" if h.measured else " (estimated)")
+        table.add_row(h.matcher, f"{h.failed} ({100.0 * h.failed_share:.1f} %)" if h.scans else "0",
+                      str(h.refused), longest, step, window, verdict)
+    console.print(table)
 
 
 def _console() -> Console:
@@ -1128,9 +1162,9 @@ def report(
 ) -> None:
     """Redraw the figures and report.md of a finished run from its files alone (no log needed).
 
-    The figures (fig_model, fig_raw, fig_commands, fig_timing, fig_modes) come from commands.csv,
-    timing.csv, the trajectories, summary.json and maps.npz; --from / --to draw the time series of a
-    window. --animate writes an animation of the robot-centred view instead.
+    The figures (fig_model, fig_raw, fig_commands, fig_timing, fig_modes; fig_error with ground truth) come
+    from commands.csv, timing.csv, the trajectories, summary.json and maps.npz; --from / --to draw the time
+    series of a window. --animate writes an animation of the robot-centred view instead.
 
     [bold]Examples[/]
 
@@ -1242,12 +1276,23 @@ def simulate(
             mcap_grid=_grid_every(mcap_grid),
         )
     _said_moved(out_dir, result.out_dir, silent=json_out)
+    _warn_matcher(result.out_dir)
     if json_out:
         _print_json(result.result)
     else:
         _print_simulation(result, f"{spec.name} ({cfg.preset}, seed {seed})")
     if not result.success:
         raise typer.Exit(1)
+
+
+def _warn_matcher(run_dir: Path) -> None:
+    """The scan matcher's warning of a finished run (its summary.json), on stderr, if it has one."""
+    from .report.rundir import SUMMARY_FILE, read_summary
+    from .report.summary import matcher_warning
+
+    warning = matcher_warning(read_summary(run_dir / SUMMARY_FILE))
+    if warning is not None:
+        typer.echo(f"gndreplay: warning: {warning}", err=True)
 
 
 def _print_simulation(result: SimOutcome, title: str) -> None:
@@ -1765,6 +1810,8 @@ def _print_run(data: dict[str, object], out_dir: Path) -> None:
             f"speed MAE {agreement['speed_mae_mps']:.3f} m/s, "
             f"turn direction agrees {100 * agreement['turn_sign_agreement']:.0f} %",
         )
+    if isinstance(health := data.get("matcher_health"), dict):
+        head.add_row("scan matcher", _health_line(health))
     console.print(head)
     lat = Table(title="latency per tick (ms)", title_justify="left")
     for col in ("module", "median", "p90", "p99", "max"):
@@ -1773,6 +1820,21 @@ def _print_run(data: dict[str, object], out_dir: Path) -> None:
         if q:
             lat.add_row(module, *(f"{q[k]:.2f}" for k in ("median", "p90", "p99", "max")))
     console.print(lat)
+
+
+def _health_line(h: dict[str, Any]) -> str:
+    """summary.json's ``matcher_health`` in one line (the warning itself goes to stderr)."""
+    n, failed = int(h.get("scans", 0)), int(h.get("failed", 0))
+    share = _num(100.0 * failed / n if n else None, "{:.1f}")
+    longest = _num((h.get("longest_without_match") or {}).get("duration_s"), "{:.1f}")
+    window = h.get("worst_window") or {}
+    span, sigmas = _num(window.get("window_s"), "{:g}"), _num(window.get("sigmas"), "{:.1f}")
+    text = (f"{h.get('matcher')}: {failed} of {n} failed ({share} %), {longest} s at most without a match, "
+            f"worst {span} s vs odometry {sigmas} sigma")
+    if h.get("verdict") == "measured":
+        ate, odom = _num(h.get("ate_matcher_m"), "{:.3f}"), _num(h.get("ate_odom_m"), "{:.3f}")
+        text += f"; ATE {ate} m (odometry {odom})"
+    return text + ("; warned" if h.get("warning") else "")
 
 
 def _counts(counts: object) -> str:

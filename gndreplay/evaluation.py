@@ -25,9 +25,11 @@ from __future__ import annotations
 
 import math
 import os
+from collections import Counter
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -39,8 +41,9 @@ from .geometry import compose, inverse, relative, wrap_angle
 from .io.base import MAX_ABS_TIME_NS
 from .io.userfile import brief, read_text
 
-__all__ = ["ALIGNMENTS", "MAX_RELATIONS_BYTES", "MAX_TUM_BYTES", "SPANS", "RelationStats", "Relations",
-           "SpanStats", "TrajectoryErrors", "align_origin", "align_se2", "associate", "load_relations",
+__all__ = ["ALIGNMENTS", "FAILURE_CATEGORIES", "MAX_RELATIONS_BYTES", "MAX_TUM_BYTES", "REFUSALS", "SPANS",
+           "HealthParams", "MatcherHealth", "RelationStats", "Relations", "SpanStats", "TrajectoryErrors",
+           "align_origin", "align_se2", "associate", "failure_category", "load_relations", "matcher_health",
            "read_tum", "relation_errors", "relations_from_trajectory", "trajectory_errors", "write_tum"]
 
 F64 = NDArray[np.float64]
@@ -297,7 +300,8 @@ class TrajectoryErrors:
         rpe_delta_s: the span of an RPE pair [s]; rpe_pairs: pose pairs that far apart.
         rpe_trans_rmse_m, rpe_trans_mean_m, rpe_trans_max_m: translational error of a pair's motion [m].
         rpe_rot_rmse_deg, rpe_rot_mean_deg, rpe_rot_max_deg: its rotational error [deg].
-        t_ns: (matched,) stamps of the matched estimated poses; ate_m: (matched,) their error [m].
+        t_ns: (matched,) stamps of the matched estimated poses; ate_m: (matched,) their error [m];
+            yaw_err_deg: (matched,) their heading error (aligned minus truth, wrapped) [deg].
     """
 
     alignment: str
@@ -318,6 +322,7 @@ class TrajectoryErrors:
     rpe_rot_max_deg: float
     t_ns: I64
     ate_m: F64
+    yaw_err_deg: F64
 
     def to_dict(self) -> dict[str, Any]:
         """Summary numbers (no per-pose arrays), JSON-ready."""
@@ -377,17 +382,29 @@ def _rms_mean_median_max(x: F64) -> tuple[float, float, float, float]:
     return (float(np.sqrt(np.mean(x * x))), float(np.mean(x)), float(np.median(x)), float(np.max(x)))
 
 
-def _rpe(t_ns: I64, est: F64, ref: F64, delta_s: float) -> tuple[F64, F64]:
-    """Translational [m] and rotational [deg] error of the motion over each pair of poses ``delta_s`` apart
-    (sorted stamps): the first pose at or after t + delta_s, kept when the pair spans at most 1.5 delta_s."""
+def _pairs_apart(t_ns: I64, delta_s: float) -> tuple[I64, I64]:
+    """Index pairs (i, j) of sorted stamps about ``delta_s`` apart: j the first pose at or after t_i +
+    delta_s, kept when the pair spans at most 1.5 delta_s (no pair across a gap)."""
     d_ns = round(delta_s * NS_PER_S)
     j = np.searchsorted(t_ns, t_ns + d_ns, side="left")
     i = np.flatnonzero(j < t_ns.shape[0])
     j = j[i]
     keep = (t_ns[j] - t_ns[i]) <= round(1.5 * d_ns)
-    i, j = i[keep], j[keep]
-    err = relative(relative(ref[i], ref[j]), relative(est[i], est[j])).reshape(-1, 3)
-    return np.hypot(err[:, 0], err[:, 1]), np.degrees(np.abs(err[:, 2]))
+    return i[keep].astype(np.int64), j[keep].astype(np.int64)
+
+
+def _motion_error(a: F64, b: F64, i: I64, j: I64) -> tuple[F64, F64]:
+    """Translational [m] and rotational [rad, absolute] difference of trajectory b's motion from i to j
+    against trajectory a's (``relative`` of the two relative poses)."""
+    err = relative(relative(a[i], a[j]), relative(b[i], b[j])).reshape(-1, 3)
+    return np.hypot(err[:, 0], err[:, 1]), np.abs(err[:, 2])
+
+
+def _rpe(t_ns: I64, est: F64, ref: F64, delta_s: float) -> tuple[F64, F64]:
+    """Translational [m] and rotational [deg] error of the motion over each pair of poses ``delta_s`` apart
+    (sorted stamps, :func:`_pairs_apart`)."""
+    e_t, e_r = _motion_error(ref, est, *_pairs_apart(t_ns, delta_s))
+    return e_t, np.degrees(e_r)
 
 
 def trajectory_errors(t_est: ArrayLike, est: ArrayLike, t_ref: ArrayLike, ref: ArrayLike, *,
@@ -416,12 +433,297 @@ def trajectory_errors(t_est: ArrayLike, est: ArrayLike, t_ref: ArrayLike, ref: A
         transform = align_origin(p[0], q[0])
     aligned = compose(transform, p).reshape(-1, 3)
     ate = np.hypot(aligned[:, 0] - q[:, 0], aligned[:, 1] - q[:, 1])
+    yaw_err = np.degrees(np.asarray(wrap_angle(aligned[:, 2] - q[:, 2])).reshape(-1))
     e_t, e_r = _rpe(t, p, q, rpe_delta_s)
     a = _rms_mean_median_max(ate)
     rt = _rms_mean_median_max(e_t)
     rr = _rms_mean_median_max(e_r)
     return TrajectoryErrors(alignment, int(t.size), int(te.size - t.size), transform, *a, rpe_delta_s,
-                            int(e_t.size), rt[0], rt[1], rt[3], rr[0], rr[1], rr[3], t, ate)
+                            int(e_t.size), rt[0], rt[1], rt[3], rr[0], rr[1], rr[3], t, ate, yaw_err)
+
+
+# ---- scan-matcher health ----------------------------------------------------------------------------
+
+#: The categories of a failed match, by the leading words of its reason (``MatchResult.reason``): the
+#: matcher found no usable match (too few valid beams, too few pairs, a residual too large, a degenerate
+#: geometry), or found one and refused it as inconsistent with the odometry or its prior (``REFUSALS``).
+#: Any other reason is "other".
+FAILURE_CATEGORIES: tuple[str, ...] = (
+    "too few valid beams", "too few pairs", "residual", "degenerate geometry",
+    "correction too far from the prior", "unconfirmed match",
+)
+#: The categories of a match found and refused (its correction disagreed with the odometry or its prior).
+REFUSALS = frozenset(("correction too far from the prior", "unconfirmed match"))
+#: What the IDC matcher appends to the reason of a failure after a gap in the log (its map restarts there).
+_AFTER_GAP = " after a gap of "
+
+
+def failure_category(reason: str) -> str:
+    """The category of a failed match's ``reason`` (one of ``FAILURE_CATEGORIES``, else "other"; "" for an
+    accepted match's empty reason)."""
+    if not reason:
+        return ""
+    return next((c for c in FAILURE_CATEGORIES if reason.startswith(c)), "other")
+
+
+class OdometrySigmas(Protocol):
+    """An odometry error model per increment, as ``scanmatch.IdcParams`` states it."""
+
+    @property
+    def odo_sigma_m(self) -> float: ...
+
+    @property
+    def odo_sigma_rel(self) -> float: ...
+
+    @property
+    def odo_sigma_rad(self) -> float: ...
+
+    @property
+    def odo_sigma_rel_rad(self) -> float: ...
+
+
+@dataclass(frozen=True, slots=True)
+class HealthParams:
+    """The odometry error model and the limits of :func:`matcher_health`'s warning.
+
+    Over a window of ``window_s`` the matcher's motion may differ from the odometry's by sigma_t = sigma_m +
+    sigma_rel * d in translation and sigma_r = sigma_rad + sigma_rel_rad * turn + sigma_rad_per_m * d in
+    rotation, with d and turn the larger of the two trajectories' path length [m] and accumulated turn [rad]
+    in the window (the true motion is unknown; the larger one never blames the matcher for odometry that
+    stalled). The defaults are the IDC matcher's own model of the odometry (``IdcParams.odo_sigma_*``, see
+    :meth:`from_odometry`) plus 2 deg per metre driven. Measured on the dev logs (``gndreplay scanmatch``,
+    docs/results.md) the worst 5 s window is 2.5 sigmas (MIT CSAIL, whose odometry under-reports turns)
+    and a laser that repeats its last scan for 5 s while the robot drives 1.5 m is 4.3.
+
+    Attributes:
+        window_s: the stretch compared [s]; max_sigmas: the disagreement that warns.
+        max_failed_share: the share of failed matches that warns (the dev logs: at most 5 %).
+        worse_margin_m, worse_margin_rel: with ground truth, the matcher warns when its aligned ATE RMSE
+            exceeds the odometry's by more than max(worse_margin_m, worse_margin_rel * the odometry's).
+    """
+
+    sigma_m: float = 0.1
+    sigma_rel: float = 1.0 / 6.0
+    sigma_rad: float = math.radians(10.0 / 3.0)
+    sigma_rel_rad: float = 1.0 / 6.0
+    sigma_rad_per_m: float = math.radians(2.0)
+    window_s: float = 5.0
+    max_sigmas: float = 4.0
+    max_failed_share: float = 0.2
+    worse_margin_m: float = 0.02
+    worse_margin_rel: float = 0.1
+
+    @classmethod
+    def from_odometry(cls, model: OdometrySigmas) -> HealthParams:
+        """The defaults with the odometry error model of a matcher's parameters (``IdcParams``)."""
+        return cls(sigma_m=model.odo_sigma_m, sigma_rel=model.odo_sigma_rel, sigma_rad=model.odo_sigma_rad,
+                   sigma_rel_rad=model.odo_sigma_rel_rad)
+
+
+@dataclass(frozen=True)
+class MatcherHealth:
+    """How a scan matcher did over a log (:func:`matcher_health`); times in seconds since the first scan.
+
+    Attributes:
+        matcher: its name; scans: scans matched.
+        failed: failed matches (MATCH_FAILED: the odometry increment kept); refused: those of them whose
+            match was found and refused (``REFUSALS``); after_gap: those after a gap in the log;
+            reasons: failures per category (``failure_category``).
+        steps: accepted matches whose increment is compared with the odometry's; step_trans_m,
+            step_rot_deg: (median, p95, max) of that disagreement per scan [m], [deg].
+        longest_start_s, longest_s, longest_scans: the longest run of consecutive failed matches: its first
+            scan, its length (until the next accepted match; to one median scan period past the last scan
+            when none follows) and its scans (0 and nan without a failure).
+        window_start_s, window_trans_m, window_rot_deg, window_sigma_m, window_sigma_deg, window_sigmas:
+            the window of ``HealthParams.window_s`` whose disagreement is the most sigmas of the odometry
+            model: its start, the disagreement, the model's sigmas there and the ratio (nan without one).
+        measured: whether ground truth decided the verdict; ate_odom_m, ate_matcher_m: then the aligned
+            ATE RMSE of the odometry and of the matcher [m] (nan otherwise).
+        warning: one line when the matcher likely hurts (see :func:`matcher_health`), else None.
+    """
+
+    matcher: str
+    scans: int
+    failed: int
+    refused: int
+    after_gap: int
+    reasons: Mapping[str, int]
+    steps: int
+    step_trans_m: tuple[float, float, float]
+    step_rot_deg: tuple[float, float, float]
+    longest_start_s: float
+    longest_s: float
+    longest_scans: int
+    window_s: float
+    window_start_s: float
+    window_trans_m: float
+    window_rot_deg: float
+    window_sigma_m: float
+    window_sigma_deg: float
+    window_sigmas: float
+    measured: bool
+    ate_odom_m: float
+    ate_matcher_m: float
+    warning: str | None
+
+    @property
+    def failed_share(self) -> float:
+        return self.failed / self.scans if self.scans else math.nan
+
+    def to_dict(self) -> dict[str, Any]:
+        """summary.json's ``matcher_health`` (JSON-ready; nan where not measured)."""
+        q = ("median", "p95", "max")
+        return {
+            "matcher": self.matcher, "scans": self.scans, "failed": self.failed,
+            "failed_share": self.failed_share, "refused": self.refused, "after_gap": self.after_gap,
+            "reasons": dict(self.reasons),
+            "step_vs_odometry": {"scans": self.steps,
+                                 **{f"trans_{k}_m": v for k, v in zip(q, self.step_trans_m, strict=True)},
+                                 **{f"rot_{k}_deg": v for k, v in zip(q, self.step_rot_deg, strict=True)}},
+            "longest_without_match": {"t_start_s": self.longest_start_s, "duration_s": self.longest_s,
+                                      "scans": self.longest_scans},
+            "worst_window": {"window_s": self.window_s, "t_start_s": self.window_start_s,
+                             "trans_m": self.window_trans_m, "rot_deg": self.window_rot_deg,
+                             "sigma_m": self.window_sigma_m, "sigma_deg": self.window_sigma_deg,
+                             "sigmas": self.window_sigmas},
+            "verdict": "measured" if self.measured else "estimated",
+            "ate_odom_m": self.ate_odom_m, "ate_matcher_m": self.ate_matcher_m,
+            "warning": self.warning,
+        }
+
+
+def _median_p95_max(x: F64) -> tuple[float, float, float]:
+    if x.size == 0:
+        return math.nan, math.nan, math.nan
+    q = np.percentile(x, [50, 95])
+    return float(q[0]), float(q[1]), float(np.max(x))
+
+
+def _longest_failure(t_s: F64, ok: NDArray[np.bool_]) -> tuple[float, float, int]:
+    """(start [s], length [s], scans) of the longest run of consecutive failed matches ((nan, 0, 0) without
+    one): until the next accepted match, or one median scan period past the last scan."""
+    bad = np.concatenate([[False], ~ok, [False]]).astype(np.int8)
+    edges = np.flatnonzero(np.diff(bad))
+    if edges.size == 0:
+        return math.nan, 0.0, 0
+    starts, ends = edges[0::2], edges[1::2]  # failed scans starts[k] .. ends[k] - 1
+    period = float(np.median(np.diff(t_s))) if t_s.size > 1 else 0.0
+    stop = np.where(ends < t_s.size, t_s[np.minimum(ends, t_s.size - 1)], t_s[-1] + period)
+    length = stop - t_s[starts]
+    k = int(np.argmax(ends - starts))
+    return float(t_s[starts[k]]), float(length[k]), int(ends[k] - starts[k])
+
+
+def _path(poses: F64) -> tuple[F64, F64]:
+    """Cumulative path length [m] and accumulated absolute turn [rad] along a trajectory (0 at its start)."""
+    inc = relative(poses[:-1], poses[1:]).reshape(-1, 3)
+    zero = np.zeros(1)
+    return (np.concatenate([zero, np.cumsum(np.hypot(inc[:, 0], inc[:, 1]))]),
+            np.concatenate([zero, np.cumsum(np.abs(inc[:, 2]))]))
+
+
+def _pct(x: float) -> str:
+    return f"{100.0 * x:.0f} %"
+
+
+_Window = tuple[float, float, float, float, float, float]
+
+
+def _worst_window(t: I64, o: F64, c: F64, params: HealthParams) -> _Window:
+    """The window of ``params.window_s`` (``_pairs_apart``) whose motion of ``c`` disagrees most with that of
+    ``o`` in sigmas of the odometry model: (start [s since the first pose], translation [m], rotation [deg],
+    sigma_t [m], sigma_r [deg], sigmas); nan without a window."""
+    i, j = _pairs_apart(t, params.window_s)
+    if i.size == 0:
+        return math.nan, math.nan, math.nan, math.nan, math.nan, math.nan
+    w_t, w_r = _motion_error(o, c, i, j)
+    (d_o, r_o), (d_c, r_c) = _path(o), _path(c)
+    dist = np.maximum(d_o[j] - d_o[i], d_c[j] - d_c[i])
+    turn = np.maximum(r_o[j] - r_o[i], r_c[j] - r_c[i])
+    sig_t = params.sigma_m + params.sigma_rel * dist
+    sig_r = params.sigma_rad + params.sigma_rel_rad * turn + params.sigma_rad_per_m * dist
+    z = np.maximum(w_t / sig_t, w_r / sig_r)
+    k = int(np.argmax(z))
+    return (float(t[i[k]] - t[0]) / NS_PER_S, float(w_t[k]), math.degrees(float(w_r[k])), float(sig_t[k]),
+            math.degrees(float(sig_r[k])), float(z[k]))
+
+
+def _estimated_warning(matcher: str, n: int, failed: int, counts: Mapping[str, int], window: _Window,
+                       params: HealthParams) -> str | None:
+    """The warning without ground truth: too many failures, or a window beyond the odometry model."""
+    signs = []
+    if n and failed > params.max_failed_share * n:
+        why = ", ".join(f"{k} {v}" for k, v in counts.items())
+        signs.append(f"{failed} of {n} matches failed ({_pct(failed / n)}: {why}), so the corrected poses "
+                     "are mostly odometry")
+    start, trans, rot, sig_t, sig_r, z = window
+    if z > params.max_sigmas:
+        signs.append(f"its motion disagreed with the odometry by {trans:.2f} m and {rot:.1f} deg over "
+                     f"{params.window_s:g} s from t = {start:.1f} s, {z:.1f} sigmas of the odometry error "
+                     f"model ({sig_t:.2f} m, {sig_r:.1f} deg)")
+    if not signs:
+        return None
+    return f"scan matcher {matcher} likely hurts: {'; '.join(signs)} (estimated: no ground truth)"
+
+
+def _measured_warning(matcher: str, ate_odom: float, ate_matcher: float, params: HealthParams) -> str | None:
+    """The warning with ground truth: the matcher's aligned ATE RMSE worse than the odometry's."""
+    worse = ate_matcher - ate_odom
+    if not worse > max(params.worse_margin_m, params.worse_margin_rel * ate_odom):
+        return None
+    return (f"scan matcher {matcher} made the trajectory worse than the odometry: aligned ATE RMSE "
+            f"{ate_matcher:.3f} m against {ate_odom:.3f} m (+{worse:.3f} m; measured against the ground "
+            "truth)")
+
+
+def matcher_health(t_ns: ArrayLike, odom: ArrayLike, poses: ArrayLike, ok: ArrayLike, reasons: Sequence[str],
+                   *, matcher: str = "matcher", truth: tuple[ArrayLike, ArrayLike] | None = None,
+                   params: HealthParams = HealthParams()) -> MatcherHealth:
+    """How a scan matcher did over a log, from its corrected trajectory ``poses`` and the odometry ``odom``
+    ((N, 3) at the scans' stamps ``t_ns``, in time order), whether each match was accepted (``ok``) and the
+    failed ones' ``reasons``; vectorised over the arrays.
+
+    The warning says the matcher likely hurts. With ``truth`` (stamps, (M, 3) poses) it is measured: the
+    matcher's aligned ATE RMSE against the odometry's (``trajectory_errors``, SE(2) alignment), worse by more
+    than ``params.worse_margin_*``. Without truth it is estimated from two signs: more than
+    ``params.max_failed_share`` of the matches failed, or over a window of ``params.window_s`` its motion
+    disagreed with the odometry's by more than ``params.max_sigmas`` of the odometry error model
+    (:class:`HealthParams`). The disagreement per scan is that of the accepted matches' increments (a failed
+    match keeps the odometry's).
+
+    Raises:
+        ValueError: shapes disagree.
+    """
+    t, o = _trajectory_arrays(t_ns, odom)
+    _, c = _trajectory_arrays(t, poses)
+    good = np.asarray(ok, dtype=bool).reshape(-1)
+    if good.shape != t.shape or len(reasons) != t.size:
+        raise ValueError(f"ok and reasons must have one entry per pose ({t.size}), got {good.shape[0]} and "
+                         f"{len(reasons)}")
+    n = int(t.size)
+    bad = [r for r, g in zip(reasons, good.tolist(), strict=True) if not g]
+    counts = dict(sorted(Counter(map(failure_category, bad)).items(), key=lambda kv: (-kv[1], kv[0])))
+    failed = len(bad)
+    step = np.flatnonzero(good[1:]) + 1  # the accepted matches' increments against the odometry's
+    s_t, s_r = _motion_error(o, c, step - 1, step)
+    window = _worst_window(t, o, c, params)
+    ate_o = ate_m = math.nan
+    if truth is not None:
+        e_o, e_m = trajectory_errors(t, o, *truth), trajectory_errors(t, c, *truth)
+        if min(e_o.matched, e_m.matched) >= 2:
+            ate_o, ate_m = e_o.ate_rmse_m, e_m.ate_rmse_m
+    measured = not math.isnan(ate_o)
+    warning = (_measured_warning(matcher, ate_o, ate_m, params) if measured
+               else _estimated_warning(matcher, n, failed, counts, window, params))
+    start, length, scans = _longest_failure((t - (t[0] if n else 0)) / NS_PER_S, good)
+    return MatcherHealth(
+        matcher=matcher, scans=n, failed=failed, refused=sum(v for k, v in counts.items() if k in REFUSALS),
+        after_gap=sum(1 for r in bad if _AFTER_GAP in r), reasons=counts, steps=int(step.size),
+        step_trans_m=_median_p95_max(s_t), step_rot_deg=_median_p95_max(np.degrees(s_r)),
+        longest_start_s=start, longest_s=length, longest_scans=scans, window_s=params.window_s,
+        window_start_s=window[0], window_trans_m=window[1], window_rot_deg=window[2],
+        window_sigma_m=window[3], window_sigma_deg=window[4], window_sigmas=window[5], measured=measured,
+        ate_odom_m=ate_o, ate_matcher_m=ate_m, warning=warning)
 
 
 def _trajectory_arrays(t_ns: ArrayLike, poses: ArrayLike) -> tuple[I64, F64]:

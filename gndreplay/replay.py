@@ -79,7 +79,7 @@ class RunOptions:
 
 @dataclass(frozen=True, slots=True)
 class Matched:
-    """A tick after scan matching: corrected pose, time spent, and whether the match failed."""
+    """A tick after scan matching: corrected pose, time spent, and whether the match failed (and why)."""
 
     tick: Tick
     pose: Pose2D
@@ -87,6 +87,7 @@ class Matched:
     failed: bool
     s_m: float  # path length along the corrected trajectory since the first scan
     in_range: bool = True  # within until_s (later ticks are read only for the goal lookahead)
+    reason: str = ""  # why the match failed (MatchResult.reason)
 
 
 def _make_matcher(cfg: Config) -> Matcher:
@@ -131,7 +132,7 @@ def corrected_stream(ticks: Iterable[Tick], cfg: Config, options: RunOptions) ->
         if prev is not None:
             s += math.hypot(res.pose.x - prev.x, res.pose.y - prev.y)
         prev = res.pose
-        yield Matched(tick, res.pose, ms, not res.ok, s, in_range)
+        yield Matched(tick, res.pose, ms, not res.ok, s, in_range, res.reason)
 
 
 def assign_goals(
@@ -308,6 +309,7 @@ def run_replay(
                 pairs = assign_goals(corrected_stream(ticks, cfg, options), options)
                 for k, (m, goal) in enumerate(pairs):
                     traj.add(m.tick.t_ns, m.tick.odom, m.pose, m.tick.truth)
+                    rec.add_match(not m.failed, m.reason)
                     for sink in sinks:
                         sink.add_scan(m.tick, m.pose)
                     if k % options.every:

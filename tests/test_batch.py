@@ -373,6 +373,82 @@ def test_metrics_from_summary() -> None:
     )
 
 
+def _truth(ate: float, rpe_m: float, rpe_deg: float) -> dict[str, Any]:
+    aligned = {"ate_rmse_m": ate, "rpe_trans_rmse_m": rpe_m, "rpe_rot_rmse_deg": rpe_deg, "matched": 10}
+    return {"poses": 10, "odom": {"aligned": {**aligned, "ate_rmse_m": 9.0}},
+            "corrected": {"aligned": aligned, "unaligned": {**aligned, "ate_rmse_m": 8.0}}}
+
+
+def test_truth_metrics_are_the_corrected_trajectorys_aligned_errors() -> None:
+    m = metrics_from_summary({**fake_summary(12, 9.5, 2), "truth": _truth(0.25, 0.01, 0.5)})
+    assert (m["ate_m"], m["rpe_m"], m["rpe_deg"]) == (0.25, 0.01, 0.5)
+    absent = metrics_from_summary({**fake_summary(12, 9.5, 2), "truth": None})
+    assert absent.keys().isdisjoint({"ate_m", "rpe_m", "rpe_deg"})
+    unpaired = metrics_from_summary({**fake_summary(12, 9.5, 2), "truth": _truth(math.nan, math.nan, 0.5)})
+    assert math.isnan(unpaired["ate_m"]) and math.isnan(unpaired["rpe_m"]) and unpaired["rpe_deg"] == 0.5
+
+
+def test_a_truth_threshold_fails_an_input_without_truth_and_says_so() -> None:
+    limits = {"ate_m": 0.2, "rpe_deg": 1.0, "match_trans_err_mean_m": 0.1}
+    assert check_limits({"ate_m": 0.25, "rpe_deg": 0.5}, limits) == ("ate_m 0.25 > 0.2",)
+    assert check_limits({"ate_m": 0.15, "rpe_deg": 0.5}, limits) == ()  # relations absent: not checked
+    assert check_limits({"ticks": 3}, limits) == (
+        "ate_m not measured: the input has no ground truth (limit 0.2; ate_m = false in its [inputs] table "
+        "skips the check)",
+        "rpe_deg not measured: the input has no ground truth (limit 1; rpe_deg = false in its [inputs] "
+        "table skips the check)",
+    )
+    assert check_limits({"ate_m": math.nan}, {"ate_m": 0.2}) == ("ate_m not measured (limit 0.2)",)
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("[thresholds]\nate = 0.1", r"unknown key 'ate' \(did you mean 'ate_m'\?\)"),
+        ("[thresholds]\nrpe_m_deg = 0.1", r"unknown key 'rpe_m_deg' \(did you mean 'rpe_deg'\?\)"),
+        ("[thresholds]\nrpe_deg = 200", r"rpe_deg must be at most 180 deg \(a half turn"),
+        ("[thresholds]\nate_m = 2e6", r"ate_m must be at most 1e\+06 m"),
+        ("[thresholds]\nate_m = -0.1", r"ate_m must be a non-negative number or false"),
+    ],
+)
+def test_truth_thresholds_are_validated_like_the_others(tmp_path: Path, text: str, match: str) -> None:
+    with pytest.raises(ConfigError, match=match):
+        load_thresholds(write_toml(tmp_path, text))
+
+
+def test_truth_thresholds_in_a_real_batch(tmp_path: Path) -> None:
+    """The sample (CARMEN TRUEPOS) and two copies without its truth lines, under ``ate_m``: the sample is
+    scored, the first copy fails for want of truth, the second is switched off for it."""
+    import bz2
+
+    from gndreplay.config import Config
+    from gndreplay.replay import RunOptions
+
+    text = bz2.decompress(SAMPLE_LOG.read_bytes()).decode()
+    blind = "".join(x for x in text.splitlines(keepends=True) if not x.startswith("TRUEPOS"))
+    for name in ("blind", "blind-off"):
+        (tmp_path / f"{name}.clf").write_text(blind)
+    th = load_thresholds(write_toml(tmp_path, '[thresholds]\nate_m = 0.5\nrpe_m = 0.1\n'
+                                              '[inputs."blind-off"]\nate_m = false\nrpe_m = false\n'))
+    jobs = [Job("office", SAMPLE_LOG), Job("blind", tmp_path / "blind.clf"),
+            Job("blind-off", tmp_path / "blind-off.clf")]
+    res = run_batch(jobs, cfg=Config(), options=RunOptions(until_s=3.0), thresholds=th,
+                    out_dir=tmp_path / "b")
+    office, blind_run, off = res.results
+    summary = json.loads((office.run_dir / "summary.json").read_text())
+    assert office.status == "pass" and office.metrics["ate_m"] == pytest.approx(
+        summary["truth"]["corrected"]["aligned"]["ate_rmse_m"])
+    assert blind_run.status == "fail" and blind_run.failures == (
+        "ate_m not measured: the input has no ground truth (limit 0.5; ate_m = false in its [inputs] table "
+        "skips the check)",
+        "rpe_m not measured: the input has no ground truth (limit 0.1; rpe_m = false in its [inputs] table "
+        "skips the check)")
+    assert off.status == "pass" and "ate_m" not in off.metrics
+    rows = {r["name"]: r for r in csv.DictReader(io.StringIO((tmp_path / "b" / "summary.csv").read_text()))}
+    assert float(rows["office"]["ate_m"]) == pytest.approx(office.metrics["ate_m"], abs=1e-4)
+    assert rows["blind"]["ate_m"] == "" and res.exit_code == 1
+
+
 # ---------------------------------------------------------------- trajectories and relations
 
 

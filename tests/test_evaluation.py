@@ -1,5 +1,5 @@
-"""Relations metric, SE(2) ATE / RPE against truth and TUM writer: known answers, matching by stamp, error
-messages, round trip."""
+"""Relations metric, SE(2) ATE / RPE against truth (against evo's SE(3) Umeyama when evo is installed), TUM
+writer, and the scan matcher's health: known answers, matching by stamp, error messages, round trip."""
 
 from __future__ import annotations
 
@@ -11,10 +11,15 @@ import pytest
 
 from gndreplay.errors import GndReplayError
 from gndreplay.evaluation import (
+    FAILURE_CATEGORIES,
+    REFUSALS,
+    HealthParams,
     align_origin,
     align_se2,
     associate,
+    failure_category,
     load_relations,
+    matcher_health,
     relation_errors,
     relations_from_trajectory,
     trajectory_errors,
@@ -283,3 +288,185 @@ def test_trajectory_errors_empty_and_bad_input() -> None:
         trajectory_errors([0], [[0, 0, 0]], [0], [[0, 0, 0]], alignment="sim3")
     np.testing.assert_allclose(align_origin([1.0, 0.0, 0.5], [0.0, 0.0, 0.0]),
                                compose([0, 0, 0], [-np.cos(0.5), np.sin(0.5), -0.5]), atol=1e-12)
+
+
+def test_heading_error_per_pose_after_the_alignment() -> None:
+    t, truth = _truth_path()
+    est = truth.copy()
+    est[:, 2] += math.radians(2.0)  # the positions agree (identity alignment), the heading is 2 deg off
+    est[150:, 2] -= math.radians(5.0)  # ... then 3 deg the other way
+    e = trajectory_errors(t, est, t, truth)
+    np.testing.assert_allclose(e.transform, 0.0, atol=1e-12)
+    np.testing.assert_allclose(e.yaw_err_deg[:150], 2.0, atol=1e-9)
+    np.testing.assert_allclose(e.yaw_err_deg[150:], -3.0, atol=1e-9)
+    assert e.ate_max_m < 1e-12 and e.yaw_err_deg.shape == e.ate_m.shape == e.t_ns.shape
+
+
+def _evo_trajectory(t: np.ndarray, poses: np.ndarray) -> object:
+    from evo.core import trajectory
+
+    half = 0.5 * poses[:, 2]
+    quat = np.column_stack([np.cos(half), np.zeros_like(half), np.zeros_like(half), np.sin(half)])  # w x y z
+    return trajectory.PoseTrajectory3D(positions_xyz=np.column_stack([poses[:, :2], np.zeros(len(poses))]),
+                                       orientations_quat_wxyz=quat, timestamps=t / 1e9)
+
+
+def test_ate_and_rpe_match_evo_on_planar_data() -> None:
+    """evo (the TUM / KITTI evaluation tool) on the same planar trajectories: its SE(3) Umeyama alignment
+    (no scale) then APE of the translation, and RPE over 10 poses (1 s at 10 Hz), all pairs."""
+    evo_metrics = pytest.importorskip("evo.core.metrics")
+    t, truth = _truth_path(300, seed=11)
+    rng = np.random.default_rng(12)
+    est = compose([2.0, -1.0, 0.8], truth)  # another frame ...
+    est[:, :2] += np.cumsum(rng.normal(0.0, 0.01, (300, 2)), axis=0)  # ... with a random walk
+    est[:, 2] += np.cumsum(rng.normal(0.0, 0.002, 300))
+    ours = trajectory_errors(t, est, t, truth)
+    ref, traj = _evo_trajectory(t, truth), _evo_trajectory(t, est)
+    rotation, translation, scale = traj.align(ref, correct_scale=False)  # type: ignore[attr-defined]
+    assert scale == 1.0 and abs(rotation[2, 2] - 1.0) < 1e-9  # planar: a rotation about z only
+    assert ours.transform[2] == pytest.approx(math.atan2(rotation[1, 0], rotation[0, 0]), abs=1e-9)
+    np.testing.assert_allclose(ours.transform[:2], translation[:2], atol=1e-9)
+    ape = evo_metrics.APE(evo_metrics.PoseRelation.translation_part)
+    ape.process_data((ref, traj))
+    stats = ape.get_all_statistics()
+    assert ours.ate_rmse_m == pytest.approx(stats["rmse"], rel=1e-9)
+    assert ours.ate_max_m == pytest.approx(stats["max"], rel=1e-9)
+    assert ours.ate_median_m == pytest.approx(stats["median"], rel=1e-9)
+    for relation, ours_rmse in ((evo_metrics.PoseRelation.translation_part, ours.rpe_trans_rmse_m),
+                                (evo_metrics.PoseRelation.rotation_angle_deg, ours.rpe_rot_rmse_deg)):
+        rpe = evo_metrics.RPE(relation, delta=10, delta_unit=evo_metrics.Unit.frames, all_pairs=True)
+        rpe.process_data((_evo_trajectory(t, truth), _evo_trajectory(t, est)))
+        assert ours.rpe_pairs == len(rpe.error)
+        assert ours_rmse == pytest.approx(rpe.get_statistic(evo_metrics.StatisticsType.rmse), rel=1e-9)
+
+
+# ---- the scan matcher's health --------------------------------------------------------------------------
+
+
+IDC_REASONS = {  # reasons the IDC matcher gives, and their category
+    "too few valid beams: 12 < 40": "too few valid beams",
+    "too few pairs: 31 < 40": "too few pairs",
+    "residual 0.091 m > 0.08 m": "residual",
+    "degenerate geometry: translation unobservable (information 1.2 < 5.0)": "degenerate geometry",
+    "correction too far from the prior (odometry stalled)": "correction too far from the prior",
+    "unconfirmed match: 0.412 m, 3.1 deg from odometry (2.4 sigma) and no better than the match near "
+    "odometry": "unconfirmed match",
+    "too few pairs: 12 < 40 after a gap of 12.5 s: map restarted": "too few pairs",
+}
+
+
+def test_failure_categories() -> None:
+    for reason, category in IDC_REASONS.items():
+        assert failure_category(reason) == category, reason
+    assert failure_category("") == "" and failure_category("the laser is on fire") == "other"
+    assert set(IDC_REASONS.values()) == set(FAILURE_CATEGORIES) and set(FAILURE_CATEGORIES) >= REFUSALS
+
+
+def _drive(n: int = 201, v: float = 0.3, rate_hz: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+    """Stamps [ns] and poses of a robot driving straight along x at ``v`` m/s."""
+    t = T0 + np.arange(n, dtype=np.int64) * round(1e9 / rate_hz)
+    x = v * np.arange(n) / rate_hz
+    return t, np.column_stack([x, np.zeros(n), np.zeros(n)])
+
+
+def test_health_of_a_matcher_that_agrees_with_the_odometry() -> None:
+    t, odom = _drive()
+    h = matcher_health(t, odom, compose([5.0, 1.0, 0.3], odom), np.ones(201, bool), [""] * 201, matcher="m")
+    assert h.failed == h.refused == h.after_gap == 0 and h.reasons == {} and h.steps == 200
+    assert h.step_trans_m[2] < 1e-9 and h.window_sigmas < 1e-6 and h.warning is None
+    assert h.longest_scans == 0 and h.longest_s == 0.0 and math.isnan(h.longest_start_s)
+    assert not h.measured and math.isnan(h.ate_odom_m)
+
+
+def test_health_counts_failures_by_kind_and_the_longest_stretch() -> None:
+    t, odom = _drive(21)
+    ok = np.ones(21, bool)
+    reasons = [""] * 21
+    for k, reason in ((3, "too few pairs: 12 < 40"), (4, "unconfirmed match: 1 m"),
+                      (5, "degenerate geometry: x"), (10, "too few pairs: 1 < 40 after a gap of 11.0 s: map"),
+                      (20, "correction too far from the prior (odometry stalled)")):
+        ok[k], reasons[k] = False, reason
+    h = matcher_health(t, odom, odom, ok, reasons)
+    assert h.failed == 5 and h.refused == 2 and h.after_gap == 1
+    assert h.reasons == {"too few pairs": 2, "correction too far from the prior": 1,
+                         "degenerate geometry": 1, "unconfirmed match": 1}
+    assert h.longest_scans == 3 and h.longest_start_s == pytest.approx(0.3)
+    assert h.longest_s == pytest.approx(0.3)  # scans 3, 4, 5: until the accepted match at 0.6 s
+    assert h.steps == 15  # accepted matches after the first scan
+    tail = matcher_health(t, odom, odom, np.arange(21) < 15, [""] * 15 + ["too few pairs"] * 6)
+    assert tail.longest_scans == 6 and tail.longest_s == pytest.approx(0.6)  # to one period past the end
+
+
+def test_health_step_disagreement_known_answer() -> None:
+    """Per scan the odometry says 30 mm straight on, the matcher 33 mm and a 0.5 deg turn (a 10 % wider
+    stride on every 4th scan): the disagreement is that increment against the odometry's."""
+    t, odom = _drive(101)
+    corrected = [np.zeros(3)]
+    for k in range(100):
+        corrected.append(compose(corrected[-1], [0.033 if k % 4 else 0.06, 0.0, math.radians(0.5)]))
+    h = matcher_health(t, odom, np.array(corrected), np.ones(101, bool), [""] * 101)
+    assert h.steps == 100
+    assert h.step_rot_deg == pytest.approx((0.5, 0.5, 0.5))
+    assert h.step_trans_m[0] == pytest.approx(0.003) and h.step_trans_m[2] == pytest.approx(0.03)
+    assert h.step_trans_m[1] == pytest.approx(np.percentile([0.03] * 25 + [0.003] * 75, 95))
+
+
+def test_health_window_beyond_the_odometry_model_warns_estimated() -> None:
+    """The matcher stands still for 10 s while the odometry drives 3 m: the worst 5 s window is 1.5 m off,
+    against sigma = 0.1 m + 1.5 m / 6 = 0.35 m (4.3 sigmas)."""
+    t, odom = _drive()
+    corrected = odom.copy()
+    corrected[50:150, 0] = corrected[50, 0]
+    corrected[150:, 0] -= corrected[150, 0] - corrected[50, 0]
+    h = matcher_health(t, odom, corrected, np.ones(201, bool), [""] * 201, matcher="m")
+    assert h.window_trans_m == pytest.approx(1.5) and h.window_sigma_m == pytest.approx(0.35)
+    assert h.window_sigmas == pytest.approx(1.5 / 0.35) and 5.0 - 1e-9 <= h.window_start_s <= 10.0 + 1e-9
+    assert h.warning is not None and h.warning.startswith("scan matcher m likely hurts: its motion disagreed")
+    assert "1.50 m" in h.warning and "4.3 sigmas" in h.warning
+    assert h.warning.endswith("(estimated: no ground truth)")
+    calm = matcher_health(t, odom, corrected, np.ones(201, bool), [""] * 201,
+                          params=HealthParams(max_sigmas=4.5))
+    assert calm.warning is None  # the limit is the params'
+
+
+def test_health_failure_share_warns_estimated() -> None:
+    t, odom = _drive(10)
+    ok = np.array([True] * 7 + [False] * 3)
+    h = matcher_health(t, odom, odom, ok, [""] * 7 + ["degenerate geometry: x"] * 2 + ["too few pairs: 1"])
+    assert h.failed_share == pytest.approx(0.3) and h.warning is not None
+    assert "3 of 10 matches failed (30 %: degenerate geometry 2, too few pairs 1)" in h.warning
+    ok[7] = True
+    assert matcher_health(t, odom, odom, ok, [""] * 8 + ["x"] * 2).warning is None  # 20 %: not above
+
+
+def test_health_with_truth_is_measured_and_decides_alone() -> None:
+    t, truth = _drive()
+    stuck = truth.copy()
+    stuck[50:150, 0] = stuck[50, 0]
+    stuck[150:, 0] -= stuck[150, 0] - stuck[50, 0]
+    all_ok, none = np.ones(201, bool), [""] * 201
+    # exact odometry, a matcher that stood still for 10 s: measured worse, by the ATE of the stuck trajectory
+    h = matcher_health(t, truth, stuck, all_ok, none, matcher="m", truth=(t, truth))
+    want = trajectory_errors(t, stuck, t, truth).ate_rmse_m
+    assert h.measured and h.ate_odom_m == pytest.approx(0.0, abs=1e-12)
+    assert h.ate_matcher_m == pytest.approx(want)
+    assert h.warning == (f"scan matcher m made the trajectory worse than the odometry: aligned ATE RMSE "
+                         f"{want:.3f} m against 0.000 m (+{want:.3f} m; measured against the ground truth)")
+    # the same disagreement with odometry that drifted and a matcher that was right: no warning
+    h = matcher_health(t, stuck, truth, np.zeros(201, bool), ["too few pairs"] * 201, truth=(t, truth))
+    assert h.measured and h.window_sigmas > 4.0 and h.failed_share == 1.0 and h.warning is None
+    # within the margin (10 % of the odometry's ATE, at least 2 cm): no warning
+    worse = truth.copy()
+    worse[:, 1] += 0.015 * np.sin(np.arange(201))
+    assert matcher_health(t, truth, worse, all_ok, none, truth=(t, truth)).warning is None
+
+
+def test_health_bad_input() -> None:
+    t, odom = _drive(5)
+    with pytest.raises(ValueError, match="one entry per pose"):
+        matcher_health(t, odom, odom, np.ones(4, bool), [""] * 5)
+    with pytest.raises(ValueError, match="poses must be"):
+        matcher_health(t, odom, odom[:4], np.ones(5, bool), [""] * 5)
+    empty = matcher_health(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, bool), [])
+    assert empty.scans == 0 and empty.warning is None and math.isnan(empty.window_sigmas)
+    assert math.isnan(empty.to_dict()["failed_share"])

@@ -26,6 +26,7 @@ from gndreplay.report import (
     load_maps,
     load_run,
 )
+from gndreplay.report.figures import TRUTH_FIGURES
 from gndreplay.report.markdown import trajectory_gap
 from gndreplay.report.plots import hit_image, plot_bands
 from gndreplay.report.rundir import runs
@@ -288,7 +289,9 @@ def test_load_run_errors_name_the_file(tmp_path: Path) -> None:
 
 
 def test_build_report_writes_the_pngs_and_the_report(run_dir: Path) -> None:
-    sizes = {name: png_size(run_dir / name) for name in FIGURES}
+    drawn = [name for name in FIGURES if name not in TRUTH_FIGURES]  # the run has no ground truth
+    assert not any((run_dir / name).exists() for name in TRUTH_FIGURES)
+    sizes = {name: png_size(run_dir / name) for name in drawn}
     assert sizes["fig_commands.png"][0] == 1440 and sizes["fig_timing.png"] == (1440, 966)  # 5 panels
     assert sizes["fig_model.png"][0] == 1560 and sizes["fig_raw.png"][0] == 1080
     assert sizes["fig_modes.png"][0] >= 1440  # the timeline, with its legend beside it
@@ -296,7 +299,7 @@ def test_build_report_writes_the_pngs_and_the_report(run_dir: Path) -> None:
         assert 500 <= h <= 1300 and w >= 1000
     text = (run_dir / "report.md").read_text()
     for name in FIGURES:
-        assert f"]({name})" in text
+        assert (f"]({name})" in text) == (name in drawn)
     summary = json.loads((run_dir / "summary.json").read_text())
     q = summary["latency_ms"]["planner"]
     assert f"| planner | {q['median']:.2f} | {q['p90']:.2f} | {q['p99']:.2f} | {q['max']:.2f} | 80 |" in text
@@ -332,8 +335,9 @@ def test_build_report_is_deterministic_and_needs_only_the_files(run_dir: Path, t
                  "summary.json", "maps.npz"):
         (copy / name).write_bytes((run_dir / name).read_bytes())
     written = build_report(copy)
-    assert [p.name for p in written] == [*FIGURES, "report.md"]
-    for name in FIGURES:
+    drawn = [n for n in FIGURES if n not in TRUTH_FIGURES]  # the run has no ground truth
+    assert [p.name for p in written] == [*drawn, "report.md"]
+    for name in drawn:
         assert (copy / name).read_bytes() == (run_dir / name).read_bytes(), name
     report = (copy / "report.md").read_text()
     assert report.replace("copy", "synthetic") == (run_dir / "report.md").read_text()
@@ -402,10 +406,18 @@ def _replay_with_sinks(log: Path, out: Path, until_s: float) -> int:
     return summary.ticks
 
 
+def _figures_of(out: Path) -> list[str]:
+    """The figures a run directory holds: fig_error.png only with ground truth."""
+    truth = (out / "trajectory_truth.tum").is_file()
+    names = [n for n in FIGURES if truth or n not in TRUTH_FIGURES]
+    assert sorted(names) == sorted(p.name for p in out.glob("fig_*.png"))
+    return names
+
+
 def _check_run_dir(out: Path, ticks: int) -> None:
     from rosbags.highlevel import AnyReader
 
-    for name in FIGURES:
+    for name in _figures_of(out):
         assert png_size(out / name)[0] >= 1000
     assert "## Latency per tick [ms]" in (out / "report.md").read_text()
     with AnyReader([out / "results.mcap"]) as reader:
@@ -415,7 +427,7 @@ def _check_run_dir(out: Path, ticks: int) -> None:
     maps = load_maps(out / "maps.npz")
     assert maps.scans == ticks and maps.snapshot is not None
     # report rebuilds the same figures from the files alone
-    before = {name: (out / name).read_bytes() for name in FIGURES}
+    before = {name: (out / name).read_bytes() for name in _figures_of(out)}
     build_report(out)
     assert all((out / name).read_bytes() == data for name, data in before.items())
 
@@ -424,6 +436,7 @@ def test_replay_of_the_sample_log_writes_figures_report_and_mcap(tmp_path: Path)
     out = tmp_path / "office"
     ticks = _replay_with_sinks(SAMPLE_LOG, out, until_s=30.0)
     assert ticks > 100
+    assert "fig_error.png" in _figures_of(out)  # the sample has ground truth
     _check_run_dir(out, ticks)
 
 
@@ -441,8 +454,8 @@ def test_cli_run_mcap_on_aces_writes_figures_report_and_mcap(datasets: Path, tmp
     ticks = json.loads((out / "summary.json").read_text())["ticks"]
     assert ticks == 7374 == len((out / "commands.csv").read_text().splitlines()) - 1
     _check_run_dir(out, ticks)
-    before = {name: (out / name).read_bytes() for name in FIGURES}
-    for name in FIGURES:
+    before = {name: (out / name).read_bytes() for name in _figures_of(out)}
+    for name in before:
         (out / name).unlink()
     again = CliRunner().invoke(app, ["report", str(out)])
     assert again.exit_code == 0, again.output
@@ -507,6 +520,9 @@ def test_a_failed_figure_leaves_the_previous_file(run_dir: Path, tmp_path: Path,
         ('{"config": {"supervisor": 3}}', r"summary\.json: key 'config' must be a table"),
         ('{"latency_ms": {"match": {"p99": "slow"}}}', r"summary\.json: key 'latency_ms'"),
         ('{"options": null}', r"summary\.json: key 'options' must be a table"),
+        ('{"matcher_health": {"scans": "many"}}', r"summary\.json: key 'matcher_health' must be a table"),
+        ('{"matcher_health": {"worst_window": {"sigmas": "4"}}}', r"key 'matcher_health'"),
+        ('{"matcher_health": {"warning": 3}}', r"key 'matcher_health'"),
     ],
 )
 def test_a_malformed_summary_is_one_run_dir_error(run_dir: Path, tmp_path: Path, text: str,

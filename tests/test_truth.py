@@ -16,7 +16,14 @@ from gndreplay.evaluation import read_tum, trajectory_errors
 from gndreplay.io import open_log
 from gndreplay.replay import RunOptions, run_log, run_replay
 from gndreplay.report import load_run
-from gndreplay.report.figures import figure_model, truth_on_corrected
+from gndreplay.report.figures import (
+    build_figures,
+    figure_error,
+    figure_model,
+    figure_names,
+    truth_errors,
+    truth_on_corrected,
+)
 from gndreplay.report.markdown import render_report
 from gndreplay.report.rundir import (
     CORRECTED_TRAJECTORY_FILE,
@@ -100,6 +107,29 @@ def test_fig_model_draws_the_truth_on_the_corrected_start(runs: tuple[Path, Path
     assert part.traj_truth is not None and 0 < part.traj_truth.shape[0] < data.traj_truth.shape[0]
 
 
+def test_fig_error_draws_both_aligned_errors_and_the_failed_matches(runs: tuple[Path, Path],
+                                                                   tmp_path: Path) -> None:
+    run, without = runs
+    data = load_run(run)
+    errors = truth_errors(data)
+    assert errors is not None and set(errors) == {"odometry", "corrected"}
+    truth = data.summary["truth"]
+    for name, key in (("odometry", "odom"), ("corrected", "corrected")):
+        assert errors[name].ate_rmse_m == pytest.approx(truth[key]["aligned"]["ate_rmse_m"], rel=1e-9)
+        assert errors[name].matched == data.traj_truth.shape[0]
+    fig = figure_error(data)
+    labels = [line.get_label() for line in fig.axes[0].get_lines()]
+    c = errors["corrected"]
+    assert f"corrected (RMSE {c.ate_rmse_m:.3f} m, max {c.ate_max_m:.3f} m)" in labels
+    assert any(x.startswith("raw odometry (RMSE") for x in labels)
+    failed = data.summary["flags"]["MATCH_FAILED"]
+    assert f"{failed} of {len(data.commands)} ticks MATCH_FAILED" in fig.axes[0].get_title()
+    assert [p.name for p in build_figures(data, tmp_path)] == list(figure_names(None, truth=True))
+    assert (tmp_path / "fig_error.png").is_file()
+    blind = load_run(without)
+    assert truth_errors(blind) is None and "fig_error.png" not in figure_names(None, truth=False)
+
+
 def test_trajectory_writer_truth_only_where_given() -> None:
     w = TrajectoryWriter()
     p = Pose2D(1.0, 2.0, 0.5)
@@ -125,6 +155,9 @@ def test_closed_loop_run_writes_the_world_pose_as_truth(tmp_path: Path) -> None:
     t_ns, truth = read_tum(out.out_dir / TRUTH_TRAJECTORY_FILE)
     t_odom, _ = read_tum(out.out_dir / ODOM_TRAJECTORY_FILE)
     assert np.array_equal(t_ns, t_odom) and t_ns.size > 5
-    section = load_run(out.out_dir).summary["truth"]
+    summary = load_run(out.out_dir).summary
+    section = summary["truth"]
     assert section["poses"] == truth.shape[0] and section["corrected"]["aligned"]["matched"] == t_ns.size
     assert section["odom"]["unaligned"]["ate_max_m"] < 0.1  # 2 s of simulated odometry drift
+    health = summary["matcher_health"]  # the closed loop's matcher, measured against the world pose
+    assert health["verdict"] == "measured" and health["scans"] == t_ns.size and health["warning"] is None

@@ -2,14 +2,16 @@
 
 Metric names carry their unit: ``<module>_<stat>_ms`` for latencies (module: match, model, planner, reactor,
 stack = model + planner + reactor, total; stat: median, p90, p99, max), plain counts of ticks on which a
-flag fired (``emergency_stops``, ``no_region``, ...), and ``match_*`` relation errors when the input has a
-relations file. A closed-loop scenario run adds the scores of its result.json and sim_timing.json
+flag fired (``emergency_stops``, ``no_region``, ...), ``match_*`` relation errors when the input has a
+relations file, and the errors of the corrected trajectory against ground truth (``TRUTH_METRICS``) when
+the input has it. A closed-loop scenario run adds the scores of its result.json and sim_timing.json
 (``SCENARIO_METRICS``); the per-scenario aggregates over seeds are ``AGGREGATE_METRICS``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from math import nan
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -21,6 +23,7 @@ __all__ = [
     "LATENCY_METRICS",
     "RELATION_METRICS",
     "SCENARIO_METRICS",
+    "TRUTH_METRICS",
     "metrics_from_result",
     "metrics_from_summary",
     "outcome_note",
@@ -58,11 +61,24 @@ RELATION_METRICS: tuple[str, ...] = (
 )
 
 
-def metrics_from_summary(data: Mapping[str, Any]) -> dict[str, float]:
-    """Flatten summary.json into the batch metrics: ``ticks``, latencies [ms] and flag counts (the
-    ``*_OVER_BUDGET`` counts from its ``over_budget`` table, the others from ``flags``).
+#: Ground-truth metric -> its key in summary.json's ``truth.corrected.aligned``: the corrected trajectory
+#: after the SE(2) alignment to the truth, ATE RMSE [m] and the RMSE of the 1 s RPE [m], [deg]
+#: (``gndreplay.evaluation.trajectory_errors``). An input without ground truth has none of them.
+TRUTH_METRICS: Mapping[str, str] = {
+    "ate_m": "ate_rmse_m",
+    "rpe_m": "rpe_trans_rmse_m",
+    "rpe_deg": "rpe_rot_rmse_deg",
+}
 
-    A latency module missing from the summary (no ticks) gives no metric; a flag missing counts 0.
+
+def metrics_from_summary(data: Mapping[str, Any]) -> dict[str, float]:
+    """Flatten summary.json into the batch metrics: ``ticks``, latencies [ms], flag counts (the
+    ``*_OVER_BUDGET`` counts from its ``over_budget`` table, the others from ``flags``) and, with ground
+    truth, ``TRUTH_METRICS``.
+
+    A latency module missing from the summary (no ticks) gives no metric; a flag missing counts 0; without
+    truth (``truth`` null) there is no truth metric, and one that is not a number (no pose paired with the
+    truth) is nan.
     """
     out: dict[str, float] = {"ticks": int(data.get("ticks", 0))}
     latency = data.get("latency_ms") or {}
@@ -74,6 +90,14 @@ def metrics_from_summary(data: Mapping[str, Any]) -> dict[str, float]:
     over = data.get("over_budget") or {}  # the wall-clock *_OVER_BUDGET counts (always recorded here)
     for name, flag in COUNT_METRICS.items():
         out[name] = int(over[flag] if flag in over else flags.get(flag, 0))
+    truth = data.get("truth")
+    if isinstance(truth, Mapping):
+        aligned = (truth.get("corrected") or {}).get("aligned") or {}
+        for name, key in TRUTH_METRICS.items():
+            value = aligned.get(key)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                value = nan
+            out[name] = float(value)
     return out
 
 

@@ -47,6 +47,9 @@ METRIC_COLUMNS: tuple[str, ...] = (
     "match_trans_err_mean_m",
     "match_rot_err_mean_deg",
     "relations_matched",
+    "ate_m",
+    "rpe_m",
+    "rpe_deg",
     "success",
     "collisions",
     "goal_missed",
@@ -84,12 +87,14 @@ _MD_METRICS: tuple[tuple[str, str], ...] = (
     ("no region", "no_region"),
     ("e-stop", "emergency_stops"),
     ("trans err m", "match_trans_err_mean_m"),
+    ("ATE m", "ate_m"),
 )
 #: summary.md, scenario runs: (header, metric) after name, status and seed.
 _MD_SCENARIO_METRICS: tuple[tuple[str, str], ...] = (
     ("time s", "time_to_goal_s"),
     ("clearance m", "clearance_m"),
     ("path m", "path_length_m"),
+    ("ATE m", "ate_m"),
     ("stack p99 ms", "stack_p99_ms"),
     ("takeovers", "takeovers"),
     ("local %", "local_ticks_pct"),

@@ -14,6 +14,10 @@ File format (every key optional; paths relative to the file's folder)::
     goal = [12.0, -3.5]          # fixed goal [m] in the corrected odometry frame
     match_trans_err_mean_m = 0.15
 
+    [inputs."office*"]           # a log with ground truth (CARMEN TRUEPOS, a truth topic)
+    ate_m = 0.10                 # the corrected trajectory's aligned ATE RMSE [m]
+    rpe_deg = 0.5                # ... and its RPE over 1 s, RMSE [deg] (rpe_m: [m])
+
     [inputs."u_trap"]            # closed-loop scenarios (a table matches the scenario's name, its runs'
                                  # names u_trap-s1, ..., or its path): each run (scenario x seed) ...
     min_success = false          # ... need not reach the goal (default: every run must, min_success = 1)
@@ -22,11 +26,14 @@ File format (every key optional; paths relative to the file's folder)::
     min_success_rate = 0.8       # per scenario over its seeds: at least 80 % of the runs reach the goal
 
 Upper-limit keys are the metric names of :mod:`gndreplay.batch.metrics` (``<module>_<stat>_ms``, the flag
-counts, the ``match_*`` relation errors, the scenario scores ``collisions``, ``goal_missed``,
-``timeouts``, ``takeovers``, ``time_to_goal_s``, ...); lower limits are ``min_ticks``,
-``min_relations_matched``, ``min_success`` and ``min_clearance_m``. A threshold on a metric an input
-does not have (relation errors without a relations file, scenario scores of a log) is not checked; a
-metric that is nan (relations given but none matched) fails. ``AGGREGATE_KEYS`` (``min_success_rate``,
+counts, the ``match_*`` relation errors, the ground-truth errors ``ate_m``, ``rpe_m``, ``rpe_deg``, the
+scenario scores ``collisions``, ``goal_missed``, ``timeouts``, ``takeovers``, ``time_to_goal_s``, ...);
+lower limits are ``min_ticks``, ``min_relations_matched``, ``min_success`` and ``min_clearance_m``. A
+threshold on a metric an input does not have (relation errors without a relations file, scenario scores of
+a log) is not checked; a metric that is nan (relations given but none matched) fails. The ground-truth
+errors are the exception: a limit on them asks for a measurement only the truth gives, so an input without
+ground truth fails it, saying so (``ate_m = false`` in its ``[inputs]`` table switches the check off for
+it): a CI gate on accuracy never passes for want of truth. ``AGGREGATE_KEYS`` (``min_success_rate``,
 ``collision_rate``, ``goal_missed_rate``, ``timeout_rate``, ``mean_time_to_goal_s``) bound a scenario's
 aggregate over its seeds. ``relations`` and ``goal`` apply to logs only (a scenario has its own goal and
 ground truth).
@@ -50,7 +57,7 @@ from ..errors import ConfigError, did_you_mean
 from ..io.base import MAX_ABS_POSITION_M
 from ..io.userfile import brief, check_number, check_regular_file, load_toml
 from .jobs import Job
-from .metrics import COUNT_METRICS, LATENCY_METRICS, RELATION_METRICS, SCENARIO_METRICS
+from .metrics import COUNT_METRICS, LATENCY_METRICS, RELATION_METRICS, SCENARIO_METRICS, TRUTH_METRICS
 
 __all__ = [
     "AGGREGATE_KEYS",
@@ -85,6 +92,7 @@ _MAX_KEYS: tuple[str, ...] = (
     *LATENCY_METRICS,
     *COUNT_METRICS,
     *(m for m in RELATION_METRICS if m != "relations_matched"),
+    *TRUTH_METRICS,
     *(m for m in SCENARIO_METRICS if m not in ("success", "clearance_m")),
     *(k for k in AGGREGATE_KEYS if k not in MIN_KEYS),
 )
@@ -206,7 +214,8 @@ def check_limits(
     """The thresholds ``metrics`` violate, one message each (``"reactor_p99_ms 63.2 > 50"``), with
     ``notes[metric]`` appended in brackets when given (``"success 0 < 1 (collision with door at 3.10 s)"``).
 
-    A limit on a metric that is absent is not checked; a nan metric fails (``"... not measured"``).
+    A limit on a metric that is absent is not checked, but for the ground-truth errors (``TRUTH_METRICS``),
+    which fail: the input has no ground truth. A nan metric fails (``"... not measured"``).
     """
     failures: list[str] = []
     notes = notes or {}
@@ -216,6 +225,9 @@ def check_limits(
         limit = limits[key]
         metric = MIN_KEYS.get(key, key)
         if metric not in metrics:
+            if metric in TRUTH_METRICS:
+                failures.append(f"{metric} not measured: the input has no ground truth (limit "
+                                f"{_fmt(limit)}; {key} = false in its [inputs] table skips the check)")
             continue
         value = metrics[metric]
         if math.isnan(value):

@@ -3,10 +3,10 @@ summary.json), its figures, report.md and the results MCAP.
 
 A replay feeds the sinks while it streams (``MapSink`` -> maps.npz, ``McapSink`` -> results.mcap and its
 Foxglove layout, ``SnapshotSink`` -> snapshots/; ``default_sinks`` lists a run's); ``build_report(run_dir)``
-then draws fig_model.png, fig_raw.png, fig_commands.png, fig_timing.png, fig_modes.png and report.md from the
-run's files alone (``ReportSink`` does it inside the replay's staging directory, ``gndreplay report RUN_DIR``
-afterwards). ``decision_view`` / ``draw_decision`` picture one decision (the snapshots' and ``animate_run``'s
-view).
+then draws fig_model.png, fig_raw.png, fig_commands.png, fig_timing.png, fig_modes.png (fig_error.png with
+ground truth) and report.md from the run's files alone (``ReportSink`` does it inside the replay's staging
+directory, ``gndreplay report RUN_DIR`` afterwards). ``decision_view`` / ``draw_decision`` picture one
+decision (the snapshots' and ``animate_run``'s view).
 matplotlib and rosbags are imported only when a figure or the MCAP is made.
 """
 

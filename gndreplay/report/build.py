@@ -19,7 +19,7 @@ from ..fsutil import (
 from ..pipeline.model import RobotCentredGrid
 from ..pipeline.stack import TickResult
 from ..types import Pose2D, Tick
-from .figures import FIGURE_MAKERS, build_figures, figure_names
+from .figures import build_figures, figure_names
 from .markdown import render_report
 from .rundir import load_run, window_run
 
@@ -31,8 +31,9 @@ REPORT_FILE = "report.md"
 def build_report(run_dir: Path, *, name: str | None = None, require_marker: bool = False,
                  t_from: float | None = None, t_to: float | None = None) -> list[Path]:
     """Read ``run_dir`` (commands.csv, timing.csv, the TUM trajectories, summary.json and maps.npz when
-    present) and write fig_model.png, fig_raw.png, fig_commands.png, fig_timing.png, fig_modes.png and
-    report.md into it, replacing only files gndreplay wrote there (listed in its ``.gndreplay`` marker).
+    present) and write fig_model.png, fig_raw.png, fig_commands.png, fig_timing.png, fig_modes.png,
+    fig_error.png (when the run has ground truth) and report.md into it, replacing only files gndreplay wrote
+    there (listed in its ``.gndreplay`` marker).
     Deterministic: the same files give the same bytes. ``name`` titles report.md (default: the directory's
     name). Each file is written beside its place and renamed there, so a failure leaves the earlier one.
 
@@ -46,7 +47,7 @@ def build_report(run_dir: Path, *, name: str | None = None, require_marker: bool
             not write gets no figures added).
 
     Returns:
-        The paths written (the figures of ``FIGURE_MAKERS``, then report.md; or the window's figures).
+        The paths written (the figures of ``figures.figure_names``, then report.md; or the window's figures).
 
     Raises:
         RunDirError: a required file is missing or malformed.
@@ -66,7 +67,8 @@ def build_report(run_dir: Path, *, name: str | None = None, require_marker: bool
             written = build_figures(data, run_dir)
             add_to_marker(run_dir, [p.name for p in written])
         return written
-    check_may_write(run_dir, [*FIGURE_MAKERS, REPORT_FILE])
+    truth = data.traj_truth is not None and data.traj_truth.shape[0] > 0
+    check_may_write(run_dir, [*figure_names(None, truth=truth), REPORT_FILE])
     with write_errors(run_dir):  # inside a staging directory, the staging names the output instead
         written = build_figures(data, run_dir)
         text = render_report(data, [p.name for p in written], name=name)

@@ -13,12 +13,13 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from ..evaluation import align_origin, associate
+from ..evaluation import TrajectoryErrors, align_origin, associate, trajectory_errors
 from ..fsutil import atomic_path
 from ..geometry import compose
 from ..types import REFLEXIVE_MODES
 from .plots import (
     COMMAND_COLORS,
+    FLAG_COLORS,
     MIN_BAND_FRACTION,
     MODE_COLORS,
     NAV_MODE_COLORS,
@@ -44,10 +45,12 @@ __all__ = [
     "DPI",
     "FIGURES",
     "FIGURE_MAKERS",
+    "TRUTH_FIGURES",
     "WINDOW_FIGURES",
     "budgets_ms",
     "build_figures",
     "figure_commands",
+    "figure_error",
     "figure_model",
     "figure_modes",
     "figure_names",
@@ -55,6 +58,7 @@ __all__ = [
     "figure_timing",
     "save_figure",
     "scan_period_s",
+    "truth_errors",
     "truth_on_corrected",
     "window_figure_name",
 ]
@@ -72,6 +76,9 @@ FIGURES: Mapping[str, str] = {
     "fig_modes.png": "Intervention timeline: the commands with the takeovers shaded, the desired and the "
     "active navigation mode, and the reflexive overrides (emergency stops, safe replacements, stale data, "
     "trap escapes).",
+    "fig_error.png": "Error against the ground truth over time (when the log has it): position and "
+    "heading error of the odometry and of the corrected trajectory, each after its SE(2) alignment to the "
+    "truth, with the ticks where the match failed (MATCH_FAILED) marked.",
 }
 #: The figures drawn for a time window (``build_figures`` of a windowed run): the time series, and the maps
 #: zoomed to the poses of the window.
@@ -202,6 +209,22 @@ def truth_on_corrected(data: RunData) -> NDArray[np.float64] | None:
     first = int(np.argmin(truth[it, 0]))
     move = align_origin(truth[it[first], 1:], data.traj_corrected[ic[first], 1:])
     return np.column_stack([truth[:, 0], compose(move, truth[:, 1:]).reshape(-1, 3)])
+
+
+def _stamps_ns(traj: NDArray[np.float64]) -> NDArray[np.int64]:
+    return np.round(np.asarray(traj[:, 0]) * 1e9).astype(np.int64)
+
+
+def truth_errors(data: RunData) -> dict[str, TrajectoryErrors] | None:
+    """The SE(2)-aligned errors of the odometry ("odometry") and the corrected trajectory ("corrected")
+    against the run's ground truth (``evaluation.trajectory_errors``, as summary.json's ``truth``); None
+    without truth."""
+    truth = data.traj_truth
+    if truth is None or truth.shape[0] == 0:
+        return None
+    ref = (_stamps_ns(truth), truth[:, 1:])
+    return {name: trajectory_errors(_stamps_ns(traj), traj[:, 1:], *ref)
+            for name, traj in (("odometry", data.traj_odom), ("corrected", data.traj_corrected))}
 
 
 def figure_model(data: RunData) -> Figure:
@@ -419,6 +442,50 @@ def figure_modes(data: RunData) -> Figure:
     return fig
 
 
+def figure_error(data: RunData) -> Figure:
+    """The position and heading error of the odometry and the corrected trajectory against the ground truth
+    over time, each after its SE(2) alignment (``truth_errors``), with the MATCH_FAILED ticks shaded and
+    marked below (commands.csv's flags)."""
+    errors = truth_errors(data) or {}
+    c = data.commands
+    origin = time_origin(data)
+    failed = np.asarray(c.flags.get("MATCH_FAILED", np.zeros(len(c), dtype=bool)), dtype=bool)
+    t_ticks = c.t_s - origin
+    series = {name: ((e.t_ns / 1e9) - origin, e) for name, e in errors.items()}
+    t_all = np.concatenate([t_ticks, *(t for t, _ in series.values())]) if series else t_ticks
+    span = _time_axis(data, np.sort(t_all))
+    fig = _new_figure(12.0, 6.2)
+    ax_p, ax_h, ax_f = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": [3.0, 3.0, 0.5]})
+    bands = band_spans(t_ticks, np.where(failed, "failed", ""), min_width=_min_width(span))
+    for ax in (ax_p, ax_h):
+        for k, i in enumerate(np.flatnonzero(bands.labels == "failed")):
+            x0 = float(bands.x0[i])
+            ax.axvspan(x0, x0 + float(bands.width[i]), color=FLAG_COLORS["MATCH_FAILED"], alpha=0.12,
+                       linewidth=0, label="MATCH_FAILED" if k == 0 else None, zorder=0)
+    styles = {"odometry": (_RAW, "raw odometry"), "corrected": (_CORRECTED, "corrected")}
+    for name, (t, e) in series.items():
+        color, label = styles[name]
+        plot_series(ax_p, t, e.ate_m, span=span, columns=COLUMNS, color=color,
+                    label=f"{label} (RMSE {e.ate_rmse_m:.3f} m, max {e.ate_max_m:.3f} m)")
+        plot_series(ax_h, t, e.yaw_err_deg, span=span, columns=COLUMNS, color=color, label=label)
+    if not series:
+        _no_data(ax_p, "no ground truth")
+    ax_h.axhline(0.0, color="0.6", linewidth=0.6, zorder=0)
+    for ax, unit in ((ax_p, "position error [m]"), (ax_h, "heading error [deg]")):
+        ax.set_ylabel(unit)
+        ax.grid(True, linewidth=0.3, alpha=0.6)
+    if series or np.any(failed):
+        ax_p.legend(loc="best", fontsize=8)
+    ax_p.set_ylim(bottom=0.0)
+    plot_flags(ax_f, t_ticks, {"MATCH_FAILED": failed})
+    ax_f.set_xlabel("time since the first scan [s]")
+    ax_f.set_xlim(*span)
+    ax_p.set_title(f"Error against the ground truth, each trajectory aligned to it (SE(2) least squares)"
+                   f"{_window_title(data.window)}: {int(np.count_nonzero(failed))} of {len(c)} ticks "
+                   "MATCH_FAILED", fontsize=10)
+    return fig
+
+
 def _timing_stats(ms: NDArray[np.float64], budget: float | None) -> str:
     if ms.size == 0:
         return ""
@@ -481,7 +548,10 @@ FIGURE_MAKERS: Mapping[str, Callable[[RunData], Figure]] = {
     "fig_commands.png": figure_commands,
     "fig_timing.png": figure_timing,
     "fig_modes.png": figure_modes,
+    "fig_error.png": figure_error,
 }
+#: Figures drawn only when the run has ground truth (trajectory_truth.tum).
+TRUTH_FIGURES = ("fig_error.png",)
 
 
 def window_figure_name(name: str, window: TimeWindow) -> str:
@@ -491,16 +561,18 @@ def window_figure_name(name: str, window: TimeWindow) -> str:
     return f"{stem}_{window.tag}{dot}{ext}"
 
 
-def figure_names(window: TimeWindow | None) -> dict[str, Callable[[RunData], Figure]]:
-    """The files ``build_figures`` writes for the whole run (``FIGURE_MAKERS``) or for a window
-    (``WINDOW_FIGURES``, named by ``window_figure_name``), with their makers."""
+def figure_names(window: TimeWindow | None, *, truth: bool = False) -> dict[str, Callable[[RunData], Figure]]:
+    """The files ``build_figures`` writes for the whole run (``FIGURE_MAKERS``; ``TRUTH_FIGURES`` only with
+    ``truth``) or for a window (``WINDOW_FIGURES``, named by ``window_figure_name``), with their makers."""
     if window is None:
-        return dict(FIGURE_MAKERS)
+        return {n: make for n, make in FIGURE_MAKERS.items() if truth or n not in TRUTH_FIGURES}
     return {window_figure_name(n, window): FIGURE_MAKERS[n] for n in WINDOW_FIGURES}
 
 
 def build_figures(data: RunData, out_dir: Path, *, dpi: int = DPI) -> list[Path]:
-    """Draw the figures of ``data`` into ``out_dir`` under the names of ``figure_names(data.window)``,
-    replacing earlier ones (the caller checks they are gndreplay's: ``fsutil.check_may_write``)."""
+    """Draw the figures of ``data`` into ``out_dir`` under the names of ``figure_names`` (fig_error.png when
+    the run has ground truth), replacing earlier ones (the caller checks they are gndreplay's:
+    ``fsutil.check_may_write``)."""
+    truth = data.traj_truth is not None and data.traj_truth.shape[0] > 0
     return [save_figure(make(data), Path(out_dir) / name, dpi=dpi)
-            for name, make in figure_names(data.window).items()]
+            for name, make in figure_names(data.window, truth=truth).items()]

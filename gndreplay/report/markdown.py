@@ -14,7 +14,8 @@ from .figures import FIGURES, budgets_ms, scan_period_s
 from .rundir import RunData
 from .snapshots import SNAPSHOTS_DIR, SnapshotEntry, read_snapshot_index
 
-__all__ = ["interventions_section", "render_report", "timeline_section", "trajectory_gap", "truth_section"]
+__all__ = ["health_rows", "interventions_section", "render_report", "timeline_section", "trajectory_gap",
+           "truth_section"]
 
 _LATENCY_ROWS = ("match", "model", "planner", "reactor", "stack", "total")
 _OVER = {"match": "MATCH_OVER_BUDGET", "model": "MODEL_OVER_BUDGET", "planner": "PLANNER_OVER_BUDGET",
@@ -116,6 +117,49 @@ def truth_section(truth: Mapping[str, Any] | None) -> list[str]:
             ""]
 
 
+def _trio(q: Mapping[str, Any], key: str, unit: str, fmt: str) -> str:
+    return " / ".join(_num(q.get(key.format(k)), fmt) for k in ("median", "p95", "max")) + f" {unit}"
+
+
+def health_rows(health: Mapping[str, Any] | None) -> list[tuple[str, str]]:
+    """report.md's rows of the scan matcher's health (summary.json's ``matcher_health``); none without it."""
+    if not isinstance(health, Mapping):
+        return []
+    n = int(health.get("scans", 0) or 0)
+    failed = int(health.get("failed", 0) or 0)
+    reasons: Mapping[str, int] = health.get("reasons", {}) or {}
+    why = ": " + ", ".join(f"{k} {v}" for k, v in reasons.items()) if reasons else ""
+    share = f" ({100.0 * failed / n:.1f} %)" if n else ""
+    rows = [("failed matches, every scan", f"{failed} of {n} scans{share}{why}"),
+            ("of which refused (a match found, inconsistent with the odometry or its prior)",
+             str(health.get("refused", 0)))]
+    if health.get("after_gap"):
+        rows.append(("of which after a gap in the log (map restarted)", str(health["after_gap"])))
+    longest = health.get("longest_without_match", {}) or {}
+    if longest.get("scans"):
+        rows.append(("longest stretch without an accepted match",
+                     f"{_num(longest.get('duration_s'))} s ({longest['scans']} scans) from t = "
+                     f"{_num(longest.get('t_start_s'), '.1f')} s"))
+    else:
+        rows.append(("longest stretch without an accepted match", "none (every match accepted)"))
+    step = health.get("step_vs_odometry", {}) or {}
+    rows += [("per scan vs odometry, translation median / p95 / max", _trio(step, "trans_{}_m", "m", ".3f")),
+             ("per scan vs odometry, rotation median / p95 / max", _trio(step, "rot_{}_deg", "deg", ".2f"))]
+    w = health.get("worst_window", {}) or {}
+    if isinstance(w.get("sigmas"), int | float) and not math.isnan(w["sigmas"]):
+        rows.append((f"worst {_num(w.get('window_s'), 'g')} s window vs odometry",
+                     f"{_num(w.get('trans_m'), '.3f')} m, {_num(w.get('rot_deg'), '.1f')} deg from t = "
+                     f"{_num(w.get('t_start_s'), '.1f')} s: {_num(w['sigmas'])} sigmas of the odometry error "
+                     f"model ({_num(w.get('sigma_m'), '.3f')} m, {_num(w.get('sigma_deg'), '.1f')} deg)"))
+    if health.get("verdict") == "measured":
+        verdict = (f"measured: aligned ATE RMSE {_num(health.get('ate_matcher_m'), '.3f')} m, the odometry's "
+                   f"{_num(health.get('ate_odom_m'), '.3f')} m")
+    else:
+        verdict = "estimated from the failures and the disagreement with the odometry (no ground truth)"
+    rows += [("verdict", verdict), ("warning", str(health.get("warning") or "none"))]
+    return rows
+
+
 def timeline_section(entries: Sequence[SnapshotEntry] | None) -> list[str]:
     """report.md's "Timeline": the key events that got a snapshot (snapshots/index.csv), each linked to its
     picture; nothing when the run has no snapshots/."""
@@ -164,6 +208,9 @@ def render_report(data: RunData, figures: Iterable[str] = tuple(FIGURES), *, nam
     period = scan_period_s(data.traj_corrected[:, 0])
     opts = s.get("options", {}) or {}
     out = [f"# gndreplay run: {name or data.run_dir.name}", ""]
+    health = s.get("matcher_health")
+    if isinstance(health, Mapping) and health.get("warning"):
+        out += [f"> **Warning:** {health['warning']} (see Scan matching).", ""]
     overview = [
         ("log", f"`{s.get('log', '-')}`"),
         ("gndreplay version", str(s.get("gndreplay_version", "-"))),
@@ -222,7 +269,15 @@ def render_report(data: RunData, figures: Iterable[str] = tuple(FIGURES), *, nam
              "final_gap_m": "corrected vs odometry at the end [m]",
              "max_gap_m": "corrected vs odometry, max [m]"}
     rows += [(names[k], f"{v:.3f}") for k, v in gap.items()]
+    rows += health_rows(health)
     out += ["## Scan matching", "", *_table(("", ""), rows)]
+    if isinstance(health, Mapping):
+        out += ["The matcher's health counts every scan it matched (the stack may run on fewer: `--every`). "
+                "Per scan: an accepted match's increment against the odometry's. A window: the corrected "
+                "motion over it against the odometry's, in sigmas of the odometry error model (translation "
+                "0.1 m + 1/6 of the distance, rotation 3.3 deg + 1/6 of the turn + 2 deg per metre, by "
+                "default). The warning is measured against the ground truth when there is one, else "
+                "estimated from these numbers.", ""]
     out += truth_section(s.get("truth"))
 
     rr = s.get("read_report")

@@ -20,6 +20,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "COMMAND_COLORS",
+    "FLAG_COLORS",
     "FLAG_ORDER",
     "MIN_BAND_FRACTION",
     "MODE_COLORS",
@@ -98,7 +99,7 @@ FLAG_ORDER: Sequence[str] = (
     "PLANNER_OVER_BUDGET",
     "REACTOR_OVER_BUDGET",
 )
-_FLAG_COLORS: Mapping[str, str] = {
+FLAG_COLORS: Mapping[str, str] = {
     "EMERGENCY_STOP": "#e41a1c",
     "PLANNER_NO_PATH": "#377eb8",
     "PLANNER_TIMEOUT": "#377eb8",
@@ -343,7 +344,7 @@ def plot_flags(ax: Axes, t: ArrayLike, flags: Mapping[str, ArrayLike], *,
     pos = [tt[np.asarray(flags[n], dtype=bool)] for n in names]
     offsets = [float(len(names) - 1 - k) for k in range(len(names))]
     ax.eventplot(pos, lineoffsets=offsets, linelengths=0.7, linewidths=0.8,
-                 colors=[_FLAG_COLORS.get(n, "#555555") for n in names])
+                 colors=[FLAG_COLORS.get(n, "#555555") for n in names])
     ax.set_yticks(offsets, [f"{n} ({int(np.count_nonzero(flags[n]))})" for n in names], fontsize=7)
     ax.set_ylim(-0.6, len(names) - 0.4)
     ax.grid(True, axis="x", linewidth=0.3, alpha=0.6)

@@ -621,6 +621,17 @@ def _truth_ok(x: Any) -> bool:
         for k in ("odom", "corrected"))
 
 
+def _health_ok(x: Any) -> bool:
+    """summary.json's matcher_health: counts, failures per reason, tables of numbers, a text warning."""
+    return (isinstance(x, dict) and all(_is_count(x.get(k, 0)) for k in ("scans", "failed", "refused",
+                                                                           "after_gap"))
+            and _COUNTS(x.get("reasons", {}))
+            and all(_table_of(_opt(_is_num))(x.get(k, {}))
+                    for k in ("step_vs_odometry", "longest_without_match", "worst_window"))
+            and all(_opt(_is_num)(x.get(k)) for k in ("failed_share", "ate_odom_m", "ate_matcher_m"))
+            and all(_opt(lambda v: isinstance(v, str))(x.get(k)) for k in ("matcher", "verdict", "warning")))
+
+
 #: summary.json key -> (what it must be, a test); keys the report reads, each optional.
 _SUMMARY_FIELDS: Mapping[str, tuple[str, Any]] = {
     "ticks": ("a count (integer >= 0)", _is_count),
@@ -634,6 +645,7 @@ _SUMMARY_FIELDS: Mapping[str, tuple[str, Any]] = {
     "agreement": ("a table of numbers", _opt(_table_of(_opt(_is_num)))),
     "interventions": ("a table of mode counts and takeovers / emergencies lists", _interventions_ok),
     "truth": ("a table of trajectory errors per trajectory and alignment", _opt(_truth_ok)),
+    "matcher_health": ("a table of the scan matcher's health", _opt(_health_ok)),
     "config": ("a table", lambda x: isinstance(x, dict)
                and all(isinstance(x.get(k), dict | None) for k in ("supervisor", "scanmatch"))),
     "options": ("a table", lambda x: isinstance(x, dict)

@@ -9,7 +9,10 @@ mode, the takeovers and the reflexive overrides, each with its start, duration a
 
 With ground truth in the log, ``truth`` (:func:`truth_section`) scores the odometry and the corrected
 trajectory against it: ATE and RPE per second in SE(2), after the SE(2) Umeyama alignment ("aligned") and
-from the first pose ("unaligned"), see ``gndreplay.evaluation.trajectory_errors``.
+from the first pose ("unaligned"), see ``gndreplay.evaluation.trajectory_errors``. ``matcher_health``
+(:func:`health_section`) says how the scan matcher did over every scan: failures by reason, its disagreement
+with the odometry, the longest stretch without an accepted match, and a warning when it likely hurt
+(``gndreplay.evaluation.matcher_health``: measured against the truth when there is one).
 """
 
 from __future__ import annotations
@@ -26,9 +29,10 @@ from numpy.typing import NDArray
 from .. import __version__
 from .. import detmath as dm
 from ..config import Config, config_to_dict
-from ..evaluation import trajectory_errors
+from ..evaluation import matcher_health, trajectory_errors
 from ..geometry import relative, wrap_angle
 from ..pipeline.stack import MODULES, TickResult
+from ..scanmatch import health_params
 from ..types import BUDGET_FLAGS, REFLEXIVE_MODES, Flag, Subgoal
 from .rundir import (
     CORRECTED_TRAJECTORY_FILE,
@@ -47,7 +51,9 @@ __all__ = [
     "SummaryOptions",
     "SummaryRecorder",
     "command_gap_warning",
+    "health_section",
     "interventions",
+    "matcher_warning",
     "motion_agreement",
     "summarise",
     "truth_section",
@@ -94,6 +100,14 @@ class SummaryRecorder:
         self.planner: list[tuple[float, float]] = []  # nodes expanded (cells for NF1), path length [m]
         self.t_ns: list[int] = []
         self.audit: list[tuple[str, str, str, str]] = []  # desired, active, takeover reason, GND mode / rule
+        self.match_ok: list[bool] = []  # per scan (also those the stack skips): match accepted
+        self.match_reason: list[str] = []  # why it failed ("" when accepted)
+
+    def add_match(self, ok: bool, reason: str) -> None:
+        """A scan the matcher corrected: every scan of the run, in time order (``--every`` runs the stack on
+        fewer), one per pose of the trajectories."""
+        self.match_ok.append(ok)
+        self.match_reason.append("" if ok else reason)
 
     def add(self, r: TickResult) -> None:
         """A tick the stack ran on."""
@@ -262,13 +276,40 @@ def truth_section(
     return out
 
 
+def health_section(
+    trajectories: Mapping[str, tuple[NDArray[np.int64], NDArray[np.float64]]], rec: SummaryRecorder,
+    cfg: Config,
+) -> dict[str, Any] | None:
+    """summary.json's ``matcher_health``: ``evaluation.matcher_health`` of the configured matcher over every
+    scan (the corrected trajectory against the odometry, the matches ``rec`` recorded, the truth when there
+    is one), with the odometry error model of ``[scanmatch.idc]``; None when ``rec`` did not record one
+    match per pose."""
+    t, odom = trajectories[ODOM_TRAJECTORY_FILE]
+    _, corrected = trajectories[CORRECTED_TRAJECTORY_FILE]
+    if len(rec.match_ok) != t.size:
+        return None
+    truth = trajectories.get(TRUTH_TRAJECTORY_FILE)
+    return matcher_health(t, odom, corrected, rec.match_ok, rec.match_reason, matcher=cfg.scanmatch.method,
+                          truth=truth if truth is not None and truth[0].size else None,
+                          params=health_params(cfg.scanmatch.idc)).to_dict()
+
+
+def matcher_warning(summary: Mapping[str, Any]) -> str | None:
+    """summary.json's ``matcher_health.warning`` (the one line saying the scan matcher likely hurt), or
+    None."""
+    health = summary.get("matcher_health")
+    warning = health.get("warning") if isinstance(health, Mapping) else None
+    return warning if isinstance(warning, str) and warning else None
+
+
 def summarise(
     rec: SummaryRecorder, cfg: Config, log: Path, options: SummaryOptions, read_report: Any,
     trajectories: Mapping[str, tuple[NDArray[np.int64], NDArray[np.float64]]] | None = None,
 ) -> dict[str, Any]:
     """summary.json: counts, histograms, agreement, the errors against ground truth (``trajectories``, see
-    :func:`truth_section`) and (last, the only non-deterministic part) latency and the ticks over each
-    module's time budget. ``flags`` counts what commands.csv records."""
+    :func:`truth_section`), the matcher's health (:func:`health_section`) and (last, the only
+    non-deterministic part) latency and the ticks over each module's time budget. ``flags`` counts what
+    commands.csv records."""
     n = len(rec.t_s)
     timing = np.asarray(rec.timing, dtype=np.float64).reshape(n, len(MODULES))
     latency = {m: _latency(timing[:, k]) for k, m in enumerate(MODULES)}
@@ -292,6 +333,7 @@ def summarise(
         "interventions": interventions(rec.t_ns, desired, active, reasons, modes),
         "agreement": agreement,
         "truth": truth_section(trajectories) if trajectories is not None else None,
+        "matcher_health": health_section(trajectories, rec, cfg) if trajectories is not None else None,
         "read_report": read_report,
         "options": {
             "goal": list(options.goal_xy) if options.goal_xy else None,

@@ -16,7 +16,18 @@ from numpy.typing import NDArray
 
 from .. import detmath as dm
 from ..errors import ScanMatchError
-from ..evaluation import Relations, RelationStats, relation_errors, write_tum
+from ..evaluation import (
+    HealthParams,
+    MatcherHealth,
+    Relations,
+    RelationStats,
+    TrajectoryErrors,
+    failure_category,
+    matcher_health,
+    relation_errors,
+    trajectory_errors,
+    write_tum,
+)
 from ..fsutil import check_output_dir, resolve_output_dir, staging_dir
 from ..io import DEFAULT_READ, LogReader, ReadOptions, open_log
 from ..io.clock import fmt_ns, scan_clock
@@ -25,8 +36,9 @@ from .base import Matcher, OdomMatcher
 from .idc import IdcMatcher, IdcParams
 from .kiss import KissIcpMatcher, KissParams
 
-__all__ = ["METHODS", "CorrectedTrajectory", "MatcherReport", "correct_trajectory", "keep_by_travel",
-           "log_ticks", "make_matcher", "matcher_report", "relations_time_base", "run_scanmatch"]
+__all__ = ["METHODS", "CorrectedTrajectory", "MatcherReport", "correct_trajectory", "health_params",
+           "keep_by_travel", "log_ticks", "make_matcher", "matcher_report", "relations_time_base",
+           "run_scanmatch"]
 
 Method = Literal["idc", "kiss-icp", "odom"]
 METHODS: tuple[Method, ...] = ("odom", "idc", "kiss-icp")
@@ -50,6 +62,12 @@ def make_matcher(method: Method, *, idc: IdcParams | None = None, kiss: KissPara
     raise ScanMatchError(f"unknown matcher {method!r}: expected one of {', '.join(METHODS)}")
 
 
+def health_params(idc: IdcParams | None = None) -> HealthParams:
+    """The matcher-health limits with the odometry error model of the IDC parameters (the configured ones:
+    whichever matcher runs, it is the odometry's model)."""
+    return HealthParams.from_odometry(idc if idc is not None else IdcParams())
+
+
 @dataclass(frozen=True, eq=False)
 class CorrectedTrajectory:
     """One matcher's output over a log.
@@ -61,7 +79,9 @@ class CorrectedTrajectory:
         ok: (N,) bool, False where the match failed (MATCH_FAILED).
         pairs, iterations: (N,) int64 per-scan figures; residual_m: (N,) float64.
         ms: (N,) float64 wall-clock time of each ``update`` call [ms] (the only non-deterministic field).
-        reasons: failure reason -> count.
+        reason: (N,) why each match failed ("" where it did not).
+        odom: (N, 3) the odometry poses of the scans.
+        truth_t_ns, truth: (M,) stamps and (M, 3) poses of the scans that have ground truth (M may be 0).
     """
 
     method: str
@@ -72,11 +92,24 @@ class CorrectedTrajectory:
     residual_m: NDArray[np.float64]
     iterations: NDArray[np.int64]
     ms: NDArray[np.float64]
-    reasons: dict[str, int]
+    reason: tuple[str, ...]
+    odom: NDArray[np.float64]
+    truth_t_ns: NDArray[np.int64]
+    truth: NDArray[np.float64]
 
     @property
     def failures(self) -> int:
         return int(np.count_nonzero(~self.ok))
+
+    @property
+    def reasons(self) -> dict[str, int]:
+        """Failed matches per category (``evaluation.failure_category``)."""
+        out: dict[str, int] = {}
+        for r in self.reason:
+            if r:
+                key = failure_category(r)
+                out[key] = out.get(key, 0) + 1
+        return out
 
 
 def correct_trajectory(ticks: Iterable[Tick], matcher: Matcher) -> CorrectedTrajectory:
@@ -88,7 +121,10 @@ def correct_trajectory(ticks: Iterable[Tick], matcher: Matcher) -> CorrectedTraj
     resid: list[float] = []
     iters: list[int] = []
     ms: list[float] = []
-    reasons: dict[str, int] = {}
+    reason: list[str] = []
+    odom: list[tuple[float, float, float]] = []
+    truth_t: list[int] = []
+    truth: list[tuple[float, float, float]] = []
     for tick in ticks:
         t0 = time.perf_counter_ns()
         res = matcher.update(tick.scan, tick.odom)
@@ -99,13 +135,17 @@ def correct_trajectory(ticks: Iterable[Tick], matcher: Matcher) -> CorrectedTraj
         pairs.append(res.pairs)
         resid.append(res.residual_m)
         iters.append(res.iterations)
-        if not res.ok:
-            key = res.reason.split(":")[0]
-            reasons[key] = reasons.get(key, 0) + 1
+        reason.append("" if res.ok else res.reason)
+        odom.append((tick.odom.x, tick.odom.y, tick.odom.theta))
+        if tick.truth is not None:
+            truth_t.append(tick.t_ns)
+            truth.append((tick.truth.x, tick.truth.y, tick.truth.theta))
     return CorrectedTrajectory(
         matcher.name, np.array(t, dtype=np.int64), np.array(poses, dtype=np.float64).reshape(-1, 3),
         np.array(ok, dtype=bool), np.array(pairs, dtype=np.int64), np.array(resid, dtype=np.float64),
-        np.array(iters, dtype=np.int64), np.array(ms, dtype=np.float64), reasons)
+        np.array(iters, dtype=np.int64), np.array(ms, dtype=np.float64), tuple(reason),
+        np.array(odom, dtype=np.float64).reshape(-1, 3), np.array(truth_t, dtype=np.int64),
+        np.array(truth, dtype=np.float64).reshape(-1, 3))
 
 
 def keep_by_travel(ticks: Iterable[Tick], dist_m: float, angle_rad: float) -> list[Tick]:
@@ -137,6 +177,9 @@ class MatcherReport:
         ms_median, ms_p99: time per scan [ms] (the first scan, which only initialises, is excluded).
         relations: relation errors, when relations were given.
         tum_path: the trajectory written, when an output folder was given.
+        truth: the errors against the log's ground truth (SE(2)-aligned ATE, RPE over 1 s), when it has one.
+        health: the matcher's health (``evaluation.matcher_health``: failures, disagreement with the
+            odometry, the warning).
     """
 
     method: str
@@ -146,22 +189,32 @@ class MatcherReport:
     ms_p99: float
     relations: RelationStats | None = None
     tum_path: str | None = None
+    truth: TrajectoryErrors | None = None
+    health: MatcherHealth | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"method": self.method, "scans": self.scans, "failures": self.failures,
                 "ms_median": self.ms_median, "ms_p99": self.ms_p99,
                 "relations": None if self.relations is None else self.relations.to_dict(),
-                "tum_path": self.tum_path}
+                "tum_path": self.tum_path,
+                "truth": None if self.truth is None else self.truth.to_dict(),
+                "health": None if self.health is None else self.health.to_dict()}
 
 
 def matcher_report(traj: CorrectedTrajectory, relations: Relations | None = None, *, tol_s: float = 1e-4,
-                   tum_path: str | None = None) -> MatcherReport:
-    """Summarise a corrected trajectory (timings, failures, relation errors)."""
+                   tum_path: str | None = None, health: HealthParams | None = None) -> MatcherReport:
+    """Summarise a corrected trajectory: timings, failures, relation errors, errors against the log's ground
+    truth (aligned) and the matcher's health (``health``: its limits, default ``health_params()``)."""
     ms = traj.ms[1:] if traj.ms.size > 1 else traj.ms
     med = float(np.median(ms)) if ms.size else math.nan
     p99 = float(np.percentile(ms, 99)) if ms.size else math.nan
     stats = None if relations is None else relation_errors(traj.t_ns, traj.poses, relations, tol_s=tol_s)
-    return MatcherReport(traj.method, int(traj.t_ns.size), traj.failures, med, p99, stats, tum_path)
+    truth = (traj.truth_t_ns, traj.truth) if traj.truth_t_ns.size else None
+    errors = None if truth is None else trajectory_errors(traj.t_ns, traj.poses, *truth)
+    state = matcher_health(traj.t_ns, traj.odom, traj.poses, traj.ok, traj.reason, matcher=traj.method,
+                           truth=truth, params=health if health is not None else health_params())
+    return MatcherReport(traj.method, int(traj.t_ns.size), traj.failures, med, p99, stats, tum_path, errors,
+                         state)
 
 
 def _span(t_ns: NDArray[np.int64]) -> str:
@@ -214,7 +267,9 @@ def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence
                   inputs: Sequence[str | os.PathLike[str]] = (),
                   on_pass: Callable[[str], None] | None = None,
                   on_warning: Callable[[str], None] | None = None) -> list[MatcherReport]:
-    """The ``gndreplay scanmatch`` command as a function: each matcher over the same log, one report each.
+    """The ``gndreplay scanmatch`` command as a function: each matcher over the same log, one report each
+    (``matcher_report``: timings, failures, relation errors, errors against the log's ground truth and the
+    matcher's health with the odometry error model of ``idc``).
 
     Args:
         ticks_factory: returns a fresh tick stream of the log (called once per matcher).
@@ -250,7 +305,7 @@ def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence
         if on_pass is not None:
             on_pass(method)
         traj = correct_trajectory(ticks_factory(), make_matcher(method, idc=idc, kiss=kiss))
-        row = matcher_report(traj, relations, tol_s=tol_s)
+        row = matcher_report(traj, relations, tol_s=tol_s, health=health_params(idc))
         if relations is not None and row.relations is not None and not rows:
             note = relations_time_base(traj.t_ns, relations, row.relations.matched, tol_s=tol_s,
                                        name=relations_name)
