@@ -1009,7 +1009,11 @@ def scanmatch(
     Writes one TUM trajectory per matcher (full-precision stamps, readable by evo) and prints ms per scan
     (median, p99), match failures and, with --relations, the relation errors: for each relation (t1, t2) the
     pose of scan t2 in the frame of scan t1 against the reference; mean +- std and max of the translational
-    (m) and rotational (deg) errors, relations matched / unmatched. The matchers' settings come from the
+    (m) and rotational (deg) errors, relations matched / unmatched. When the log has ground truth (CARMEN
+    TRUEPOS, a truth topic): each trajectory's ATE (RMSE and max after its SE(2) alignment to the truth)
+    and RPE over 1 s. Then each matcher's health: failed and refused matches, the longest stretch without
+    one, its disagreement with the odometry per scan and over the worst 5 s; a warning line when it likely
+    made things worse (measured against the truth when there is one). The matchers' settings come from the
     configuration's [scanmatch.idc] / [scanmatch.kiss] sections.
 
     [bold]Example[/]
