@@ -489,11 +489,12 @@ class HealthParams:
     Over a window of ``window_s`` the matcher's motion may differ from the odometry's by sigma_t = sigma_m +
     sigma_rel * d in translation and sigma_r = sigma_rad + sigma_rel_rad * turn + sigma_rad_per_m * d in
     rotation, with d and turn the larger of the two trajectories' path length [m] and accumulated turn [rad]
-    in the window (the true motion is unknown; the larger one never blames the matcher for odometry that
-    stalled). The defaults are the IDC matcher's own model of the odometry (``IdcParams.odo_sigma_*``, see
-    :meth:`from_odometry`) plus 2 deg per metre driven. Measured on the dev logs (``gndreplay scanmatch``,
-    docs/results.md) the worst 5 s window is 2.5 sigmas (MIT CSAIL, whose odometry under-reports turns)
-    and a laser that repeats its last scan for 5 s while the robot drives 1.5 m is 4.3.
+    in the window (the true motion is unknown; with the larger one, odometry that stalled does not make the
+    matcher look wrong). The defaults are the IDC matcher's own model of the odometry
+    (``IdcParams.odo_sigma_*``, see :meth:`from_odometry`) plus 2 deg per metre driven. Measured on the dev
+    logs (``gndreplay scanmatch``, docs/results.md) the worst 5 s window is 2.4 sigmas (MIT CSAIL, whose
+    odometry under-reports turns) and a laser that repeats its last scan for 5 s while the robot drives
+    1.5 m is 4.3.
 
     Attributes:
         window_s: the stretch compared [s]; max_sigmas: the disagreement that warns.
