@@ -41,6 +41,16 @@ def run(events: list[Event], **kw: object) -> tuple[list, SyncStats]:
     return ticks, stats
 
 
+def test_records_are_put_on_the_microsecond_clock() -> None:
+    """A bag's stamps went through float seconds (+-120 ns at 1e9 s): on the replay's clock they are the
+    CARMEN file's microseconds again, and the odometry is interpolated there."""
+    t0 = 1_134_864_629_895_182_000
+    ticks, _ = run([odom(t0 - 100 * MS + 37, 0.0), scan(t0 - 106), odom(t0 + 100 * MS - 91, 2.0)],
+                   odom_mode="stream")
+    assert ticks[0].t_ns == ticks[0].scan.t_ns == t0
+    assert ticks[0].odom.x == 1.0
+
+
 def test_wrap_matches_half_open_interval() -> None:
     assert wrap(math.pi) == math.pi
     assert wrap(-math.pi) == pytest.approx(math.pi)
@@ -149,10 +159,10 @@ def test_last_command_at_or_before_the_scan_is_attached() -> None:
 def test_truth_is_interpolated_and_none_outside_its_span() -> None:
     events: list[Event] = [
         scan(0),
-        TruthEvent(10, Pose2D(0.0, 0.0, 0.0)),
-        scan(15),
-        TruthEvent(20, Pose2D(1.0, 0.0, 0.0)),
-        scan(30),
+        TruthEvent(10 * MS, Pose2D(0.0, 0.0, 0.0)),
+        scan(15 * MS),
+        TruthEvent(20 * MS, Pose2D(1.0, 0.0, 0.0)),
+        scan(30 * MS),
     ]
     ticks, _ = run(events, odom_mode="none", truth_mode="stream")
     assert ticks[0].truth is None

@@ -1081,6 +1081,11 @@ def _open_write(path: Path, tmp: Path) -> IO[str]:
     return open(tmp, "w", encoding="ascii", newline="\n")
 
 
+# bearings agree when within float32 precision: every reader keeps them as a float32 start and step
+# (io.canonical), so a scan read from a bag or from CARMEN is written back with the geometry it was read with
+_BEARING_TOL = 1e-6
+
+
 def _geometry_params(scan: Scan) -> dict[str, str] | None:
     """PARAMs needed so the reader rebuilds the scan's bearings; None if the readlog.c default matches.
 
@@ -1091,11 +1096,11 @@ def _geometry_params(scan: Scan) -> dict[str, str] | None:
     n = a.size
     if n < 2:
         raise LogFormatError(f"cannot write a {n}-beam scan as CARMEN FLASER")
-    if np.allclose(a, flaser_angles(n), rtol=0.0, atol=1e-9):
+    if np.allclose(a, flaser_angles(n), rtol=0.0, atol=_BEARING_TOL):
         return None
     res = float((a[-1] - a[0]) / (n - 1))
     fov = float(a[-1] - a[0])
-    if np.allclose(a, flaser_angles(n, fov_rad=fov, resolution_rad=res), rtol=0.0, atol=1e-9):
+    if np.allclose(a, flaser_angles(n, fov_rad=fov, resolution_rad=res), rtol=0.0, atol=_BEARING_TOL):
         return {
             "laser_front_laser_fov": repr(math.degrees(fov)),
             "laser_front_laser_resolution": repr(math.degrees(res)),

@@ -11,7 +11,9 @@ Two steps, both streaming:
    record, or with ``cmd_from_odom`` the velocities of odometry samples from the first non-zero one on:
    CARMEN ODOM tv/rv). A scan waits (bounded in time and count) for the first odometry sample at or after
    its stamp; scans before the first or after the last odometry sample take the nearest sample and are
-   counted.
+   counted. Every record is first put on the replay's microsecond clock, and each tick's scan and poses
+   in one representation (:mod:`.canonical`), so that a log and its conversion to another container
+   replay alike.
 
 Both steps update a :class:`SyncStats`, which becomes the reader's :class:`~gndreplay.io.base.ReadReport`.
 """
@@ -25,8 +27,12 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
+import numpy as np
+from numpy.typing import NDArray
+
 from ..types import NS_PER_S, Command, Odometry, Pose2D, Scan, Tick
 from .base import ReadReport
+from .canonical import canonical_pose, canonical_scan, canonical_stamp
 
 __all__ = [
     "DEFAULT_SYNC",
@@ -268,6 +274,7 @@ def synchronise(
     last_scan_t: int | None = None
     index = 0
     identity = Pose2D(0.0, 0.0, 0.0)
+    bearings: dict[tuple[int, float, float], NDArray[np.float64]] = {}
 
     def emit(p: _Pending) -> Tick:
         nonlocal index, last_scan_t
@@ -278,7 +285,9 @@ def synchronise(
                 stats.gaps += 1
             stats.max_gap_ns = max(stats.max_gap_ns, dt)
         last_scan_t = t
-        tick = Tick(index=index, t_ns=t, scan=p.ev.scan, odom=p.odom or identity, cmd=p.cmd, truth=p.truth)
+        truth = canonical_pose(p.truth) if p.truth is not None else None
+        tick = Tick(index=index, t_ns=t, scan=canonical_scan(p.ev.scan, bearings),
+                    odom=canonical_pose(p.odom or identity), cmd=p.cmd, truth=truth)
         index += 1
         stats.scans += 1
         return tick
@@ -305,7 +314,7 @@ def synchronise(
             return False
         return not (odom_mode == "stream" and p.odom is None and odom_prev is None)
 
-    for e in events:
+    for e in map(canonical_event, events):
         if isinstance(e, ScanEvent):
             p = _Pending(e, last_cmd)
             if odom_mode == "embedded":
@@ -360,6 +369,18 @@ def _set_command(pending: Iterable[_Pending], cmd: Command) -> Command:
         if p.ev.t_ns == cmd.t_ns:
             p.cmd = cmd
     return cmd
+
+
+def canonical_event(e: Event) -> Event:
+    """The event on the replay's microsecond clock (see :mod:`.canonical`)."""
+    t = canonical_stamp(e.t_ns)
+    if t == e.t_ns and not (isinstance(e, CmdEvent) and e.cmd.t_ns != t):
+        return e
+    if isinstance(e, ScanEvent):
+        return ScanEvent(t, replace(e.scan, t_ns=t), e.odom, e.truth)
+    if isinstance(e, CmdEvent):
+        return CmdEvent(t, replace(e.cmd, t_ns=canonical_stamp(e.cmd.t_ns)))
+    return replace(e, t_ns=t)
 
 
 def with_index_clock(e: Event, t_ns: int) -> Event:

@@ -188,6 +188,67 @@ def render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r, blend_m, se
     return ref_x, ref_y, ref_r, ref_a, ok, nxt
 
 
+# how far beyond a polyline's open end its surface's continuation is looked for in the keyframes' views
+BEYOND_RAD = math.radians(2.0)
+
+
+@njit(cache=True, error_model="numpy")
+def unseen_ends(ref_x, ref_y, nxt, views):
+    """Per bin, which open ends of the reference polyline no keyframe could have seen past: bit 1 a
+    polyline's first point, bit 2 its last, set when the surface's continuation ``BEYOND_RAD`` further on
+    (same range, seen from the reference's origin) lay outside the view of every keyframe.
+
+    ``views`` holds one row per keyframe in the reference's frame: laser x, y, cos and sin of its heading,
+    its first and last bearing, its maximum range. Such an end is where the keyframes' field of view ended,
+    not where the surface ends: the map does not know what lies beyond (see _off_end)."""
+    n_bins = ref_x.shape[0]
+    has_prev = np.zeros(n_bins, dtype=np.bool_)
+    for j in range(n_bins):
+        if nxt[j] >= 0:
+            has_prev[nxt[j]] = True
+    out = np.zeros(n_bins, dtype=np.uint8)
+    for e in range(n_bins):
+        first = nxt[e] >= 0 and not has_prev[e]
+        last = nxt[e] < 0 and has_prev[e]
+        if not (first or last):
+            continue
+        r = math.sqrt(ref_x[e] * ref_x[e] + ref_y[e] * ref_y[e])
+        a = fast_atan2(ref_y[e], ref_x[e]) + (BEYOND_RAD if last else -BEYOND_RAD)
+        bx = r * dm.cos(a)
+        by = r * dm.sin(a)
+        seen = False
+        for k in range(views.shape[0]):
+            dx = bx - views[k, 0]
+            dy = by - views[k, 1]
+            if dx * dx + dy * dy >= views[k, 6] * views[k, 6]:
+                continue
+            b = fast_atan2(-views[k, 3] * dx + views[k, 2] * dy, views[k, 2] * dx + views[k, 3] * dy)
+            if views[k, 4] <= b <= views[k, 5]:
+                seen = True
+                break
+        if not seen:
+            out[e] = 2 if last else 1
+    return out
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _off_end(j, u, nxt, unseen):
+    """Whether the closest point u on segment j is an open end of its polyline that no keyframe saw past
+    (``unseen``, see unseen_ends): the segment's end (u = 1) or its start (u = 0). A scan point paired
+    there lies past the mapped extent of that surface, where the keyframes' field of view ended: a
+    closest-point pair with the end pulls the scan along the surface towards the mapped part, and the pull
+    builds up while the view sweeps along a wall (turning on the spot beside one). IDC's closest-point rule
+    leaves such pairs out (Rusinkiewicz & Levoy 2001, rejecting pairs on the reference's boundary); the
+    point-to-line polish keeps them, the surface's line being what the point lies on. An end that a
+    keyframe saw past (a door jamb, a corner, the edge of a table) is kept: it observes the motion along
+    the wall."""
+    if u >= 1.0:
+        return (unseen[np.uint64(nxt[np.uint64(j)])] & 2) != 0
+    if u <= 0.0:
+        return (unseen[np.uint64(j)] & 1) != 0
+    return False
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def _closest_on_polyline(qx, qy, rq2, bq, w_max, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il, best_d2,
                          sin2):
@@ -395,15 +456,16 @@ def segments(ref_x, ref_y, ok, nxt, normal_chord_m):
 
 
 @njit(cache=True, error_model="numpy")
-def idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, seg_ex, seg_ey, seg_il, x0, y0, th0,
-              max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride,
+def idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, seg_ex, seg_ey, seg_il, unseen, x0, y0,
+              th0, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride,
               mrp_every):
     """Iterative Dual Correspondence (Lu & Milios 1997) of the points (px, py) against the reference.
 
     Each iteration pairs the points twice. Closest-point rule: each transformed point q with the closest
-    point of the reference polyline, gated by a distance that shrinks from gate0 to gate_min; the
-    least-squares rigid fit of these pairs gives the translation. Matching-range-point rule: q with the
-    point of the polyline of equal range |q| within the bearing window [-Bw, +Bw] of q,
+    point of the reference polyline, gated by a distance that shrinks from gate0 to gate_min, except at an
+    open end of the polyline that no keyframe saw past (``unseen``, see _off_end); the least-squares rigid
+    fit of these pairs gives the translation. Matching-range-point rule: q with the point of the polyline
+    of equal range |q| within the bearing window [-Bw, +Bw] of q,
     Bw(k) = max(win_min, win0 exp(-k / tau)); the offsets give the rotation (about the reference origin,
     which is within centimetres of the scan's origin). The rotation update is the range²-weighted median of
     the offsets (the weighted mean is the least-squares answer; the median ignores the wrong pairs of corners
@@ -494,6 +556,8 @@ def idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, seg_ex, se
                         best_d2 = dd
                         j = jj
                         u = uu
+            if j >= 0 and seg_il[j] > 0.0 and _off_end(j, u, nxt, unseen):
+                j = -1
             if j >= 0:
                 cx = ref_x[j] + u * seg_ex[j]
                 cy = ref_y[j] + u * seg_ey[j]
@@ -827,15 +891,15 @@ def coarse_rotation(pa, pr, ref_r, ok, half_bins, step_bins, every, tol_abs, tol
 
 
 @njit(cache=True, error_model="numpy")
-def _idc_polish(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, th0, max_iter,
-                win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every,
-                polish_iter, w_t, w_r, par):
+def _idc_polish(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, unseen, th0,
+                max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride,
+                mrp_every, polish_iter, w_t, w_r, par):
     """IDC from rotation ``th0``, then the point-to-line polish (``polish_iter`` > 0) or just the quality of
     the IDC pose: (x, y, th, iterations, pairs, mean pair distance, 3x3 information, 2x2 rotation equations
     per beam parity)."""
-    x, y, th, iters, _ = idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, 0.0,
-                                   0.0, th0, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r,
-                                   max_cp_bins, stride, mrp_every)
+    x, y, th, iters, _ = idc_align(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, unseen,
+                                   0.0, 0.0, th0, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t,
+                                   tol_r, max_cp_bins, stride, mrp_every)
     if polish_iter > 0:
         x, y, th, it2, pairs, resid, info, hr = polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, ex, ey,
                                                                      il, nx, ny, x, y, th, polish_iter,
@@ -848,14 +912,15 @@ def _idc_polish(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, 
 
 
 @njit(cache=True, error_model="numpy")
-def match_scan(kf_xy, kf_n, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend_m, seg_abs_m, seg_rel,
-               gap_bins, normal_chord_m, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r,
-               max_cp_bins, stride, mrp_every, polish_iter, w_t, w_r, pa, coarse_bins, coarse_step,
+def match_scan(kf_xy, kf_n, views, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend_m, seg_abs_m,
+               seg_rel, gap_bins, normal_chord_m, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t,
+               tol_r, max_cp_bins, stride, mrp_every, polish_iter, w_t, w_r, pa, coarse_bins, coarse_step,
                coarse_every, coarse_tol_abs, coarse_tol_rel, coarse_min_gain, coarse_margin, par):
     """The whole match in one call (one dispatch instead of four): render the reference at (ox, oy, oth),
-    its segments, IDC from the prediction, then the point-to-line polish (``polish_iter`` > 0) or just the
-    quality of the IDC pose. With ``coarse_bins`` > 0, a second IDC may start from the rotation that the
-    correlative search (coarse_rotation) prefers (see the comment below).
+    its segments and the ends no keyframe saw past (``views``, see unseen_ends), IDC from the prediction,
+    then the point-to-line polish (``polish_iter`` > 0) or just the quality of the IDC pose. With
+    ``coarse_bins`` > 0, a second IDC may start from the rotation that the correlative search
+    (coarse_rotation) prefers (see the comment below).
 
     Returns (x, y, th, iterations, pairs, mean pair distance [m], 3x3 point-to-line information, smallest
     eigenvalue of its translational 2x2 block, rotation of the odd beams' half-scan against the map minus
@@ -864,10 +929,11 @@ def match_scan(kf_xy, kf_n, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend
     ref_x, ref_y, ref_r, ref_a, ok, nxt = render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r,
                                                            blend_m, seg_abs_m, seg_rel, gap_bins)
     ex, ey, il, nx, ny, cover = segments(ref_x, ref_y, ok, nxt, normal_chord_m)
+    unseen = unseen_ends(ref_x, ref_y, nxt, views)
     x, y, th, iters, pairs, resid, info, hr = _idc_polish(
-        px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, 0.0, max_iter, win0,
-        win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every, polish_iter, w_t,
-        w_r, par)
+        px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, unseen, 0.0, max_iter,
+        win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every, polish_iter,
+        w_t, w_r, par)
     if coarse_bins > 0:
         # IDC only follows its bearing window: when the correlative search sees a rotation that agrees
         # better elsewhere in the window, IDC starts from there too, and that match wins when its mean
@@ -876,9 +942,9 @@ def match_scan(kf_xy, kf_n, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend
                                       coarse_tol_abs, coarse_tol_rel)
         if s1 >= s0 + coarse_min_gain and abs(_pm_pi(th1 - th)) > 2.0 * win_min:
             x2, y2, t2, it2, p2, r2, i2, hr2 = _idc_polish(
-                px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, th1, max_iter,
-                win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every,
-                polish_iter, w_t, w_r, par)
+                px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, unseen, th1,
+                max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride,
+                mrp_every, polish_iter, w_t, w_r, par)
             iters += it2
             n = px.shape[0]
             cost1 = (resid * pairs + gate_min * (n - pairs)) / n

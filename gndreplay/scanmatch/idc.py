@@ -304,6 +304,9 @@ _SKEW_MIN_RATE = math.radians(30.0)
 _SKEW_MAX_S = 0.05
 
 
+_DEGENERATE = "degenerate geometry"
+
+
 class _Outcome(NamedTuple):
     laser: P3  # estimated laser pose (corrected frame)
     pairs: int
@@ -343,6 +346,9 @@ class IdcMatcher:
         # keyframe ring: points in the corrected frame, their count, next slot, pose of the newest
         self._kf_xy = np.zeros((self.params.map_keyframes, 0, 2))
         self._kf_n = np.zeros(self.params.map_keyframes, dtype=np.int64)
+        # each keyframe's view: laser x, y, heading (corrected frame), first and last bearing, range limit
+        self._kf_view = np.zeros((self.params.map_keyframes, 6))
+        self._view = (0.0, 0.0, 0.0)  # the current scan's first and last bearing and range limit
         self._kf_next = 0
         self._kf_pose: P3 | None = None
 
@@ -366,6 +372,7 @@ class IdcMatcher:
         slot = self._kf_next
         self._kf_xy[slot, : pts.shape[0]] = transform_points(laser_pose, pts)
         self._kf_n[slot] = pts.shape[0]
+        self._kf_view[slot] = (*laser_pose, *self._view)
         self._kf_next = (slot + 1) % self._kf_xy.shape[0]
         self._kf_pose = laser_pose
         self._kf_pairs = self._kf_short = 0
@@ -418,6 +425,9 @@ class IdcMatcher:
         sp = scan.sensor_pose
         sensor = (sp.x, sp.y, sp.theta)
         odom_a = (odom.x, odom.y, odom.theta)
+        if scan.angles_rad.shape[0]:
+            self._view = (float(scan.angles_rad.min()), float(scan.angles_rad.max()),
+                          min(p.max_range_m, scan.max_range_m))
         gap_s = (scan.t_ns - self._last_t_ns) * 1e-9
         self._last_t_ns = scan.t_ns
         vel = self._vel if p.deskew else ZERO
@@ -451,6 +461,8 @@ class IdcMatcher:
                                                        "stalled)")
             if out.iterations == 0:
                 break  # nothing to match (too few beams): another prior will not help
+            if h == 0 and fresh and out.reason.startswith(_DEGENERATE):
+                break  # the place, not the start, leaves the translation unobservable
             if h + 1 >= compete and any(o.pairs >= p.recheck_pair_ratio * self._last_pairs
                                         for o in plausible):
                 break
@@ -466,7 +478,7 @@ class IdcMatcher:
         res = min(pool, key=lambda o: (-o.pairs, o.residual_m)) if pool else outcomes[0]
         res = self._clearly_better(res, accepted, px.shape[0])
         if fresh and not res.reason:
-            res, extra = self._guard(res, px, py, pr, pa, par, odo_laser, priors[0][1])
+            res, extra = self._guard(res, accepted, px, py, pr, pa, par, odo_laser, priors[0][1])
             iterations += extra
         if res.reason:
             pose = priors[0][0]
@@ -617,33 +629,40 @@ class IdcMatcher:
         g = self.params.guard_sigmas
         return z_t > g * self._odo_scale[0] or z_r > g * self._odo_scale[1]
 
-    def _guard(self, res: _Outcome, px: F64, py: F64, pr: F64, pa: F64, par: I64, odo_laser: P3,
-               incr: P3) -> tuple[_Outcome, int]:
+    def _guard(self, res: _Outcome, accepted: list[_Outcome], px: F64, py: F64, pr: F64, pa: F64, par: I64,
+               odo_laser: P3, incr: P3) -> tuple[_Outcome, int]:
         """Never worse than odometry: a match within ``guard_sigmas`` of the odometry's prediction (in the
         learnt error model, see IdcParams) is taken and teaches the model; a match further away needs a
         second opinion, the match from the odometry's prediction in a narrow bearing window. The far match
         is believed when the odometry's neighbourhood does not fit the map (that match fails its gates) or
         when it pairs ``guard_gain`` of the points more; otherwise the odometry is kept (MATCH_FAILED).
-        Returns the outcome and the iterations the second opinion took."""
+        When the far match is no better than the near one but another accepted match of this scan
+        (``accepted``, from another prior) fits clearly better than the near one, the odometry's basin is
+        not where the scan fits best, and that match is taken (a fast turn that the odometry
+        under-reports: the match from constant velocity's prediction was preferred for being near its own
+        prior, the one from the odometry's prediction fits better). Returns the outcome and the iterations
+        the second opinion took."""
         p = self.params
         corr = _compose(_inverse(odo_laser), res.laser)
         z_t, z_r = self._z(res.laser, odo_laser, incr)
         if self._suspicious(res.laser, odo_laser, incr):
             near = self._match(px, py, pr, pa, par, odo_laser, incr, p.guard_window_rad)
             extra = near.iterations
-            d = _compose(_inverse(near.laser), res.laser)
             # the near match went most of the way from the odometry to the far one: the map agrees with it
-            agree = (math.hypot(d[0], d[1]) <= max(p.guard_agree_m, 0.5 * math.hypot(corr[0], corr[1]))
-                     and abs(d[2]) <= max(p.guard_agree_rad, 0.5 * abs(corr[2])))
-            if not near.reason and not agree:
-                c_far, c_near = self._cost(res, px.shape[0]), self._cost(near, px.shape[0])
+            if not near.reason and not self._agree(near, res, corr):
+                n = px.shape[0]
+                c_far, c_near = self._cost(res, n), self._cost(near, n)
                 if c_near < (1.0 - p.guard_gain) * c_far:
                     return near, extra  # a better match near the odometry: the far one was a wrong basin
                 if c_far >= (1.0 - p.guard_gain) * c_near:
-                    return _Outcome(odo_laser, near.pairs, near.residual_m, res.iterations + extra,
-                                    f"unconfirmed match: {math.hypot(corr[0], corr[1]):.3f} m, "
-                                    f"{math.degrees(corr[2]):.1f} deg from odometry ({max(z_t, z_r):.1f} "
-                                    f"sigma) and no better than the match near odometry"), extra
+                    seconds = [o for o in accepted if o is not res
+                               and self._cost(o, n) < (1.0 - p.guard_gain) * c_near]
+                    if not seconds:
+                        return _Outcome(odo_laser, near.pairs, near.residual_m, res.iterations + extra,
+                                        f"unconfirmed match: {math.hypot(corr[0], corr[1]):.3f} m, "
+                                        f"{math.degrees(corr[2]):.1f} deg from odometry ({max(z_t, z_r):.1f} "
+                                        f"sigma) and no better than the match near odometry"), extra
+                    res = min(seconds, key=lambda o: self._cost(o, n))
         else:
             extra = 0
         a = p.odo_learn_rate
@@ -654,6 +673,25 @@ class IdcMatcher:
                  if p.narrow_rotation_guard and p.odo_sigma_rad > 0.0 else 1.0)
         self._odo_scale = (max(1.0, math.sqrt(self._odo_ms[0])), max(floor, math.sqrt(self._odo_ms[1])))
         return res, extra
+
+    def _views(self, laser_prior: P3) -> F64:
+        """The keyframes' views in the frame of ``laser_prior`` (the reference's): one row per keyframe,
+        laser x, y, cos and sin of its heading, first and last bearing, range limit (see
+        _idc_kernels.unseen_ends)."""
+        v = self._kf_view[self._kf_n > 0]
+        c, s = dm.cos(laser_prior[2]), dm.sin(laser_prior[2])
+        dx, dy = v[:, 0] - laser_prior[0], v[:, 1] - laser_prior[1]
+        th = v[:, 2] - laser_prior[2]
+        return np.column_stack([c * dx + s * dy, -s * dx + c * dy, dm.cos_a(th), dm.sin_a(th),
+                                v[:, 3], v[:, 4], v[:, 5]])
+
+    def _agree(self, a: _Outcome, b: _Outcome, corr: P3) -> bool:
+        """Whether two matches of one scan are within ``guard_agree_*`` or half the correction ``corr``
+        (the far match's, from the odometry's prediction) of each other."""
+        p = self.params
+        d = _compose(_inverse(a.laser), b.laser)
+        return (math.hypot(d[0], d[1]) <= max(p.guard_agree_m, 0.5 * math.hypot(corr[0], corr[1]))
+                and abs(d[2]) <= max(p.guard_agree_rad, 0.5 * abs(corr[2])))
 
     def _match(self, px: F64, py: F64, pr: F64, pa: F64, par: I64, laser_prior: P3, incr: P3,
                win0_rad: float | None = None, coarse: bool = False) -> _Outcome:
@@ -679,7 +717,8 @@ class IdcMatcher:
         coarse_bins = min(round(p.coarse_window_rad / bin_rad), p.n_bins // 2) if coarse else 0
         win0 = p.win0_rad if win0_rad is None else win0_rad
         x, y, th, iters, pairs, resid, _info, weakest, half_rot = k.match_scan(
-            self._kf_xy, self._kf_n, laser_prior[0], laser_prior[1], laser_prior[2], px, py, pr, p.n_bins,
+            self._kf_xy, self._kf_n, self._views(laser_prior), laser_prior[0], laser_prior[1], laser_prior[2],
+            px, py, pr, p.n_bins,
             p.min_range_m, p.max_range_m + p.gate0_m, p.blend_m, p.seg_abs_m, p.seg_rel, p.gap_bins,
             p.normal_chord_m, p.max_iterations, win0, p.win_tau, p.win_min_rad, p.gate0_m, p.gate_min_m,
             p.tol_m, p.tol_rad, p.max_cp_bins, stride, max(1, n // (stride * p.mrp_points)),
@@ -692,6 +731,6 @@ class IdcMatcher:
             return _Outcome(est, pairs, resid, iters, f"residual {resid:.3f} m > {p.max_residual_m} m")
         if weakest < p.degenerate_min_info:
             return _Outcome(est, pairs, resid, iters,
-                            f"degenerate geometry: translation unobservable (information {weakest:.1f} "
+                            f"{_DEGENERATE}: translation unobservable (information {weakest:.1f} "
                             f"< {p.degenerate_min_info})")
         return _Outcome(est, pairs, resid, iters, "", half_rot)
