@@ -193,20 +193,22 @@ BEYOND_RAD = math.radians(2.0)
 
 
 @njit(cache=True, error_model="numpy")
-def unseen_ends(ref_x, ref_y, nxt, views):
+def unseen_ends(ref_x, ref_y, nxt, kf_view, kf_n, ox, oy, oth):
     """Per bin, which open ends of the reference polyline no keyframe could have seen past: bit 1 a
     polyline's first point, bit 2 its last, set when the surface's continuation ``BEYOND_RAD`` further on
-    (same range, seen from the reference's origin) lay outside the view of every keyframe.
+    (same range, seen from the reference's origin (ox, oy, oth)) lay outside the view of every keyframe.
 
-    ``views`` holds one row per keyframe in the reference's frame: laser x, y, cos and sin of its heading,
-    its first and last bearing, its maximum range. Such an end is where the keyframes' field of view ended,
-    not where the surface ends: the map does not know what lies beyond (see _off_end)."""
+    ``kf_view`` holds each keyframe's view in the corrected frame: laser x, y, heading, first and last
+    bearing, range limit (rows with ``kf_n`` 0 are empty). Such an end is where the keyframes' field of view
+    ended, not where the surface ends: the map does not know what lies beyond (see _off_end)."""
     n_bins = ref_x.shape[0]
     has_prev = np.zeros(n_bins, dtype=np.bool_)
     for j in range(n_bins):
         if nxt[j] >= 0:
             has_prev[nxt[j]] = True
     out = np.zeros(n_bins, dtype=np.uint8)
+    co = dm.cos(oth)
+    so = dm.sin(oth)
     for e in range(n_bins):
         first = nxt[e] >= 0 and not has_prev[e]
         last = nxt[e] < 0 and has_prev[e]
@@ -214,16 +216,22 @@ def unseen_ends(ref_x, ref_y, nxt, views):
             continue
         r = math.sqrt(ref_x[e] * ref_x[e] + ref_y[e] * ref_y[e])
         a = fast_atan2(ref_y[e], ref_x[e]) + (BEYOND_RAD if last else -BEYOND_RAD)
-        bx = r * dm.cos(a)
-        by = r * dm.sin(a)
+        lx = r * dm.cos(a)
+        ly = r * dm.sin(a)
+        bx = ox + co * lx - so * ly  # the continuation in the corrected frame
+        by = oy + so * lx + co * ly
         seen = False
-        for k in range(views.shape[0]):
-            dx = bx - views[k, 0]
-            dy = by - views[k, 1]
-            if dx * dx + dy * dy >= views[k, 6] * views[k, 6]:
+        for k in range(kf_view.shape[0]):
+            if kf_n[k] == 0:
                 continue
-            b = fast_atan2(-views[k, 3] * dx + views[k, 2] * dy, views[k, 2] * dx + views[k, 3] * dy)
-            if views[k, 4] <= b <= views[k, 5]:
+            dx = bx - kf_view[k, 0]
+            dy = by - kf_view[k, 1]
+            if dx * dx + dy * dy >= kf_view[k, 5] * kf_view[k, 5]:
+                continue
+            ck = dm.cos(kf_view[k, 2])
+            sk = dm.sin(kf_view[k, 2])
+            b = fast_atan2(-sk * dx + ck * dy, ck * dx + sk * dy)
+            if kf_view[k, 3] <= b <= kf_view[k, 4]:
                 seen = True
                 break
         if not seen:
@@ -912,12 +920,12 @@ def _idc_polish(px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, 
 
 
 @njit(cache=True, error_model="numpy")
-def match_scan(kf_xy, kf_n, views, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend_m, seg_abs_m,
+def match_scan(kf_xy, kf_n, kf_view, ox, oy, oth, px, py, pr, n_bins, min_r, max_r, blend_m, seg_abs_m,
                seg_rel, gap_bins, normal_chord_m, max_iter, win0, win_tau, win_min, gate0, gate_min, tol_t,
                tol_r, max_cp_bins, stride, mrp_every, polish_iter, w_t, w_r, pa, coarse_bins, coarse_step,
                coarse_every, coarse_tol_abs, coarse_tol_rel, coarse_min_gain, coarse_margin, par):
     """The whole match in one call (one dispatch instead of four): render the reference at (ox, oy, oth),
-    its segments and the ends no keyframe saw past (``views``, see unseen_ends), IDC from the prediction,
+    its segments and the ends no keyframe saw past (``kf_view``, see unseen_ends), IDC from the prediction,
     then the point-to-line polish (``polish_iter`` > 0) or just the quality of the IDC pose. With
     ``coarse_bins`` > 0, a second IDC may start from the rotation that the correlative search
     (coarse_rotation) prefers (see the comment below).
@@ -929,7 +937,7 @@ def match_scan(kf_xy, kf_n, views, ox, oy, oth, px, py, pr, n_bins, min_r, max_r
     ref_x, ref_y, ref_r, ref_a, ok, nxt = render_reference(kf_xy, kf_n, ox, oy, oth, n_bins, min_r, max_r,
                                                            blend_m, seg_abs_m, seg_rel, gap_bins)
     ex, ey, il, nx, ny, cover = segments(ref_x, ref_y, ok, nxt, normal_chord_m)
-    unseen = unseen_ends(ref_x, ref_y, nxt, views)
+    unseen = unseen_ends(ref_x, ref_y, nxt, kf_view, kf_n, ox, oy, oth)
     x, y, th, iters, pairs, resid, info, hr = _idc_polish(
         px, py, pr, ref_x, ref_y, ref_r, ref_a, ok, nxt, cover, ex, ey, il, nx, ny, unseen, 0.0, max_iter,
         win0, win_tau, win_min, gate0, gate_min, tol_t, tol_r, max_cp_bins, stride, mrp_every, polish_iter,

@@ -37,8 +37,8 @@ from .idc import IdcMatcher, IdcParams
 from .kiss import KissIcpMatcher, KissParams
 
 __all__ = ["METHODS", "CorrectedTrajectory", "MatcherReport", "correct_trajectory", "health_params",
-           "keep_by_travel", "log_ticks", "make_matcher", "matcher_report", "relations_time_base",
-           "run_scanmatch"]
+           "interleave_bearings", "keep_by_travel", "log_ticks", "make_matcher", "matcher_report",
+           "relations_time_base", "run_scanmatch"]
 
 Method = Literal["idc", "kiss-icp", "odom"]
 METHODS: tuple[Method, ...] = ("odom", "idc", "kiss-icp")
@@ -164,6 +164,29 @@ def keep_by_travel(ticks: Iterable[Tick], dist_m: float, angle_rad: float) -> li
         kept.append(tick)
         last = (o.x, o.y, o.theta)
     return kept
+
+
+def interleave_bearings(ticks: Iterable[Tick], step_rad: float, phases: int) -> list[Tick]:
+    """The ticks with scan k's bearings shifted by (k mod ``phases``) * ``step_rad`` and its ranges resampled
+    there: the interleaved start bearings of a scanner that alternates its first beam (a ROBOTLASER log
+    with four start angles 0.25 deg apart), built from a log that has one geometry. A range is interpolated
+    between the two beams around its new bearing when both hit one surface (within 0.1 m + 5 %), else it
+    is the nearer beam's; past the last beam it is invalid (nan)."""
+    out = []
+    for k, tick in enumerate(ticks):
+        s = tick.scan
+        a, r = s.angles_rad, s.ranges_m
+        q = a + step_rad * (k % phases)
+        j = np.clip(np.searchsorted(a, q), 1, max(a.shape[0] - 1, 1))
+        r0, r1 = r[j - 1], r[j]
+        f = (q - a[j - 1]) / (a[j] - a[j - 1])
+        with np.errstate(invalid="ignore"):
+            same = np.isfinite(r0) & np.isfinite(r1) & (np.abs(r1 - r0) < 0.1 + 0.05 * np.minimum(r0, r1))
+            ranges = np.where(same, r0 + f * (r1 - r0), np.where(f < 0.5, r0, r1))
+        ranges[q > a[-1]] = np.nan
+        scan = dataclasses.replace(s, ranges_m=ranges, angles_rad=q)
+        out.append(dataclasses.replace(tick, scan=scan))
+    return out
 
 
 @dataclass(frozen=True)
