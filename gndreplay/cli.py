@@ -586,6 +586,16 @@ TimeLimitOpt = Annotated[
         show_default=False,
     ),
 ]
+AgainstOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--against",
+        help="Another container of the same recording (e.g. the bag converted from a CARMEN log): list what "
+        "a replay reads differently in it. Read with its format and topics detected (the log options apply "
+        "to LOG; --strict to both).",
+        show_default=False,
+    ),
+]
 LogArg = Annotated[
     Path,
     typer.Argument(
@@ -733,27 +743,36 @@ def _print_json(data: object) -> None:
 @app.command(cls=_Command)
 @cli_errors
 @log_options
-def info(log: LogArg, json_out: JsonOpt = False, *, read: ReadOptions) -> None:
+def info(log: LogArg, json_out: JsonOpt = False, against: AgainstOpt = None, *, read: ReadOptions) -> None:
     """Show what a log contains (streams, rates, beams, range limits, odometry, gaps, malformed records).
 
     Format, start/end and duration, per-topic or per-message-type counts and rates, beams per scan, field
     of view, range limits, fraction of invalid / no-return beams, odometry source, time reversals, gaps and
     skipped malformed records. MCAP files are summarised from their index without decoding every message.
+    With --against OTHER (the same recording in another container, a conversion say): then each difference
+    between the two in what a replay reads, and what it changes.
 
     [bold]Examples[/]
 
       gndreplay info mit-csail.clf.bz2
       gndreplay info run.bag --scan-topic /base_scan --json
+      gndreplay info aces.clf.bz2 --against aces.bag
     """
-    from .info import log_info
+    from .info import against_dict, against_lines, log_info
 
     result = log_info(log, options=read)
+    other = None if against is None else log_info(against, options=_read_options(strict=read.strict))
     if json_out:
         import json
 
-        typer.echo(json.dumps(result.to_dict(), allow_nan=False))
+        data = result.to_dict()
+        if other is not None:
+            data["against"] = against_dict(result, other)
+        typer.echo(json.dumps(data, allow_nan=False))
         return
     _print_info(result)
+    if other is not None:
+        typer.echo("\n".join(against_lines(result, other)))
 
 
 def _print_info(result: object) -> None:

@@ -3,8 +3,9 @@
 CARMEN logs have no index, so they are streamed once through the same reader later commands use (the
 numbers are exactly what a replay sees: skipped lines, reordering, scans without odometry). ROS bags and
 MCAP files are summarised from their metadata (MCAP: the summary section, via the ``mcap`` library): message
-counts come from the index, scan stamps from the raw header bytes (no decoding), and the beam statistics from
-a decoded, evenly spaced sample of at most ``sample`` scans (``LogInfo.stats_scans`` says how many).
+counts come from the index, scan stamps from the raw header bytes (no decoding; on the replay's microsecond
+clock, as the readers put them), and the beam statistics from a decoded, evenly spaced sample of at most
+``sample`` scans (``LogInfo.stats_scans`` says how many).
 
 The scan rate is the median scan period's (what the sensor runs at, whatever the gaps; count / duration is
 reported beside it as the average), and a clock that was generated rather than recorded (every period the
@@ -24,10 +25,21 @@ import numpy as np
 
 from .io import DEFAULT_READ, ReadOptions, detect_format, open_log
 from .io.base import LogDescription, ReadReport
+from .io.canonical import canonical_stamp
 from .io.clock import fmt_ns, scan_clock
 from .types import NS_PER_S, Pose2D, Scan
 
-__all__ = ["LogInfo", "StreamStat", "differences", "log_info", "stream_rows", "summary_rows"]
+__all__ = [
+    "Difference",
+    "LogInfo",
+    "StreamStat",
+    "against_dict",
+    "against_lines",
+    "differences",
+    "log_info",
+    "stream_rows",
+    "summary_rows",
+]
 
 DEFAULT_SAMPLE = 500
 #: Start bearings closer than this are one [rad] (a bag's float32 fields round at ~1e-7 rad).
@@ -76,6 +88,7 @@ class LogInfo:
         angle_min_deg, angle_max_deg, resolution_deg, fov_deg: scan geometry (of the first scan).
         range_min_m, range_max_m: sensor range limits (of the first scan).
         invalid_fraction, no_return_fraction: fraction of beams that are nan / +inf.
+        shortest_return_m: the shortest finite range in the scans the statistics saw (None without any).
         stats_scans: scans the beam statistics were computed on (< scans when sampled).
         start_angles_deg: the distinct first-beam bearings, most frequent first (at most 16).
         start_pairs, start_changes: consecutive scan pairs seen (all, or the sampled scan and the next one)
@@ -145,6 +158,7 @@ class LogInfo:
     uneven_scans: int = 0
     record_offset_s: float | None = None
     record_offset_max_s: float | None = None
+    shortest_return_m: float | None = None
 
     @property
     def interleaved(self) -> bool:
@@ -207,10 +221,12 @@ class _BeamStats:
     total: int = 0
     invalid: int = 0
     no_return: int = 0
+    shortest: float = math.inf
     first: Scan | None = None
 
     def add(self, scan: Scan) -> None:
         r = scan.ranges_m
+        self.shortest = min(self.shortest, float(np.min(r, where=np.isfinite(r), initial=math.inf)))
         self.n += 1
         self.beams.add(int(r.size))
         self.total += int(r.size)
@@ -390,6 +406,7 @@ def _assemble(
         warnings=rep.warnings + ((clock,) if clock else ()), notes=desc.notes + notes,
         start_angles_deg=starts.angles_deg(), start_pairs=starts.pairs, start_changes=starts.changes,
         uneven_scans=starts.uneven,
+        shortest_return_m=stats.shortest if math.isfinite(stats.shortest) else None,
     )
 
 
@@ -467,7 +484,7 @@ def _ros_info(path: Path, fmt: str, size: int, opts: ReadOptions, *, sample: int
             stamps: list[int] = []
             for i, (_, raw) in enumerate(log.raw_messages(log.odom_topic), start=1):
                 try:
-                    s = check_time(log.header_stamp(raw))
+                    s = canonical_stamp(check_time(log.header_stamp(raw)))
                 except errors as err:
                     bad(i, log.odom_topic, err)
                     continue
@@ -478,7 +495,7 @@ def _ros_info(path: Path, fmt: str, size: int, opts: ReadOptions, *, sample: int
         for i, (t_log, raw) in enumerate(log.raw_messages(log.scan_topic)):
             try:
                 stamp = log.header_stamp(raw)
-                times.add(check_time(stamp or t_log))
+                times.add(canonical_stamp(check_time(stamp or t_log)))
                 if stamp:
                     times.offsets.append(stamp - t_log)
                 if i % every == 0 or (every > 1 and i % every == 1):  # the sample, each with the next scan
@@ -620,41 +637,153 @@ def stream_rows(info: LogInfo) -> list[tuple[str, str, str, str, str, str]]:
 
 #: What :func:`differences` calls the same: bearings [deg], lengths [m], the laser's heading [rad].
 _SAME_DEG, _SAME_M, _SAME_RAD = 1e-3, 1e-4, 1e-4
+#: The consequence of any difference in the scans' geometry or data.
+_SCANS_DIFFER = "so the map and the corrected trajectories will differ"
 
 
-def differences(a: LogInfo, b: LogInfo) -> list[str]:
-    """Where two logs of the same recording (a CARMEN file and a bag converted from it, say) disagree in
+@dataclass(frozen=True, slots=True)
+class Difference:
+    """One way two logs of the same recording disagree: ``what``, this log's value against the other's, what
+    that changes, and whether a replay reads it (a range limit no return falls between changes nothing)."""
+
+    what: str
+    this: str
+    other: str
+    effect: str
+    affects_replay: bool = True
+
+    def __str__(self) -> str:
+        return f"{self.what}: {self.this} against {self.other}"
+
+    def line(self) -> str:
+        """The difference and what it changes, in one line."""
+        return f"{self}; {self.effect}"
+
+
+def differences(a: LogInfo, b: LogInfo) -> list[Difference]:
+    """Where ``a`` (this log) and ``b`` (the other: a bag converted from a CARMEN file, say) disagree in
     what a replay reads: scan count and beams, bearings, range limits, the laser's mounting, the stamps'
-    start and clock, start-bearing interleaving. One line per difference, ``a`` first; empty when none."""
-    out: list[str] = []
-
-    def differ(what: str, x: object, y: object) -> None:
-        out.append(f"{what}: {x} against {y}")
-
+    start and clock, start-bearing interleaving, recorded commands and ground truth. Empty when they agree."""
+    out: list[Difference] = []
     if a.scans != b.scans:
-        differ("scans", a.scans, b.scans)
+        more = "more" if b.scans > a.scans else "fewer"
+        out.append(Difference("scans", str(a.scans), str(b.scans),
+                              f"a replay of the other gets {abs(b.scans - a.scans)} {more} ticks"))
     if a.beams != b.beams:
-        differ("beams per scan", ", ".join(map(str, a.beams)), ", ".join(map(str, b.beams)))
-    for what, x, y, unit in (("first bearing", a.angle_min_deg, b.angle_min_deg, "deg"),
-                             ("last bearing", a.angle_max_deg, b.angle_max_deg, "deg"),
-                             ("beam step", a.resolution_deg, b.resolution_deg, "deg")):
-        if not math.isclose(x, y, rel_tol=0.0, abs_tol=_SAME_DEG):
-            differ(what, f"{x:.4f} {unit}", f"{y:.4f} {unit}")
+        out.append(Difference("beams per scan", ", ".join(map(str, a.beams)), ", ".join(map(str, b.beams)),
+                              f"the scans hold other beams, {_SCANS_DIFFER}"))
+    out += _bearing_differences(a, b)
     if a.interleaved != b.interleaved:
-        differ("interleaved start bearings", a.interleaved, b.interleaved)
-    for what, x, y in (("range min", a.range_min_m, b.range_min_m),
-                       ("range max", a.range_max_m, b.range_max_m)):
-        if not math.isclose(x, y, rel_tol=0.0, abs_tol=_SAME_M):
-            differ(what, f"{x:g} m", f"{y:g} m")
+        out.append(Difference("interleaved start bearings", _yes(a.interleaved), _yes(b.interleaved),
+                              f"consecutive scans start at other bearings in one of them, {_SCANS_DIFFER}"))
+    out += _range_differences(a, b)
     (ax, ay, ath), (bx, by, bth) = a.laser_pose, b.laser_pose
     if (abs(ax - bx) > _SAME_M or abs(ay - by) > _SAME_M
             or abs(math.remainder(ath - bth, 2.0 * math.pi)) > _SAME_RAD):
-        differ("laser pose in robot",
-               f"({ax:g} m, {ay:g} m, {math.degrees(ath):g} deg) from {a.laser_pose_source}",
-               f"({bx:g} m, {by:g} m, {math.degrees(bth):g} deg) from {b.laser_pose_source}")
+        out.append(Difference(
+            "laser pose in robot",
+            f"({ax:g} m, {ay:g} m, {math.degrees(ath):g} deg) from {a.laser_pose_source}",
+            f"({bx:g} m, {by:g} m, {math.degrees(bth):g} deg) from {b.laser_pose_source}",
+            f"the scan points sit elsewhere around the robot, {_SCANS_DIFFER}"))
     if a.start_ns is not None and b.start_ns is not None and a.start_ns != b.start_ns:
         d = b.start_ns - a.start_ns
-        out.append(f"first scan stamp: {'+' if d > 0 else ''}{fmt_ns(d)} s in the second")
+        out.append(Difference("first scan stamp", _fmt_s(a.start_ns), _fmt_s(b.start_ns),
+                              f"the other starts {fmt_ns(abs(d))} s {'later' if d > 0 else 'earlier'}: the "
+                              "times in commands.csv and the trajectory files differ, and relations or "
+                              "ground truth stamped on one clock do not match the other"))
     if a.synthetic_clock != b.synthetic_clock:
-        differ("synthetic clock", a.synthetic_clock, b.synthetic_clock)
+        out.append(Difference("scan clock", _clock(a), _clock(b),
+                              "the stamps of one were generated, so the odometry interpolated at them, and "
+                              "with it the corrected trajectories, differ"))
+    for what, x, y, role in (("recorded commands", a.cmd_stream, b.cmd_stream, "--mode teleop and the "
+                              "log_v, log_w columns of commands.csv have them in one only"),
+                             ("ground truth", a.truth_stream, b.truth_stream, "ATE / RPE and the error "
+                              "figures come with one only")):
+        if (x is None) != (y is None):
+            out.append(Difference(what, x or "none", y or "none", role))
     return out
+
+
+def _bearing_differences(a: LogInfo, b: LogInfo) -> list[Difference]:
+    """First and last bearing and beam step, each with how far the bearings end up apart."""
+    d_first, d_last = abs(a.angle_min_deg - b.angle_min_deg), abs(a.angle_max_deg - b.angle_max_deg)
+    far, where = max(d_first, d_last), "first" if d_first >= d_last else "last"
+    out = []
+    for what, x, y in (("first bearing", a.angle_min_deg, b.angle_min_deg),
+                       ("last bearing", a.angle_max_deg, b.angle_max_deg),
+                       ("beam step", a.resolution_deg, b.resolution_deg)):
+        if math.isclose(x, y, rel_tol=0.0, abs_tol=_SAME_DEG):
+            continue
+        if what == "beam step":
+            effect = f"the bearings are up to {far:.2f} deg apart (at the {where} beam)"
+        else:
+            effect = f"the {what.split()[0]} beam points {abs(x - y):.2f} deg apart"
+        out.append(Difference(what, f"{x:.4f} deg", f"{y:.4f} deg", f"{effect}, {_SCANS_DIFFER}"))
+    return out
+
+
+def _range_differences(a: LogInfo, b: LogInfo) -> list[Difference]:
+    """Range limits. A minimum matters only if the log with the lower one has a return below the higher one
+    (the other reads it as invalid), which a full pass knows and a sample can only suggest."""
+    out = []
+    if not math.isclose(a.range_min_m, b.range_min_m, rel_tol=0.0, abs_tol=_SAME_M):
+        low, high = (a, b) if a.range_min_m < b.range_min_m else (b, a)
+        low_name, high_name = ("this log", "the other") if low is a else ("the other", "this log")
+        hi = f"{high.range_min_m:g} m"
+        shortest = low.shortest_return_m
+        if shortest is not None and shortest < high.range_min_m:
+            effect = (f"{low_name} has returns shorter than {hi}: hits in it, invalid in {high_name}, "
+                      f"{_SCANS_DIFFER}")
+            matters = True
+        elif low.sampled:
+            effect = (f"none of the {low.stats_scans} scans of {low_name} sampled has a return shorter than "
+                      f"{hi}; one in another scan would be a hit in it and invalid in {high_name}")
+            matters = True
+        else:
+            effect = f"no return in {low_name} is shorter than {hi}, so a replay reads the same"
+            matters = False
+        out.append(Difference("range min", f"{a.range_min_m:g} m", f"{b.range_min_m:g} m", effect, matters))
+    if not math.isclose(a.range_max_m, b.range_max_m, rel_tol=0.0, abs_tol=_SAME_M):
+        short, long = sorted((a.range_max_m, b.range_max_m))
+        out.append(Difference("range max", f"{a.range_max_m:g} m", f"{b.range_max_m:g} m",
+                              f"returns from {short:g} to {long:g} m are no-returns in one and hits in the "
+                              f"other, and no-returns clear the map to other lengths, {_SCANS_DIFFER}"))
+    return out
+
+
+def _yes(flag: bool) -> str:
+    return "yes" if flag else "no"
+
+
+def _clock(info: LogInfo) -> str:
+    return "generated" if info.synthetic_clock else "recorded"
+
+
+def _fmt_s(t_ns: int) -> str:
+    """A stamp as seconds, with as many decimals as it needs."""
+    return f"{fmt_ns(t_ns)} s"
+
+
+def against_lines(this: LogInfo, other: LogInfo) -> list[str]:
+    """``info --against``: a heading naming the other log, then each difference that a replay reads with what
+    it changes, or that there is none; then the differences a replay does not read."""
+    found = differences(this, other)
+    read = [d for d in found if d.affects_replay]
+    unread = [d for d in found if not d.affects_replay]
+    where = f"against {other.path} ({other.format})"
+    if read:
+        lines = [f"{where}: {len(read)} difference{'s' if len(read) > 1 else ''} in what a replay reads "
+                 "(this log's value against the other's)", *(f"  {d.line()}" for d in read)]
+    else:
+        lines = [f"{where}: no difference in what a replay reads"]
+    lines += [f"  without effect: {d.line()}" for d in unread]
+    return lines
+
+
+def against_dict(this: LogInfo, other: LogInfo) -> dict[str, Any]:
+    """``info --against --json``: the other log, whether a replay reads the two differently, and every
+    difference (``Difference``'s fields)."""
+    found = differences(this, other)
+    return {"path": other.path, "format": other.format,
+            "replay_differs": any(d.affects_replay for d in found),
+            "differences": [asdict(d) for d in found]}

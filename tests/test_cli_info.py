@@ -22,6 +22,7 @@ from gndreplay import __version__
 from gndreplay.cli import app
 from gndreplay.info import differences, log_info
 from gndreplay.io.carmen import write_carmen
+from gndreplay.io.clock import fmt_ns
 from gndreplay.io.rosbag import RosbagReader
 from gndreplay.types import NS_PER_S, Pose2D, Scan, Tick
 
@@ -408,25 +409,31 @@ def test_differences_name_what_two_containers_disagree_on(tmp_path: Path) -> Non
     base = log_info(robotlaser_log(tmp_path / "a.clf", (-90.0,)))
     assert differences(base, base) == []
     other = log_info(robotlaser_log(tmp_path / "b.clf", (-90.0, -89.75)))
-    assert differences(base, other) == ["interleaved start bearings: False against True"]
+    assert [str(d) for d in differences(base, other)] == ["interleaved start bearings: no against yes"]
     shifted = dataclasses.replace(base, start_ns=base.start_ns + 1500, resolution_deg=1.0056, range_min_m=0.3,
                                   laser_pose=(0.2, 0.0, math.pi), laser_pose_source="tf")
-    assert differences(base, shifted) == [
+    found = differences(base, shifted)
+    assert [str(d) for d in found] == [
         "beam step: 1.0000 deg against 1.0056 deg",
         "range min: 0 m against 0.3 m",
         "laser pose in robot: (0 m, 0 m, 0 deg) from log against (0.2 m, 0 m, 180 deg) from tf",
-        "first scan stamp: +0.0000015 s in the second",
+        f"first scan stamp: {fmt_ns(base.start_ns)} s against {fmt_ns(base.start_ns + 1500)} s",
     ]
+    assert "later" in found[-1].effect and "0.0000015 s" in found[-1].effect
+    # the base log's returns are all 4 m: a minimum of 0.3 m invalidates none of them
+    assert [d.affects_replay for d in found] == [True, False, True, True]
+    shorter = dataclasses.replace(shifted, range_min_m=5.0)
+    assert next(d for d in differences(base, shorter) if d.what == "range min").affects_replay
 
 
 def test_differences_between_the_aces_file_and_its_bags(datasets: Path) -> None:
     """The bags of ACES space its 180 beams over 180 deg (pi / 179 apart), CARMEN's readlog.c 1 deg apart."""
     clf = log_info(datasets / "carmen" / "aces.clf.bz2")
-    assert differences(clf, log_info(datasets / "rosbag1" / "aces.sort.bag")) == [
+    assert [str(d) for d in differences(clf, log_info(datasets / "rosbag1" / "aces.sort.bag"))] == [
         "last bearing: 89.0000 deg against 90.0000 deg",
         "beam step: 1.0000 deg against 1.0056 deg",
         "range min: 0 m against 0.3 m",
     ]
-    synthetic = differences(clf, log_info(datasets / "rosbag1" / "aces.clf2bag.bag"))
-    assert synthetic[-2:] == ["first scan stamp: +999999929.7101 s in the second",
-                              "synthetic clock: False against True"]
+    synthetic = [str(d) for d in differences(clf, log_info(datasets / "rosbag1" / "aces.clf2bag.bag"))]
+    assert synthetic[-2:] == ["first scan stamp: 70.2899 s against 1000000000 s",
+                              "scan clock: recorded against generated"]

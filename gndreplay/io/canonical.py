@@ -2,12 +2,13 @@
 
 The same recording read from a CARMEN file and from a ROS bag converted from it differs in the last bits:
 a LaserScan stores ranges and its bearings' start and step as float32 where the CARMEN text has decimals,
-a bag's odometry heading went through a quaternion and back (1e-16 rad), and its stamps through float
-seconds (+-120 ns at 1e9 s). The scan matcher's decisions (a point's bin, a pair's gate) are discrete,
-so such differences grow into different trajectories within a hundred scans. Each tick is therefore
-brought to one representation before anything computes on it: ranges and the bearings' start and step
-at float32 (the precision of every laser driver's interface), poses on a 1e-9 m / 1e-9 rad grid, and the
-clock at whole microseconds (CARMEN's resolution; far below any scan period).
+a bag's odometry heading and its laser mounting went through a quaternion and back (1e-16 rad), and its
+stamps through float seconds (+-120 ns at 1e9 s). The scan matcher's decisions (a point's bin, a pair's
+gate) are discrete, so such differences grow into different trajectories within a hundred scans. Each tick
+is therefore brought to one representation before anything computes on it: ranges and the bearings' start
+and step at float32 (the precision of every laser driver's interface), poses (odometry, ground truth and
+the laser's mounting) on a 1e-9 m / 1e-9 rad grid, and the clock at whole microseconds (CARMEN's
+resolution; far below any scan period).
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ def canonical_bearings(angles: F64) -> F64:
 
 
 def canonical_scan(scan: Scan, bearings: dict[tuple[int, float, float], F64]) -> Scan:
-    """``scan`` with its stamp, ranges and bearings in the canonical form; ``bearings`` caches the
+    """``scan`` with its stamp, ranges, bearings and mounting in the canonical form; ``bearings`` caches the
     canonical bearings by (beams, first, last) across the scans of one log."""
     a = scan.angles_rad
     key = (a.shape[0], float(a[0]), float(a[-1])) if a.shape[0] else (0, math.nan, math.nan)
@@ -65,4 +66,5 @@ def canonical_scan(scan: Scan, bearings: dict[tuple[int, float, float], F64]) ->
             bearings.clear()
         bearings[key] = angles
     ranges = scan.ranges_m.astype(np.float32).astype(np.float64)
-    return replace(scan, t_ns=canonical_stamp(scan.t_ns), ranges_m=ranges, angles_rad=angles)
+    return replace(scan, t_ns=canonical_stamp(scan.t_ns), ranges_m=ranges, angles_rad=angles,
+                   sensor_pose=canonical_pose(scan.sensor_pose))
