@@ -135,7 +135,7 @@ def test_carmen_log_with_a_mounting_param_keeps_it(tmp_path: Path, param: str) -
 def test_carmen_rear_and_robotlaser_mountings(tmp_path: Path) -> None:
     rlaser = "".join(flaser(f"{i}.0", RANGES).replace("FLASER", "RLASER") for i in range(3))
     rear = log_file(tmp_path, rlaser, "rear.clf")
-    assert first_scan_pose(rear) == (canonical_pose(Pose2D(0.0, 0.0, math.pi)), "none")  # pi on the 1e-9 grid
+    assert first_scan_pose(rear) == (canonical_pose(Pose2D(0.0, 0.0, math.pi)), "none")
     assert first_scan_pose(rear, ReadOptions(default_sensor_pose=FALLBACK))[1] == "config default"
     header = "ROBOTLASER1 0 -1.5708 3.1416 1.5708 8.0 0.01 0 3 1 2 3 0"
     poses = "0.2 0.0 0.0 0.0 0.0 0.0 0 0 0 0 0"  # laser pose, robot pose, then five unused fields

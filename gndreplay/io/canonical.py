@@ -34,8 +34,10 @@ def canonical_stamp(t_ns: int) -> int:
 
 
 def canonical_pose(p: Pose2D) -> Pose2D:
-    """``p`` on the 1e-9 grid (Python's correctly rounded ``round``: the same on every CPU)."""
-    return Pose2D(round(p.x, _POSE_DIGITS), round(p.y, _POSE_DIGITS), round(p.theta, _POSE_DIGITS))
+    """``p`` on the 1e-9 grid (Python's correctly rounded ``round``: the same on every CPU); a heading that
+    rounds past +-pi is pi (or -pi), so it stays in [-pi, pi]."""
+    theta = min(math.pi, max(-math.pi, round(p.theta, _POSE_DIGITS)))
+    return Pose2D(round(p.x, _POSE_DIGITS), round(p.y, _POSE_DIGITS), theta)
 
 
 def canonical_bearings(angles: F64) -> F64:
