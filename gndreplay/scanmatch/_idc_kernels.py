@@ -209,6 +209,12 @@ def unseen_ends(ref_x, ref_y, nxt, kf_view, kf_n, ox, oy, oth):
     out = np.zeros(n_bins, dtype=np.uint8)
     co = dm.cos(oth)
     so = dm.sin(oth)
+    n_kf = kf_view.shape[0]
+    ck = np.empty(n_kf)
+    sk = np.empty(n_kf)
+    for k in range(n_kf):
+        ck[k] = dm.cos(kf_view[k, 2])
+        sk[k] = dm.sin(kf_view[k, 2])
     for e in range(n_bins):
         first = nxt[e] >= 0 and not has_prev[e]
         last = nxt[e] < 0 and has_prev[e]
@@ -221,16 +227,14 @@ def unseen_ends(ref_x, ref_y, nxt, kf_view, kf_n, ox, oy, oth):
         bx = ox + co * lx - so * ly  # the continuation in the corrected frame
         by = oy + so * lx + co * ly
         seen = False
-        for k in range(kf_view.shape[0]):
+        for k in range(n_kf):
             if kf_n[k] == 0:
                 continue
             dx = bx - kf_view[k, 0]
             dy = by - kf_view[k, 1]
             if dx * dx + dy * dy >= kf_view[k, 5] * kf_view[k, 5]:
                 continue
-            ck = dm.cos(kf_view[k, 2])
-            sk = dm.sin(kf_view[k, 2])
-            b = fast_atan2(-sk * dx + ck * dy, ck * dx + sk * dy)
+            b = fast_atan2(-sk[k] * dx + ck[k] * dy, ck[k] * dx + sk[k] * dy)
             if kf_view[k, 3] <= b <= kf_view[k, 4]:
                 seen = True
                 break
