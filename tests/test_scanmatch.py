@@ -339,7 +339,7 @@ def _unseen(*views: tuple[float, float, float, float, float]) -> np.ndarray:
     """unseen_ends of the wall for keyframes (laser x, y, heading, field of view, range limit), the wall
     rendered from the origin."""
     ref_x, ref_y, nxt = _wall_reference()
-    kf_view = np.array([(x, y, th, -fov / 2, fov / 2, rmax) for x, y, th, fov, rmax in views])
+    kf_view = np.array([kern.view_row(x, y, th, -fov / 2, fov / 2, rmax) for x, y, th, fov, rmax in views])
     return kern.unseen_ends(ref_x, ref_y, nxt, kf_view, np.ones(len(views), dtype=np.int64), 0.0, 0.0, 0.0)
 
 
@@ -354,6 +354,8 @@ def test_wall_ends_no_keyframe_saw_past_are_marked() -> None:
     assert narrow[first] == 1 and narrow[last] == 2
     assert np.count_nonzero(narrow) == 2  # only the ends
     assert not _unseen((0.0, 0.0, 0.0, math.pi, 30.0)).any()
+    assert not _unseen((0.0, 0.0, math.pi, math.radians(330.0), 30.0)).any()  # looking away, 330 deg wide
+    assert np.count_nonzero(_unseen((0.0, 0.0, math.pi, math.radians(200.0), 30.0))) == 2
     up = _unseen((0.0, 0.0, 0.0, math.radians(53.2), 30.0), (1.0, 0.5, math.pi / 4, math.radians(60.0), 30.0))
     assert up[first] == 1 and up[last] == 0  # the second keyframe saw past the upper end only
     too_far = _unseen((0.0, 0.0, 0.0, math.pi, 2.0))
@@ -362,7 +364,7 @@ def test_wall_ends_no_keyframe_saw_past_are_marked() -> None:
     # the continuations lie at x = 3, 14.7 deg off the axis of a keyframe at x = -1 (inside its +-17 deg);
     # rendered from the map's origin they would lie at x = 2, 19.3 deg off (outside)
     ref_x, ref_y, nxt2 = _wall_reference()
-    view = np.array([(-1.0, 0.0, 0.0, -math.radians(17.0), math.radians(17.0), 30.0)])
+    view = kern.view_row(-1.0, 0.0, 0.0, -math.radians(17.0), math.radians(17.0), 30.0)[None]
     ones = np.ones(1, dtype=np.int64)
     assert not kern.unseen_ends(ref_x, ref_y, nxt2, view, ones, 1.0, 0.0, 0.0).any()
     assert np.count_nonzero(kern.unseen_ends(ref_x, ref_y, nxt2, view, ones, 0.0, 0.0, 0.0)) == 2

@@ -193,14 +193,25 @@ BEYOND_RAD = math.radians(2.0)
 
 
 @njit(cache=True, error_model="numpy")
+def view_row(x, y, th, first, last, max_r):
+    """A keyframe's view as unseen_ends reads it: laser x, y (corrected frame), the unit vectors of its first
+    and last bearing, and its range limit, negative when the view spans more than pi."""
+    a = th + first
+    b = th + last
+    return np.array([x, y, dm.cos(a), dm.sin(a), dm.cos(b), dm.sin(b), max_r if last - first <= math.pi
+                     else -max_r])
+
+
+@njit(cache=True, error_model="numpy")
 def unseen_ends(ref_x, ref_y, nxt, kf_view, kf_n, ox, oy, oth):
     """Per bin, which open ends of the reference polyline no keyframe could have seen past: bit 1 a
     polyline's first point, bit 2 its last, set when the surface's continuation ``BEYOND_RAD`` further on
     (same range, seen from the reference's origin (ox, oy, oth)) lay outside the view of every keyframe.
 
-    ``kf_view`` holds each keyframe's view in the corrected frame: laser x, y, heading, first and last
-    bearing, range limit (rows with ``kf_n`` 0 are empty). Such an end is where the keyframes' field of view
-    ended, not where the surface ends: the map does not know what lies beyond (see _off_end)."""
+    ``kf_view`` holds each keyframe's view (rows of view_row; rows with ``kf_n`` 0 are empty): a point is in
+    it when within the range limit and between the first and the last bearing (two cross products). Such an
+    end is where the keyframes' field of view ended, not where the surface ends: the map does not know what
+    lies beyond (see _off_end)."""
     n_bins = ref_x.shape[0]
     has_prev = np.zeros(n_bins, dtype=np.bool_)
     for j in range(n_bins):
@@ -209,12 +220,6 @@ def unseen_ends(ref_x, ref_y, nxt, kf_view, kf_n, ox, oy, oth):
     out = np.zeros(n_bins, dtype=np.uint8)
     co = dm.cos(oth)
     so = dm.sin(oth)
-    n_kf = kf_view.shape[0]
-    ck = np.empty(n_kf)
-    sk = np.empty(n_kf)
-    for k in range(n_kf):
-        ck[k] = dm.cos(kf_view[k, 2])
-        sk[k] = dm.sin(kf_view[k, 2])
     for e in range(n_bins):
         first = nxt[e] >= 0 and not has_prev[e]
         last = nxt[e] < 0 and has_prev[e]
@@ -227,15 +232,17 @@ def unseen_ends(ref_x, ref_y, nxt, kf_view, kf_n, ox, oy, oth):
         bx = ox + co * lx - so * ly  # the continuation in the corrected frame
         by = oy + so * lx + co * ly
         seen = False
-        for k in range(n_kf):
+        for k in range(kf_view.shape[0]):
             if kf_n[k] == 0:
                 continue
             dx = bx - kf_view[k, 0]
             dy = by - kf_view[k, 1]
-            if dx * dx + dy * dy >= kf_view[k, 5] * kf_view[k, 5]:
+            rmax = kf_view[k, 6]
+            if dx * dx + dy * dy >= rmax * rmax:
                 continue
-            b = fast_atan2(-sk[k] * dx + ck[k] * dy, ck[k] * dx + sk[k] * dy)
-            if kf_view[k, 3] <= b <= kf_view[k, 4]:
+            after_first = kf_view[k, 2] * dy - kf_view[k, 3] * dx >= 0.0
+            before_last = dx * kf_view[k, 5] - dy * kf_view[k, 4] >= 0.0
+            if (after_first and before_last) if rmax > 0.0 else (after_first or before_last):
                 seen = True
                 break
         if not seen:

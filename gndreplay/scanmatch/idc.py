@@ -365,8 +365,8 @@ class IdcMatcher:
         # keyframe ring: points in the corrected frame, their count, next slot, pose of the newest
         self._kf_xy = np.zeros((self.params.map_keyframes, 0, 2))
         self._kf_n = np.zeros(self.params.map_keyframes, dtype=np.int64)
-        # each keyframe's view: laser x, y, heading (corrected frame), first and last bearing, range limit
-        self._kf_view = np.zeros((self.params.map_keyframes, 6))
+        # each keyframe's view in the corrected frame (see _idc_kernels.unseen_ends)
+        self._kf_view = np.zeros((self.params.map_keyframes, 7))
         self._view = (0.0, 0.0, 0.0)  # the current scan's first and last bearing and range limit
         self._kf_next = 0
         self._kf_pose: P3 | None = None
@@ -391,7 +391,7 @@ class IdcMatcher:
         slot = self._kf_next
         self._kf_xy[slot, : pts.shape[0]] = transform_points(laser_pose, pts)
         self._kf_n[slot] = pts.shape[0]
-        self._kf_view[slot] = (*laser_pose, *self._view)
+        self._kf_view[slot] = k.view_row(*laser_pose, *self._view)
         self._kf_next = (slot + 1) % self._kf_xy.shape[0]
         self._kf_pose = laser_pose
         self._kf_pairs = self._kf_short = 0
