@@ -5,7 +5,12 @@ and prints, per module, the median of the per-run medians and p99s, the stack to
 targets (median <= 5 ms, p99 <= 15 ms), and each module beside the wheelchair paper's figures (model
 20 ms, planner 30 ms, ND+ < 1 ms, 150 ms cycle on a Pentium III 850 MHz) as a ratio.
 
-    python benchmarks/stack.py [--log PATH] [--repeats 3] [--until SECONDS]
+    python benchmarks/stack.py [--log PATH] [--repeats 3] [--until SECONDS] [--vs REF]
+
+``--vs REF`` (a git revision, or the path of another checkout) runs the same slice on REF's code too,
+alternating REF and this tree run by run in fresh processes on the same core, and prints per module the
+median of the per-run medians of both, their ratio (this / REF) and both p99s: the guard against a slowdown
+nobody noticed. A revision is checked out in a temporary git worktree, removed afterwards.
 """
 
 from __future__ import annotations
@@ -16,8 +21,13 @@ for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MK
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import json  # noqa: E402
 import statistics  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
 import tempfile  # noqa: E402
+from collections.abc import Iterator  # noqa: E402
+from contextlib import contextmanager  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -25,7 +35,8 @@ import numpy as np  # noqa: E402
 from gndreplay.config import PRESETS  # noqa: E402
 from gndreplay.replay import RunOptions, run_log  # noqa: E402
 
-DATASETS = Path(__file__).resolve().parents[1].parent / "shared" / "datasets"
+ROOT = Path(__file__).resolve().parents[1]
+DATASETS = ROOT.parent / "shared" / "datasets"
 PAPER_MS = {"model": 20.0, "planner": 30.0, "reactor": 1.0, "cycle": 150.0}
 MODULES = ("match", "model", "planner", "reactor", "stack")
 
@@ -39,37 +50,97 @@ def one_run(log: Path, until: float | None) -> dict[str, np.ndarray]:
     return cols
 
 
+def _stats(runs: list[dict[str, np.ndarray]], m: str) -> tuple[float, float, float, float]:
+    """(median, p90, p99, max) of module ``m``: each the median over the runs of the per-run figure."""
+    return (statistics.median(float(np.median(r[m])) for r in runs),
+            statistics.median(float(np.percentile(r[m], 90)) for r in runs),
+            statistics.median(float(np.percentile(r[m], 99)) for r in runs),
+            statistics.median(float(r[m].max()) for r in runs))
+
+
+def report(log: Path, runs: list[dict[str, np.ndarray]]) -> None:
+    """The per-module table of one tree, beside the paper's figures, and the issue's targets."""
+    ticks = len(runs[0]["stack"])
+    print(f"log {log.name}: {ticks} ticks per run, {len(runs)} runs, wheelchair preset, one core")
+    print(f"{'module':<9}{'median ms':>11}{'p90 ms':>9}{'p99 ms':>9}{'max ms':>9}   paper ms   paper/ours")
+    for m in MODULES:
+        med, p90, p99, mx = _stats(runs, m)
+        paper = PAPER_MS.get(m, PAPER_MS["cycle"] if m == "stack" else float("nan"))
+        ratio = f"{paper / med:10.0f}x" if paper == paper else "          -"
+        label = f"{paper:9.0f}" if paper == paper else "        -"
+        print(f"{m:<9}{med:11.3f}{p90:9.3f}{p99:9.3f}{mx:9.2f}  {label}  {ratio}")
+    stack_med, _, stack_p99, _ = _stats(runs, "stack")
+    print(
+        f"stack (model+planner+reactor): median {stack_med:.2f} ms (target <= 5: "
+        f"{'ok' if stack_med <= 5 else 'MISSED'}), p99 {stack_p99:.2f} ms (target <= 15: "
+        f"{'ok' if stack_p99 <= 15 else 'MISSED'})"
+    )
+
+
+@contextmanager
+def checkout(ref: str) -> Iterator[Path]:
+    """REF's tree: the directory itself, or the revision in a temporary git worktree of this repository."""
+    if Path(ref).is_dir():
+        yield Path(ref).resolve()
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = Path(tmp) / "ref"
+        git = ["git", "-C", str(ROOT), "worktree"]
+        subprocess.run([*git, "add", "-q", "--detach", str(tree), ref], check=True)
+        try:
+            yield tree
+        finally:
+            subprocess.run([*git, "remove", "--force", str(tree)], check=False)
+
+
+def run_in(tree: Path, log: Path, until: float | None) -> dict[str, np.ndarray]:
+    """One run of this script's measurement on ``tree``'s code, in a fresh process."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "run.json"
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--log", str(log), "--worker-out", str(out)]
+        cmd += ["--until", str(until)] if until is not None else []
+        env = {**os.environ, "PYTHONPATH": str(tree)}
+        subprocess.run(cmd, check=True, cwd=tree, env=env, stdout=subprocess.DEVNULL)
+        return {m: np.asarray(v) for m, v in json.loads(out.read_text()).items()}
+
+
+def compare(ref: str, log: Path, until: float | None, repeats: int) -> None:
+    """Alternate REF and this tree ``repeats`` times each and print the per-module side-by-side table."""
+    with checkout(ref) as tree:
+        runs: dict[str, list[dict[str, np.ndarray]]] = {"ref": [], "this": []}
+        for _ in range(repeats):
+            runs["ref"].append(run_in(tree, log, until))
+            runs["this"].append(run_in(ROOT, log, until))
+    print(f"log {log.name}: {len(runs['this'][0]['stack'])} ticks per run, {repeats} runs each, alternated, "
+          f"wheelchair preset, one core; REF = {ref}")
+    print(f"{'module':<9}{'REF median':>12}{'this median':>13}{'ratio':>8}{'REF p99':>10}{'this p99':>10}")
+    for m in MODULES:
+        a, _, a99, _ = _stats(runs["ref"], m)
+        b, _, b99, _ = _stats(runs["this"], m)
+        print(f"{m:<9}{a:12.3f}{b:13.3f}{b / a:8.2f}{a99:10.3f}{b99:10.3f}")
+
+
 def main() -> None:
     fmt = argparse.RawDescriptionHelpFormatter
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=fmt)
     parser.add_argument("--log", type=Path, default=DATASETS / "carmen" / "aces.clf.bz2")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--until", type=float, default=None, help="seconds of log time per run")
+    parser.add_argument("--vs", metavar="REF", help="a git revision or another checkout to compare with")
+    parser.add_argument("--worker-out", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
-    if not args.log.exists():
-        raise SystemExit(f"benchmark log not found: {args.log} (needs ../shared/datasets)")
+    log = args.log.resolve()
+    if not log.exists():
+        raise SystemExit(f"benchmark log not found: {log} (needs ../shared/datasets)")
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})  # one core
-    runs = [one_run(args.log, args.until) for _ in range(args.repeats)]
-    ticks = len(runs[0]["stack"])
-    print(f"log {args.log.name}: {ticks} ticks per run, {args.repeats} runs, wheelchair preset, one core")
-    print(f"{'module':<9}{'median ms':>11}{'p90 ms':>9}{'p99 ms':>9}{'max ms':>9}   paper ms   paper/ours")
-    for m in MODULES:
-        med = statistics.median(float(np.median(r[m])) for r in runs)
-        p90 = statistics.median(float(np.percentile(r[m], 90)) for r in runs)
-        p99 = statistics.median(float(np.percentile(r[m], 99)) for r in runs)
-        mx = statistics.median(float(r[m].max()) for r in runs)
-        paper = PAPER_MS.get(m, PAPER_MS["cycle"] if m == "stack" else float("nan"))
-        ratio = f"{paper / med:10.0f}x" if paper == paper else "          -"
-        label = f"{paper:9.0f}" if paper == paper else "        -"
-        print(f"{m:<9}{med:11.3f}{p90:9.3f}{p99:9.3f}{mx:9.2f}  {label}  {ratio}")
-    stack_med = statistics.median(float(np.median(r["stack"])) for r in runs)
-    stack_p99 = statistics.median(float(np.percentile(r["stack"], 99)) for r in runs)
-    print(
-        f"stack (model+planner+reactor): median {stack_med:.2f} ms (target <= 5: "
-        f"{'ok' if stack_med <= 5 else 'MISSED'}), p99 {stack_p99:.2f} ms (target <= 15: "
-        f"{'ok' if stack_p99 <= 15 else 'MISSED'})"
-    )
+    if args.worker_out is not None:
+        run = one_run(log, args.until)
+        args.worker_out.write_text(json.dumps({m: v.tolist() for m, v in run.items()}))
+    elif args.vs:
+        compare(args.vs, log, args.until, args.repeats)
+    else:
+        report(log, [one_run(log, args.until) for _ in range(args.repeats)])
 
 
 if __name__ == "__main__":
