@@ -682,6 +682,7 @@ class IdcMatcher:
                                         f"{math.degrees(corr[2]):.1f} deg from odometry ({max(z_t, z_r):.1f} "
                                         f"sigma) and no better than the match near odometry"), extra
                     res = min(seconds, key=lambda o: self._cost(o, n))
+                    z_t, z_r = self._z(res.laser, odo_laser, incr)  # the model learns from what is taken
         else:
             extra = 0
         a = p.odo_learn_rate
