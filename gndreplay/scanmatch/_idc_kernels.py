@@ -807,7 +807,9 @@ def polish_point_to_line(px, py, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_i
     while it < max_iter:
         pairs, sd = _pairs_point_to_line(px, py, x, y, th, ref_x, ref_y, nxt, cover, seg_ex, seg_ey, seg_il,
                                          seg_nx, seg_ny, gate2, max_cp_bins, sin2, h, g, par, hr)
-        info[:, :] = h
+        for a in range(3):  # element by element: an array slice assignment compiles numba's shape-mismatch
+            for b in range(3):  # message (string formatting: 2-3 s of the first run's compilation)
+                info[a, b] = h[a, b]
         it += 1
         if pairs < 3:
             break
