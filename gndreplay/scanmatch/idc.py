@@ -367,7 +367,7 @@ class IdcMatcher:
         self._kf_n = np.zeros(self.params.map_keyframes, dtype=np.int64)
         # each keyframe's view in the corrected frame (see _idc_kernels.unseen_ends)
         self._kf_view = np.zeros((self.params.map_keyframes, 7))
-        self._view = (0.0, 0.0, 0.0)  # the current scan's first and last bearing and range limit
+        self._view: tuple[F64, float] = (np.zeros(0), 0.0)  # the current scan's bearings and range limit
         self._kf_next = 0
         self._kf_pose: P3 | None = None
 
@@ -391,7 +391,11 @@ class IdcMatcher:
         slot = self._kf_next
         self._kf_xy[slot, : pts.shape[0]] = transform_points(laser_pose, pts)
         self._kf_n[slot] = pts.shape[0]
-        self._kf_view[slot] = k.view_row(*laser_pose, *self._view)
+        bearings, max_r = self._view
+        if bearings.shape[0]:
+            self._kf_view[slot] = k.view_row(*laser_pose, float(bearings.min()), float(bearings.max()), max_r)
+        else:
+            self._kf_view[slot] = k.view_row(*laser_pose, 0.0, 0.0, 0.0)
         self._kf_next = (slot + 1) % self._kf_xy.shape[0]
         self._kf_pose = laser_pose
         self._kf_pairs = self._kf_short = 0
@@ -444,9 +448,7 @@ class IdcMatcher:
         sp = scan.sensor_pose
         sensor = (sp.x, sp.y, sp.theta)
         odom_a = (odom.x, odom.y, odom.theta)
-        if scan.angles_rad.shape[0]:
-            self._view = (float(scan.angles_rad.min()), float(scan.angles_rad.max()),
-                          min(p.max_range_m, scan.max_range_m))
+        self._view = (scan.angles_rad, min(p.max_range_m, scan.max_range_m))  # spanned at a keyframe only
         gap_s = (scan.t_ns - self._last_t_ns) * 1e-9
         self._last_t_ns = scan.t_ns
         vel = self._vel if p.deskew else ZERO

@@ -22,7 +22,6 @@ from ..evaluation import (
     Relations,
     RelationStats,
     TrajectoryErrors,
-    failure_category,
     matcher_health,
     relation_errors,
     trajectory_errors,
@@ -100,16 +99,6 @@ class CorrectedTrajectory:
     @property
     def failures(self) -> int:
         return int(np.count_nonzero(~self.ok))
-
-    @property
-    def reasons(self) -> dict[str, int]:
-        """Failed matches per category (``evaluation.failure_category``)."""
-        out: dict[str, int] = {}
-        for r in self.reason:
-            if r:
-                key = failure_category(r)
-                out[key] = out.get(key, 0) + 1
-        return out
 
 
 def correct_trajectory(ticks: Iterable[Tick], matcher: Matcher) -> CorrectedTrajectory:
