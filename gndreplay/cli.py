@@ -844,7 +844,7 @@ def _grid_every(value: str) -> int | Literal["change"]:
     return 1 if choose("--mcap-grid", value, _MCAP_GRID) == "every" else "change"
 
 
-def _snapshot_options(snapshots: bool | None, *, figures: bool, every_s: float = 10.0, most: int = 40) -> Any:
+def _snapshot_options(snapshots: bool | None, *, figures: bool, every_s: float, most: int) -> Any:
     """The event snapshots ``default_sinks`` draws: on with the figures unless --no-snapshots (None: off), at
     most one per kind of event per ``every_s`` seconds of log time and ``most`` per run."""
     if not (figures if snapshots is None else snapshots):

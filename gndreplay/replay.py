@@ -323,8 +323,7 @@ def run_replay(
                     if on_tick is not None:
                         on_tick(r)
             stage("write")
-            traj.write(tmp)
-            summary = summarise(rec, cfg, log_path, options, read_report(), traj.arrays())
+            summary = summarise(rec, cfg, log_path, options, read_report(), traj.write(tmp))
             write_summary(tmp, summary)
             write_config(tmp, cfg)
             for sink in sinks:

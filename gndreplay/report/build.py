@@ -67,8 +67,7 @@ def build_report(run_dir: Path, *, name: str | None = None, require_marker: bool
             written = build_figures(data, run_dir)
             add_to_marker(run_dir, [p.name for p in written])
         return written
-    truth = data.traj_truth is not None and data.traj_truth.shape[0] > 0
-    check_may_write(run_dir, [*figure_names(None, truth=truth), REPORT_FILE])
+    check_may_write(run_dir, [*figure_names(None, truth=data.has_truth), REPORT_FILE])
     with write_errors(run_dir):  # inside a staging directory, the staging names the output instead
         written = build_figures(data, run_dir)
         text = render_report(data, [p.name for p in written], name=name)

@@ -24,6 +24,7 @@ from .plots import (
     MODE_COLORS,
     NAV_MODE_COLORS,
     SITUATION_COLORS,
+    Bands,
     band_spans,
     plot_bands,
     plot_commands,
@@ -202,8 +203,7 @@ def truth_on_corrected(data: RunData) -> NDArray[np.float64] | None:
     truth = data.traj_truth
     if truth is None or truth.shape[0] == 0 or data.traj_corrected.shape[0] == 0:
         return None
-    to_ns = np.round(np.asarray(data.traj_corrected[:, 0]) * 1e9).astype(np.int64)
-    ic, it = associate(to_ns, np.round(truth[:, 0] * 1e9).astype(np.int64))
+    ic, it = associate(_stamps_ns(data.traj_corrected), _stamps_ns(truth))
     if ic.size == 0:
         return None
     first = int(np.argmin(truth[it, 0]))
@@ -407,10 +407,7 @@ def figure_modes(data: RunData) -> Figure:
     ax_c.grid(True, linewidth=0.3, alpha=0.6)
     taken = np.where(c.active != c.desired, "takeover", "")
     shaded = band_spans(t, taken, min_width=min_width)
-    for k, i in enumerate(np.flatnonzero(shaded.labels == "takeover")):
-        x0 = float(shaded.x0[i])
-        ax_c.axvspan(x0, x0 + float(shaded.width[i]), color="#e41a1c", alpha=0.15, linewidth=0,
-                     label="takeover" if k == 0 else None)
+    _shade(ax_c, shaded, "takeover", color="#e41a1c", alpha=0.15)
     ax_c.legend(loc="upper right", fontsize=7, ncol=3)
     rules = np.where(np.isin(c.modes, REFLEXIVE_MODES), c.modes, "")
     strips: tuple[tuple[Axes, NDArray[np.str_], Mapping[str, str], str], ...] = (
@@ -442,6 +439,15 @@ def figure_modes(data: RunData) -> Figure:
     return fig
 
 
+def _shade(ax: Axes, bands: Bands, label: str, *, legend: str | None = None, **style: Any) -> None:
+    """Shade the ``label`` bands of ``bands`` (``band_spans``) across ``ax``, the first one named in the
+    legend (``legend``, default the label)."""
+    for k, i in enumerate(np.flatnonzero(bands.labels == label)):
+        x0 = float(bands.x0[i])
+        ax.axvspan(x0, x0 + float(bands.width[i]), linewidth=0, label=(legend or label) if k == 0 else None,
+                   **style)
+
+
 def figure_error(data: RunData) -> Figure:
     """The position and heading error of the odometry and the corrected trajectory against the ground truth
     over time, each after its SE(2) alignment (``truth_errors``), with the MATCH_FAILED ticks shaded and
@@ -458,10 +464,8 @@ def figure_error(data: RunData) -> Figure:
     ax_p, ax_h, ax_f = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": [3.0, 3.0, 0.5]})
     bands = band_spans(t_ticks, np.where(failed, "failed", ""), min_width=_min_width(span))
     for ax in (ax_p, ax_h):
-        for k, i in enumerate(np.flatnonzero(bands.labels == "failed")):
-            x0 = float(bands.x0[i])
-            ax.axvspan(x0, x0 + float(bands.width[i]), color=FLAG_COLORS["MATCH_FAILED"], alpha=0.12,
-                       linewidth=0, label="MATCH_FAILED" if k == 0 else None, zorder=0)
+        _shade(ax, bands, "failed", legend="MATCH_FAILED", color=FLAG_COLORS["MATCH_FAILED"], alpha=0.12,
+               zorder=0)
     styles = {"odometry": (_RAW, "raw odometry"), "corrected": (_CORRECTED, "corrected")}
     for name, (t, e) in series.items():
         color, label = styles[name]
@@ -573,6 +577,5 @@ def build_figures(data: RunData, out_dir: Path, *, dpi: int = DPI) -> list[Path]
     """Draw the figures of ``data`` into ``out_dir`` under the names of ``figure_names`` (fig_error.png when
     the run has ground truth), replacing earlier ones (the caller checks they are gndreplay's:
     ``fsutil.check_may_write``)."""
-    truth = data.traj_truth is not None and data.traj_truth.shape[0] > 0
     return [save_figure(make(data), Path(out_dir) / name, dpi=dpi)
-            for name, make in figure_names(data.window, truth=truth).items()]
+            for name, make in figure_names(data.window, truth=data.has_truth).items()]

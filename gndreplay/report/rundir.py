@@ -240,11 +240,13 @@ class TrajectoryWriter:
                                           np.asarray(self.truth, dtype=np.float64).reshape(-1, 3))
         return out
 
-    def write(self, run_dir: Path) -> None:
+    def write(self, run_dir: Path) -> dict[str, tuple[NDArray[np.int64], F64]]:
         """trajectory_odom.tum, trajectory_corrected.tum and (with ground truth) trajectory_truth.tum into
-        ``run_dir``."""
-        for name, (t, poses) in self.arrays().items():
+        ``run_dir``; returns what was written (:meth:`arrays`)."""
+        arrays = self.arrays()
+        for name, (t, poses) in arrays.items():
             write_tum(run_dir / name, t, poses)
+        return arrays
 
 
 def write_summary(run_dir: Path, summary: Mapping[str, Any]) -> None:
@@ -360,6 +362,11 @@ class RunData:
     maps: MapsData | None
     window: TimeWindow | None = None
     traj_truth: F64 | None = None
+
+    @property
+    def has_truth(self) -> bool:
+        """Whether the run has ground-truth poses (trajectory_truth.tum with at least one)."""
+        return self.traj_truth is not None and self.traj_truth.shape[0] > 0
 
 
 @dataclass(frozen=True, slots=True)
