@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from gndreplay.pipeline.cspace import free_cspace, obstacle_distance_m, squared_distance_cells
-from gndreplay.pipeline.model import FREE, OCCUPIED, UNKNOWN, GridParams, RobotCentredGrid
+from gndreplay.pipeline.cspace import CSpaceTracker, free_cspace, obstacle_distance_m, squared_distance_cells
+from gndreplay.pipeline.model import FREE, OCCUPIED, UNKNOWN, GridParams, RobotCentredGrid, shift_cells
 from gndreplay.types import Pose2D, Scan
 
 
@@ -234,3 +234,40 @@ def test_free_cspace_is_the_threshold_of_the_exact_distance_on_random_grids(seed
                 expected = squared_distance_cells(obstacle) > r2
                 got = free_cspace(cells, cell_m=0.05, inflate_m=inflate, unknown_is_free=unknown_is_free)
                 np.testing.assert_array_equal(got, expected)
+
+
+@pytest.mark.parametrize("unknown_is_free", [True, False])
+@pytest.mark.parametrize("seed", range(4))
+def test_tracker_follows_a_moving_changing_grid_bit_for_bit(seed: int, unknown_is_free: bool) -> None:
+    """CSpaceTracker equals free_cspace on every tick of a grid that moves by whole cells (small steps,
+    jumps beyond its side, none) while cells change state, for radii from none to wider than the grid, on
+    shapes whose byte count is and is not a multiple of eight."""
+    rng = np.random.default_rng(seed)
+    codes = np.array([UNKNOWN, FREE, OCCUPIED], np.uint8)
+    for n_r, n_c, inflate in ((40, 48, 0.4), (23, 37, 0.0), (31, 17, 0.73), (12, 9, 1.2)):
+        tracker = CSpaceTracker(cell_m=0.05, inflate_m=inflate, unknown_is_free=unknown_is_free)
+        cells = rng.choice(codes, size=(n_r, n_c), p=[0.3, 0.6, 0.1])
+        offset = (int(rng.integers(-1000, 1000)), int(rng.integers(-1000, 1000)))
+        for _ in range(40):
+            move = rng.random()
+            if move < 0.3:
+                d = (int(rng.integers(-n_r // 3, n_r // 3 + 1)), int(rng.integers(-n_c // 3, n_c // 3 + 1)))
+            elif move < 0.35:
+                d = (int(rng.integers(n_r, 2 * n_r)), -int(rng.integers(0, n_c)))
+            else:
+                d = (0, 0)
+            cells = shift_cells(cells, *d)
+            offset = (offset[0] + d[0], offset[1] + d[1])
+            changed = rng.integers(0, cells.size, size=int(rng.integers(0, 25)))
+            cells.flat[changed] = rng.choice(codes, size=changed.size)
+            expected = free_cspace(cells, cell_m=0.05, inflate_m=inflate, unknown_is_free=unknown_is_free)
+            np.testing.assert_array_equal(tracker.free(cells, offset), expected)
+
+
+def test_tracker_refuses_what_free_cspace_refuses() -> None:
+    with pytest.raises(ValueError, match="cell_m"):
+        CSpaceTracker(cell_m=0.0, inflate_m=0.3)
+    with pytest.raises(ValueError, match="inflate_m"):
+        CSpaceTracker(cell_m=0.05, inflate_m=-1.0)
+    with pytest.raises(ValueError, match="grid_cells"):
+        CSpaceTracker(cell_m=0.05, inflate_m=0.3).free(np.zeros(5, np.uint8), (0, 0))

@@ -267,6 +267,46 @@ def test_occupied_points_in_robot_frame() -> None:
     assert grid.occupied_points(pose, 0.3).shape == (0, 2)
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_cell_views_select_every_cell_of_their_rule_within_the_radius(seed: int) -> None:
+    """Each view returns exactly the cells its rule names within the radius (row-major, robot frame), also
+    where the radius crosses the grid's edge: checked against the rule applied to the whole grid."""
+    rng = np.random.default_rng(seed)
+    grid = RobotCentredGrid(SMALL)
+    n = SMALL.size_cells
+    grid.cells[:] = rng.choice(np.array([UNKNOWN, FREE, OCCUPIED], np.uint8), size=(n, n), p=[0.3, 0.5, 0.2])
+    grid.seen_ns[:] = rng.integers(0, 100, size=(n, n))
+    for pose in (Pose2D(0.3, -0.2, 0.7), Pose2D(0.9, 0.95, -2.5)):  # the second near a corner
+        rows, cols = np.mgrid[0:n, 0:n]
+        world = grid.cells_to_world(np.column_stack([rows.ravel(), cols.ravel()]))
+        d = world - [pose.x, pose.y]
+        ct, st = math.cos(pose.theta), math.sin(pose.theta)
+        local = np.column_stack([ct * d[:, 0] + st * d[:, 1], -st * d[:, 0] + ct * d[:, 1]])
+        inside = np.hypot(d[:, 0], d[:, 1]) <= 0.6
+        free = grid.cells == FREE
+        beside = np.zeros_like(free)
+        beside[1:] |= free[:-1]
+        beside[:-1] |= free[1:]
+        beside[:, 1:] |= free[:, :-1]
+        beside[:, :-1] |= free[:, 1:]
+        rules = {
+            "occupied": grid.cells == OCCUPIED,
+            "unseen": (grid.cells != OCCUPIED) & (grid.seen_ns < 40),
+            "border": ~free & beside,
+        }
+        views = {
+            "occupied": grid.occupied_points(pose, 0.6),
+            "unseen": grid.unseen_points(pose, 0.6, 40),
+            "border": grid.free_border_points(pose, 0.6),
+        }
+        for name, rule in rules.items():
+            want = rule.ravel() & inside
+            assert views[name].shape == (int(want.sum()), 2), name
+            np.testing.assert_allclose(views[name], local[want], atol=1e-12, err_msg=name)
+        _, seen = grid.occupied_points_seen(pose, 0.6)
+        np.testing.assert_array_equal(seen, grid.seen_ns.ravel()[(grid.cells == OCCUPIED).ravel() & inside])
+
+
 def test_presets_and_validation() -> None:
     assert (GRID_400.size_cells, GRID_400.cell_m, GRID_400.side_m) == (400, 0.05, 20.0)
     assert (GRID_200.size_cells, GRID_200.cell_m) == (200, 0.05)

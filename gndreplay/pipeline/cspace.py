@@ -28,6 +28,7 @@ best of 20) on the 400 x 400 synthetic offices of benchmarks/planner.py, the sam
 from __future__ import annotations
 
 import math
+from typing import TypeAlias
 
 import numpy as np
 from numba import njit
@@ -35,7 +36,7 @@ from numpy.typing import NDArray
 
 from .model import OCCUPIED, UNKNOWN
 
-__all__ = ["free_cspace", "obstacle_distance_m", "squared_distance_cells"]
+__all__ = ["CSpaceTracker", "free_cspace", "obstacle_distance_m", "squared_distance_cells"]
 
 
 @njit(cache=True)
@@ -161,6 +162,13 @@ def obstacle_distance_m(occupied: NDArray[np.bool_], *, cell_m: float) -> NDArra
     return (np.sqrt(squared_distance_cells(occupied)) * cell_m).astype(np.float32)
 
 
+def _disc_r2(cell_m: float, inflate_m: float) -> int:
+    """Squared disc radius [cells^2] of ``free_cspace``'s rule: a cell is blocked iff an obstacle cell lies
+    at dx^2 + dy^2 <= r2 (integers), r2 the floor of the squared effective radius in cells."""
+    r_cells = max(inflate_m / cell_m - 0.5, 0.0)
+    return math.floor(r_cells * r_cells * (1.0 + 1e-9))
+
+
 def free_cspace(
     grid_cells: NDArray[np.uint8], *, cell_m: float, inflate_m: float, unknown_is_free: bool = True
 ) -> NDArray[np.bool_]:
@@ -179,9 +187,7 @@ def free_cspace(
         raise ValueError(f"inflate_m must be >= 0, got {inflate_m!r}")
     if grid_cells.size == 0:
         return np.zeros(grid_cells.shape, dtype=np.bool_)
-    # blocked iff dx^2 + dy^2 <= r2 (integers), r2 = floor of the squared effective radius in cells
-    r_cells = max(inflate_m / cell_m - 0.5, 0.0)
-    r2 = math.floor(r_cells * r_cells * (1.0 + 1e-9))
+    r2 = _disc_r2(cell_m, inflate_m)
     n_k = min(math.isqrt(r2) + 1, grid_cells.shape[0])  # rows farther than the grid's height never count
     half_width = np.array(
         [*(math.isqrt(r2 - k * k) for k in range(n_k)), -(grid_cells.shape[1] + 2)], dtype=np.int64
@@ -190,3 +196,210 @@ def free_cspace(
         raise ValueError(f"inflate_m {inflate_m!r} spans {n_k} cells, more than {np.iinfo(np.int16).max - 1}")
     cells = np.ascontiguousarray(grid_cells)
     return _free_of_disc(cells, OCCUPIED, UNKNOWN, bool(unknown_is_free), half_width)
+
+
+@njit(cache=True)
+def _is_obstacle(v: np.uint8, occupied: np.uint8, unknown: np.uint8, unknown_is_free: bool) -> bool:
+    return v == occupied or (not unknown_is_free and v == unknown)
+
+
+@njit(cache=True)
+def _count_discs(
+    cells: NDArray[np.uint8], occupied: np.uint8, unknown: np.uint8, unknown_is_free: bool,
+    half_width: NDArray[np.int64], counts: NDArray[np.int16],
+) -> None:
+    """Fill ``counts`` (R + 2P, C + 2P), P = len(half_width) - 1: for each cell of the padded frame, the
+    number of obstacle cells of ``cells`` within its disc. Row by row: a prefix sum of the obstacle row gives
+    each disc row's window count in O(1) (O((R + 2P) (C + 2P) (2P + 1)) in all)."""
+    n_r, n_c = cells.shape
+    pad = half_width.shape[0] - 1
+    counts[:, :] = 0
+    prefix = np.empty(n_c + 1, np.int64)
+    for r in range(n_r):
+        prefix[0] = 0
+        for c in range(n_c):
+            ob = _is_obstacle(cells[r, c], occupied, unknown, unknown_is_free)
+            prefix[c + 1] = prefix[c] + (1 if ob else 0)
+        if prefix[n_c] == 0:
+            continue
+        for dy in range(-pad, pad + 1):
+            h = half_width[abs(dy)]
+            row = r + pad + dy
+            for j in range(n_c + 2 * pad):
+                lo = max(j - pad - h, 0)
+                hi = min(j - pad + h, n_c - 1)
+                if lo <= hi:
+                    counts[row, j] += prefix[hi + 1] - prefix[lo]
+
+
+@njit(cache=True)
+def _add_disc(counts: NDArray[np.int16], free: NDArray[np.bool_], r: int, c: int,
+              half_width: NDArray[np.int64], delta: int) -> None:
+    """Add ``delta`` over the disc about grid cell (r, c) in the padded frame of ``counts``, and keep
+    ``free`` (grid frame: counts 0) in step over the disc's grid cells."""
+    pad = half_width.shape[0] - 1
+    n_r, n_c = free.shape
+    for dy in range(-pad, pad + 1):
+        h = half_width[abs(dy)]
+        row = r + pad + dy
+        inside = 0 <= r + dy < n_r
+        for j in range(c + pad - h, c + pad + h + 1):
+            n = counts[row, j] + delta
+            counts[row, j] = n
+            if inside and pad <= j < n_c + pad:
+                free[r + dy, j - pad] = n == 0
+
+
+@njit(cache=True)
+def _update_discs(
+    cells: NDArray[np.uint8], occupied: np.uint8, unknown: np.uint8, unknown_is_free: bool,
+    half_width: NDArray[np.int64], d_row: int, d_col: int,
+    counts: NDArray[np.int16], prev: NDArray[np.uint8], free: NDArray[np.bool_],
+    counts_out: NDArray[np.int16], prev_out: NDArray[np.uint8], free_out: NDArray[np.bool_],
+) -> None:
+    """One tick of ``CSpaceTracker`` after the grid moved its origin by (d_row, d_col) cells (|d| < its
+    side; new cell (r, c) is old cell (r + d_row, c + d_col)) and its contents changed from ``prev``.
+    Obstacles that left the grid leave the old ``counts``; the counts move into ``counts_out`` (cells new
+    to the padded frame are farther than the disc from every remaining obstacle: 0) and ``free_out`` is
+    read off them; then each cell whose obstacle state differs from the moved ``prev`` adds or removes its
+    disc, keeping ``free_out`` in step; ``prev_out`` becomes ``cells``."""
+    n_r, n_c = cells.shape
+    pad = half_width.shape[0] - 1
+    check_unknown = not unknown_is_free
+    for r in range(n_r):
+        row_gone = r - d_row < 0 or r - d_row >= n_r
+        for c in range(n_c):
+            v = prev[r, c]
+            if ((v == occupied) | (check_unknown & (v == unknown))) and (
+                    row_gone or c - d_col < 0 or c - d_col >= n_c):
+                _add_disc(counts, free, r, c, half_width, -1)
+    h_r, h_c = n_r + 2 * pad, n_c + 2 * pad
+    for i in range(h_r):
+        src_i = i + d_row
+        for j in range(h_c):
+            src_j = j + d_col
+            inside = 0 <= src_i < h_r and 0 <= src_j < h_c
+            counts_out[i, j] = counts[src_i, src_j] if inside else 0
+    for r in range(n_r):
+        for c in range(n_c):
+            free_out[r, c] = counts_out[r + pad, c + pad] == 0
+    for r in range(n_r):
+        src_r = r + d_row
+        for c in range(n_c):
+            v = cells[r, c]
+            ob = (v == occupied) | (check_unknown & (v == unknown))
+            src_c = c + d_col
+            was = False
+            if 0 <= src_r < n_r and 0 <= src_c < n_c:
+                w = prev[src_r, src_c]
+                was = (w == occupied) | (check_unknown & (w == unknown))
+            if ob != was:
+                _add_disc(counts_out, free_out, r, c, half_width, 1 if ob else -1)
+            prev_out[r, c] = v
+
+
+@njit(cache=True)
+def _changed_discs(
+    cells: NDArray[np.uint8], cells_words: NDArray[np.uint64], occupied: np.uint8, unknown: np.uint8,
+    unknown_is_free: bool, half_width: NDArray[np.int64],
+    counts: NDArray[np.int16], prev: NDArray[np.uint8], prev_words: NDArray[np.uint64],
+    free: NDArray[np.bool_],
+) -> None:
+    """One tick of ``CSpaceTracker`` on a grid that did not move: the cells that differ from ``prev`` (found
+    eight at a time through the uint64 views ``*_words`` of the same bytes) add or remove their disc where
+    their obstacle state changed, in place; ``prev`` becomes ``cells``."""
+    n_c = cells.shape[1]
+    check_unknown = not unknown_is_free
+    flat, prev_flat = cells.ravel(), prev.ravel()
+    for w in range(cells_words.shape[0]):
+        if cells_words[w] == prev_words[w]:
+            continue
+        for k in range(w * 8, min(w * 8 + 8, flat.shape[0])):
+            v, old = flat[k], prev_flat[k]
+            if v == old:
+                continue
+            ob = (v == occupied) | (check_unknown & (v == unknown))
+            was = (old == occupied) | (check_unknown & (old == unknown))
+            if ob != was:
+                _add_disc(counts, free, k // n_c, k % n_c, half_width, 1 if ob else -1)
+            prev_flat[k] = v
+
+
+_I16: TypeAlias = NDArray[np.int16]
+_U8: TypeAlias = NDArray[np.uint8]
+_Bool: TypeAlias = NDArray[np.bool_]
+
+
+class CSpaceTracker:
+    """``free_cspace`` of one grid followed from tick to tick: the robot-centred grid moves by whole cells
+    and a scan changes few of its cells, so the tracker keeps, for every cell of the grid padded by the disc
+    radius, how many obstacle cells lie within its disc, and updates only the discs of the cells whose
+    obstacle state changed (and of the obstacles that left the grid). The result is ``free_cspace``'s, bit
+    for bit (tests/test_cspace.py); a first call, a new shape or a jump of a whole grid side counts afresh.
+
+    Args: as ``free_cspace``'s. Discs wider than ``MAX_PAD`` cells are computed afresh every call (their
+    counts would overflow int16 and their disc updates cost more than the sweep).
+    """
+
+    MAX_PAD = 64
+
+    def __init__(self, *, cell_m: float, inflate_m: float, unknown_is_free: bool = True) -> None:
+        if not cell_m > 0.0:
+            raise ValueError(f"cell_m must be > 0, got {cell_m!r}")
+        if not inflate_m >= 0.0:
+            raise ValueError(f"inflate_m must be >= 0, got {inflate_m!r}")
+        self.cell_m, self.inflate_m, self.unknown_is_free = cell_m, inflate_m, bool(unknown_is_free)
+        r2 = _disc_r2(cell_m, inflate_m)
+        pad = math.isqrt(r2)
+        self._half_width = np.array([math.isqrt(r2 - k * k) for k in range(pad + 1)], dtype=np.int64)
+        # (counts, the last grid's codes padded to whole uint64 words, free, offset) of the last call, and
+        # the arrays a move writes into
+        self._state: tuple[_I16, _U8, _Bool, tuple[int, int]] | None = None
+        self._spare: tuple[_I16, _U8, _Bool] | None = None
+
+    def free(self, grid_cells: NDArray[np.uint8], offset_rc: tuple[int, int]) -> NDArray[np.bool_]:
+        """(R, C) grid codes whose cell (0, 0) is world cell ``offset_rc`` -> (R, C) bool free C-space. The
+        array is the tracker's own, valid (and not to be written) until its next call."""
+        _check_2d(grid_cells, "grid_cells")
+        pad = self._half_width.shape[0] - 1
+        n_r, n_c = grid_cells.shape
+        if pad > self.MAX_PAD or grid_cells.size == 0:
+            return free_cspace(grid_cells, cell_m=self.cell_m, inflate_m=self.inflate_m,
+                               unknown_is_free=self.unknown_is_free)
+        cells = np.ascontiguousarray(grid_cells)
+        state = self._state
+        shape = (n_r + 2 * pad, n_c + 2 * pad)
+        d_row = d_col = 0
+        if state is not None:
+            d_row, d_col = offset_rc[0] - state[3][0], offset_rc[1] - state[3][1]
+        if state is None or state[0].shape != shape or abs(d_row) >= n_r or abs(d_col) >= n_c:
+            counts = np.empty(shape, np.int16)
+            _count_discs(cells, OCCUPIED, UNKNOWN, self.unknown_is_free, self._half_width, counts)
+            free = counts[pad : pad + n_r, pad : pad + n_c] == 0
+            prev = np.zeros(_words(cells.size) * 8, np.uint8)
+            prev[: cells.size] = cells.ravel()
+            self._state, self._spare = (counts, prev, free, offset_rc), None
+            return free
+        counts, prev, free, _ = state
+        if d_row == 0 and d_col == 0:
+            flat = cells.reshape(-1)
+            if flat.size != prev.size or flat.ctypes.data % 8:
+                flat = np.zeros_like(prev)
+                flat[: cells.size] = cells.ravel()
+            _changed_discs(cells, flat.view(np.uint64), OCCUPIED, UNKNOWN, self.unknown_is_free,
+                           self._half_width, counts, prev[: cells.size].reshape(n_r, n_c),
+                           prev.view(np.uint64), free)
+            return free
+        out = self._spare if self._spare is not None else (
+            np.empty_like(counts), np.zeros_like(prev), np.empty_like(free))
+        self._spare = (counts, prev, free)
+        _update_discs(cells, OCCUPIED, UNKNOWN, self.unknown_is_free, self._half_width, d_row, d_col,
+                      counts, prev[: cells.size].reshape(n_r, n_c), free,
+                      out[0], out[1][: cells.size].reshape(n_r, n_c), out[2])
+        self._state = (*out, offset_rc)
+        return out[2]
+
+
+def _words(n: int) -> int:
+    """uint64 words holding n bytes."""
+    return (n + 7) // 8

@@ -529,24 +529,54 @@ class RobotCentredGrid:
         c0, c1 = max(col - h, 0), min(col + h + 1, n)
         if r0 >= r1 or c0 >= c1:
             return np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
-        window = self.cells[r0:r1, c0:c1]
-        seen = self.seen_ns[r0:r1, c0:c1]
-        if border:
-            free = window == FREE
-            beside = np.zeros_like(free)
-            beside[1:] |= free[:-1]
-            beside[:-1] |= free[1:]
-            beside[:, 1:] |= free[:, :-1]
-            beside[:, :-1] |= free[:, 1:]
-            rows, cols = np.nonzero(~free & beside)
-        elif since_ns is None:
-            rows, cols = np.nonzero(window == state)
-        else:
-            rows, cols = np.nonzero((window != OCCUPIED) & (seen < since_ns))
-        dx = (cols + (c0 + self._off_col) + 0.5) * c - robot_pose.x
-        dy = (rows + (r0 + self._off_row) + 0.5) * c - robot_pose.y
-        keep = dx * dx + dy * dy <= radius_m * radius_m
-        dx, dy = dx[keep], dy[keep]
-        ct, st = dm.cos(robot_pose.theta), dm.sin(robot_pose.theta)
-        pts = np.column_stack([ct * dx + st * dy, -st * dx + ct * dy])
-        return pts, seen[rows[keep], cols[keep]].astype(np.int64)
+        kind = _BORDER if border else _STATE if since_ns is None else _UNSEEN
+        return _window_points(
+            self.cells, self.seen_ns, r0, r1, c0, c1, r0 + self._off_row, c0 + self._off_col, c,
+            robot_pose.x, robot_pose.y, radius_m, dm.cos(robot_pose.theta), dm.sin(robot_pose.theta), kind,
+            np.uint8(0 if state is None else state), np.int64(0 if since_ns is None else since_ns),
+        )
+
+
+_STATE, _UNSEEN, _BORDER = 0, 1, 2  # the cell selections of ``_window_points``
+
+
+@njit(cache=True)
+def _window_points(
+    cells: NDArray[np.uint8], seen: NDArray[np.int64], r0: int, r1: int, c0: int, c1: int, row0: int,
+    col0: int, cell_m: float, x: float, y: float, radius_m: float, ct: float, st: float, kind: int,
+    state: np.uint8, since_ns: np.int64,
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The selected cells of the window [r0, r1) x [c0, c1) (world lattice index of its first cell: row0,
+    col0) whose centre lies within ``radius_m`` of (x, y): their centres in the robot frame (heading cos
+    ``ct``, sin ``st``) and seen stamps, row-major."""
+    r2 = radius_m * radius_m
+    n_c = cells.shape[1]
+    index = np.empty((r1 - r0) * (c1 - c0), np.int64)
+    n = 0
+    for r in range(r0, r1):
+        dy = ((r - r0) + row0 + 0.5) * cell_m - y
+        for c in range(c0, c1):
+            v = cells[r, c]
+            if kind == _STATE:
+                take = v == state
+            elif kind == _UNSEEN:
+                take = v != OCCUPIED and seen[r, c] < since_ns
+            else:  # not FREE beside a FREE cell of the window (4-neighbours)
+                take = v != FREE and (
+                    (r > r0 and cells[r - 1, c] == FREE) or (r + 1 < r1 and cells[r + 1, c] == FREE)
+                    or (c > c0 and cells[r, c - 1] == FREE) or (c + 1 < c1 and cells[r, c + 1] == FREE))
+            if take:
+                dx = ((c - c0) + col0 + 0.5) * cell_m - x
+                if dx * dx + dy * dy <= r2:
+                    index[n] = r * n_c + c
+                    n += 1
+    pts = np.empty((n, 2), np.float64)
+    stamps = np.empty(n, np.int64)
+    for k in range(n):
+        r, c = index[k] // n_c, index[k] % n_c
+        dy = ((r - r0) + row0 + 0.5) * cell_m - y
+        dx = ((c - c0) + col0 + 0.5) * cell_m - x
+        pts[k, 0] = ct * dx + st * dy
+        pts[k, 1] = -st * dx + ct * dy
+        stamps[k] = seen[r, c]
+    return pts, stamps

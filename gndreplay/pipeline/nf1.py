@@ -58,7 +58,7 @@ from numpy.typing import ArrayLike, NDArray
 from .. import detmath as dm
 from ..geometry import wrap_angle
 from ..types import Flag
-from .cspace import free_cspace
+from .cspace import CSpaceTracker, free_cspace
 from .model import UNKNOWN
 from .planner import PlanResult, RouteParams
 
@@ -1121,6 +1121,7 @@ class Nf1Planner:
         self.unknown_is_free = unknown_is_free
         self.route = route
         self._held: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # path cells, its goal
+        self._cspace = CSpaceTracker(cell_m=cell_m, inflate_m=inflate_m, unknown_is_free=unknown_is_free)
 
     @property
     def no_path_is_no_border(self) -> bool:
@@ -1136,11 +1137,14 @@ class Nf1Planner:
         return shifted_route(self._held, goal, shape)
 
     def plan(
-        self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike
+        self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike,
+        offset_rc: tuple[int, int] | None = None,
     ) -> PlanResult:
-        free = free_cspace(
-            grid_cells, cell_m=self.cell_m, inflate_m=self.inflate_m, unknown_is_free=self.unknown_is_free
-        )
+        if offset_rc is None:
+            free = free_cspace(grid_cells, cell_m=self.cell_m, inflate_m=self.inflate_m,
+                               unknown_is_free=self.unknown_is_free)
+        else:
+            free = self._cspace.free(grid_cells, offset_rc)
         p = self.params
         weighted = self.unknown_is_free and p.unknown_cost != 1.0
         unknown = (grid_cells == UNKNOWN) if weighted else None

@@ -124,8 +124,11 @@ class Planner(Protocol):
         ...
 
     def plan(
-        self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike
+        self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike,
+        offset_rc: tuple[int, int] | None = None,
     ) -> PlanResult:
         """Plan on the robot-centred grid (UNKNOWN / FREE / OCCUPIED cells) from the robot cell to the goal
-        (corner coordinates, see ``nf1.plan``)."""
+        (corner coordinates, see ``nf1.plan``). ``offset_rc``: the world cell of grid cell (0, 0), given by a
+        caller that plans on one grid re-centred by whole cells tick after tick, so the planner may follow
+        its C-space incrementally (``cspace.CSpaceTracker``); None computes it afresh."""
         ...

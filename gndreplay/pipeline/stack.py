@@ -439,7 +439,7 @@ class NavigationStack:
     def _plan(self, pose: Pose2D, goal: NDArray[np.float64]) -> PlanResult:
         start = self.grid.robot_cell(pose)
         goal_rc = self.grid.world_to_cell_float(goal[None, :])[0]
-        return self._planner.plan(self.grid.cells, start, goal_rc)
+        return self._planner.plan(self.grid.cells, start, goal_rc, self.grid.offset_cells)
 
     def _reactor_target(
         self, pose: Pose2D, goal: NDArray[np.float64], planned: PlanResult
@@ -508,6 +508,10 @@ def _warm_up_gnd(params: StackParams) -> None:
                 scan = Scan(t_ns=k, ranges_m=ranges, angles_rad=angles, max_range_m=8.0)
                 stack.step(scan, Pose2D(0.05 * k, 0.0, 0.0), goal)
                 k += 1
+    # half a grid side on: the grid re-centres (the C-space tracker's move)
+    scan = Scan(t_ns=k, ranges_m=ranges, angles_rad=angles, max_range_m=8.0)
+    stack.step(scan, Pose2D(0.5 * params.grid.side_m, 0.0, 0.0), (30.0, 30.0))
+    k += 1
     # an obstacle closer than the robot's inner radius: the robot cell is not free, so the planner escapes
     # along a straight line of cells to the nearest reachable one (nf1's escape kernels)
     stack = NavigationStack(params)

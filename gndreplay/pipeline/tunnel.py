@@ -136,7 +136,7 @@ from numpy.typing import ArrayLike, NDArray
 from .. import detmath as dm
 from ..geometry import wrap_angle
 from ..types import Flag
-from .cspace import free_cspace
+from .cspace import CSpaceTracker, free_cspace
 from .model import FREE, OCCUPIED, UNKNOWN
 from .nf1 import (
     Nf1Params,
@@ -738,9 +738,11 @@ def tunnel_plan(
 
 
 def _spaces(
-    grid_cells: NDArray[np.uint8], cell_m: float, radius_m: float, unknown_is_free: bool, lookahead_m: float
+    grid_cells: NDArray[np.uint8], cell_m: float, radius_m: float, unknown_is_free: bool, lookahead_m: float,
+    free: NDArray[np.bool_] | None = None,
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
-    """``tunnel_plan``'s checks, then the free C-space and the workspace cells clear of obstacles."""
+    """``tunnel_plan``'s checks, then the free C-space (``free`` when the caller has it) and the workspace
+    cells clear of obstacles."""
     if not cell_m > 0.0:
         raise ValueError(f"cell_m must be > 0, got {cell_m!r}")
     if not lookahead_m > 0.0:
@@ -748,11 +750,12 @@ def _spaces(
     cells = np.asarray(grid_cells)
     if cells.ndim != 2 or cells.dtype != np.uint8:
         raise ValueError(f"grid_cells must be a 2-D uint8 array, got shape {cells.shape} dtype {cells.dtype}")
-    f = free_cspace(cells, cell_m=cell_m, inflate_m=radius_m, unknown_is_free=unknown_is_free)
+    if free is None:
+        free = free_cspace(cells, cell_m=cell_m, inflate_m=radius_m, unknown_is_free=unknown_is_free)
     clear = cells != OCCUPIED
     if not unknown_is_free:
         clear &= cells != UNKNOWN
-    return f, clear
+    return free, clear
 
 
 def _plan_on(
@@ -852,15 +855,19 @@ class TunnelPlanner:
         self.lookahead_m = route.lookahead_m
         self.route = route
         self._held: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # route cells, its goal
+        self._cspace = CSpaceTracker(cell_m=cell_m, inflate_m=self.radius_m, unknown_is_free=unknown_is_free)
 
     def reset(self) -> None:
         """Forget the held tunnel (a new run or a new goal; a changed goal is also detected by itself)."""
         self._held = None
 
     def plan(
-        self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike
+        self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike,
+        offset_rc: tuple[int, int] | None = None,
     ) -> PlanResult:
-        f, clear = _spaces(grid_cells, self.cell_m, self.radius_m, self.unknown_is_free, self.lookahead_m)
+        free = None if offset_rc is None else self._cspace.free(grid_cells, offset_rc)
+        f, clear = _spaces(grid_cells, self.cell_m, self.radius_m, self.unknown_is_free, self.lookahead_m,
+                           free)
         new = _plan_on(f, clear, start_rc, goal_rc_float, cell_m=self.cell_m, radius_m=self.radius_m,
                        params=self.params, lookahead_m=self.lookahead_m)
         goal = np.asarray(goal_rc_float, dtype=np.float64).reshape(2)
