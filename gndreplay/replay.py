@@ -13,18 +13,19 @@ change earlier ticks (the goal lookahead reads past it).
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
+from contextlib import nullcontext
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import detmath as dm
+from .compiling import CompileListener
 from .config import Config
 from .errors import FOLLOW_NEEDS_SUBGOALS, ConfigError, LogFormatError
 from .fsutil import check_output_dir, resolve_output_dir, staging_dir
@@ -33,8 +34,8 @@ from .pipeline.model import GridParams
 from .pipeline.stack import MatchInfo, NavigationStack, TickResult, warm_up
 from .report.rundir import RunSink, StagedSink, TrajectoryWriter, tick_tables, write_config, write_summary
 from .report.summary import SummaryRecorder, summarise
-from .scanmatch import Matcher, make_matcher
-from .types import Pose2D, Scan, Subgoal, Tick
+from .scanmatch import MatchAhead, Matcher, MatchResult, make_matcher, warm_up_matcher
+from .types import Pose2D, Subgoal, Tick
 
 if TYPE_CHECKING:
     from .io import LogReader
@@ -67,6 +68,8 @@ class RunOptions:
             stands still; the goal is then the newest known pose).
         subgoals: the path follower's subgoals (corrected odometry frame; ``io.subgoals.load_subgoals``),
             needed by navigation mode "follow".
+        match_ahead: scan matching runs in a second process, up to 32 ticks ahead of the stack
+            (``scanmatch.MatchAhead``): the same results, sooner on a machine with a second core.
     """
 
     goal_xy: tuple[float, float] | None = None
@@ -75,6 +78,7 @@ class RunOptions:
     every: int = 1
     max_lookahead_ticks: int = 5000
     subgoals: tuple[Subgoal, ...] = ()
+    match_ahead: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,45 +94,55 @@ class Matched:
     reason: str = ""  # why the match failed (MatchResult.reason)
 
 
-def _make_matcher(cfg: Config) -> Matcher:
-    return make_matcher(cfg.scanmatch.method, idc=cfg.scanmatch.idc, kiss=cfg.scanmatch.kiss)
+def matcher_factory(cfg: Config) -> Callable[[], Matcher]:
+    """Builds the configured matcher (a picklable partial: ``MatchAhead`` builds it in its child)."""
+    return partial(make_matcher, cfg.scanmatch.method, idc=cfg.scanmatch.idc, kiss=cfg.scanmatch.kiss)
 
 
 def _warm_up_matcher(cfg: Config) -> None:
-    """Compile the matcher's kernels on synthetic scans of a bumpy round room before timing, with every
-    mix of writable and read-only ranges and angles (numba compiles each apart; the CARMEN reader hands out
-    writable ranges with shared read-only beam angles)."""
-    for ranges_ro, angles_ro in itertools.product((False, True), repeat=2):
-        matcher = _make_matcher(cfg)
-        angles = np.linspace(-math.pi / 2, math.pi / 2, 361)
-        angles.flags.writeable = not angles_ro
-        for k in range(3):
-            pose = Pose2D(0.05 * k, 0.0, 0.01 * k)
-            ranges = 4.0 + 0.4 * dm.sin_a(5.0 * (angles + pose.theta)) - pose.x * dm.cos_a(angles)
-            ranges.flags.writeable = not ranges_ro
-            matcher.update(Scan(t_ns=k, ranges_m=ranges, angles_rad=angles, max_range_m=30.0), pose)
+    warm_up_matcher(matcher_factory(cfg))
 
 
-def corrected_stream(ticks: Iterable[Tick], cfg: Config, options: RunOptions) -> Iterator[Matched]:
-    """Run the configured matcher over the ticks (all of them, in time order), lazily.
+def _matched(ticks: Iterable[Tick], cfg: Config, ahead: MatchAhead | None,
+             ahead_while: Callable[[Tick], bool]) -> Iterator[tuple[Tick, MatchResult, float]]:
+    """(tick, match, match ms) in order: by ``ahead``'s child process (reading ahead while
+    ``ahead_while``), or here."""
+    if ahead is not None:
+        yield from ahead.results(ticks, ahead_while)
+        return
+    matcher = matcher_factory(cfg)()
+    for tick in ticks:
+        t0 = time.perf_counter_ns()
+        res = matcher.update(tick.scan, tick.odom)
+        yield tick, res, (time.perf_counter_ns() - t0) / 1e6
+
+
+def corrected_stream(ticks: Iterable[Tick], cfg: Config, options: RunOptions,
+                     ahead: MatchAhead | None = None) -> Iterator[Matched]:
+    """Run the configured matcher over the ticks (all of them, in time order), lazily; in ``ahead``'s
+    child process when given (the same poses; the ticks are then read up to its depth ahead).
 
     Ticks after ``until_s`` are yielded with ``in_range`` False when a goal lookahead needs them (goal
     ahead); with a fixed goal the stream stops at the first one.
     """
-    matcher = _make_matcher(cfg)
     t_first: int | None = None
     s, prev = 0.0, None
     in_range = True
-    for tick in ticks:
+
+    first: list[int] = []  # the reader's first stamp, seen by ``within`` before any tick is consumed
+
+    def within(tick: Tick) -> bool:
+        if not first:
+            first.append(tick.t_ns)
+        return options.until_s is None or (tick.t_ns - first[0]) / 1e9 <= options.until_s
+
+    for tick, res, ms in _matched(ticks, cfg, ahead, within):
         if t_first is None:
             t_first = tick.t_ns
         if in_range and options.until_s is not None and (tick.t_ns - t_first) / 1e9 > options.until_s:
             in_range = False
             if options.goal_xy is not None:
                 break
-        t0 = time.perf_counter_ns()
-        res = matcher.update(tick.scan, tick.odom)
-        ms = (time.perf_counter_ns() - t0) / 1e6
         if prev is not None:
             s += math.hypot(res.pose.x - prev.x, res.pose.y - prev.y)
         prev = res.pose
@@ -186,44 +200,23 @@ class RunSummary:
     data: dict[str, Any] = field(repr=False)
 
 
-class _CompileListener:
-    """Reports each gndreplay numba kernel compiled (a disk-cache miss) while active."""
-
-    def __init__(self, callback: Callable[[str], None]) -> None:
-        from numba.core import event
-
-        class Listener(event.Listener):
-            def on_start(self, ev: Any) -> None:
-                disp = ev.data.get("dispatcher") if isinstance(ev.data, dict) else None
-                func = getattr(disp, "py_func", None)
-                module = str(getattr(func, "__module__", ""))
-                if module.startswith("gndreplay."):  # not numba's own helpers compiled along
-                    callback(f"{module.rsplit('.', 1)[-1]}.{getattr(func, '__qualname__', '?')}")
-
-            def on_end(self, ev: Any) -> None:
-                pass
-
-        self._event = event
-        self._listener = Listener()
-
-    def __enter__(self) -> None:
-        self._event.register("numba:compile", self._listener)
-
-    def __exit__(self, *exc: object) -> None:
-        self._event.unregister("numba:compile", self._listener)
-
-
-def warm_up_all(cfg: Config, on_compile: Callable[[str], None] | None = None) -> None:
+def warm_up_all(cfg: Config, on_compile: Callable[[str], None] | None = None,
+                ahead: MatchAhead | None = None) -> None:
     """Compile (or load from numba's disk cache) every kernel a replay with ``cfg`` uses, before the
     first timed tick. ``on_compile(name)`` is called for each kernel actually compiled (a cold cache:
-    the first run after installing), so a caller can say so."""
-    if on_compile is None:
+    the first run after installing), so a caller can say so. With ``ahead`` the matcher's kernels are
+    its child's, warmed there at the same time: this waits for it."""
+    with CompileListener(on_compile) if on_compile is not None else nullcontext():
         warm_up(cfg.stack_params())
-        _warm_up_matcher(cfg)
-        return
-    with _CompileListener(on_compile):
-        warm_up(cfg.stack_params())
-        _warm_up_matcher(cfg)
+        if ahead is None:
+            _warm_up_matcher(cfg)
+    if ahead is not None:
+        ahead.ready(on_compile)
+
+
+def _match_ahead(cfg: Config) -> MatchAhead:
+    make = matcher_factory(cfg)
+    return MatchAhead(make, partial(warm_up_matcher, make))
 
 
 def check_navigation(cfg: Config, options: RunOptions) -> None:
@@ -300,13 +293,14 @@ def run_replay(
                 if isinstance(sink, StagedSink):
                     sink.start(tmp, target)
             stage("warm-up")
-            warm_up_all(cfg, on_compile)
-            stage("replay")
-            rec = SummaryRecorder(enforce_budgets=enforce)
-            traj = TrajectoryWriter()
-            stack = NavigationStack(cfg.stack_params(), options.subgoals)
-            with tick_tables(tmp, enforce_budgets=enforce) as write_tick:
-                pairs = assign_goals(corrected_stream(ticks, cfg, options), options)
+            ahead = _match_ahead(cfg) if options.match_ahead else None
+            with ahead or nullcontext(), tick_tables(tmp, enforce_budgets=enforce) as write_tick:
+                warm_up_all(cfg, on_compile, ahead)
+                stage("replay")
+                rec = SummaryRecorder(enforce_budgets=enforce)
+                traj = TrajectoryWriter()
+                stack = NavigationStack(cfg.stack_params(), options.subgoals)
+                pairs = assign_goals(corrected_stream(ticks, cfg, options, ahead), options)
                 for k, (m, goal) in enumerate(pairs):
                     traj.add(m.tick.t_ns, m.tick.odom, m.pose, m.tick.truth)
                     rec.add_match(not m.failed, m.reason)

@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+from .ahead import MatchAhead
 from .base import Matcher, MatchResult, OdomMatcher
 from .idc import IdcMatcher, IdcParams
 from .kiss import KissIcpMatcher, KissParams
@@ -25,6 +26,7 @@ from .run import (
     make_matcher,
     matcher_report,
     run_scanmatch,
+    warm_up_matcher,
 )
 
 __all__ = [
@@ -34,6 +36,7 @@ __all__ = [
     "IdcParams",
     "KissIcpMatcher",
     "KissParams",
+    "MatchAhead",
     "MatchResult",
     "Matcher",
     "MatcherReport",
@@ -45,4 +48,5 @@ __all__ = [
     "make_matcher",
     "matcher_report",
     "run_scanmatch",
+    "warm_up_matcher",
 ]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import os
 import time
@@ -30,14 +31,14 @@ from ..evaluation import (
 from ..fsutil import check_output_dir, resolve_output_dir, staging_dir
 from ..io import DEFAULT_READ, LogReader, ReadOptions, open_log
 from ..io.clock import fmt_ns, scan_clock
-from ..types import Tick
+from ..types import Pose2D, Scan, Tick
 from .base import Matcher, OdomMatcher
 from .idc import IdcMatcher, IdcParams
 from .kiss import KissIcpMatcher, KissParams
 
 __all__ = ["METHODS", "CorrectedTrajectory", "MatcherReport", "correct_trajectory", "health_params",
            "interleave_bearings", "keep_by_travel", "log_ticks", "make_matcher", "matcher_report",
-           "relations_time_base", "run_scanmatch"]
+           "relations_time_base", "run_scanmatch", "warm_up_matcher"]
 
 Method = Literal["idc", "kiss-icp", "odom"]
 METHODS: tuple[Method, ...] = ("odom", "idc", "kiss-icp")
@@ -59,6 +60,21 @@ def make_matcher(method: Method, *, idc: IdcParams | None = None, kiss: KissPara
     if method == "odom":
         return OdomMatcher()
     raise ScanMatchError(f"unknown matcher {method!r}: expected one of {', '.join(METHODS)}")
+
+
+def warm_up_matcher(make: Callable[[], Matcher]) -> None:
+    """Compile the kernels of the matchers ``make`` builds on synthetic scans of a bumpy round room before
+    timing, with every mix of writable and read-only ranges and angles (numba compiles each apart; the
+    CARMEN reader hands out writable ranges with shared read-only beam angles, a pipe writable copies)."""
+    for ranges_ro, angles_ro in itertools.product((False, True), repeat=2):
+        matcher = make()
+        angles = np.linspace(-math.pi / 2, math.pi / 2, 361)
+        angles.flags.writeable = not angles_ro
+        for k in range(3):
+            pose = Pose2D(0.05 * k, 0.0, 0.01 * k)
+            ranges = 4.0 + 0.4 * dm.sin_a(5.0 * (angles + pose.theta)) - pose.x * dm.cos_a(angles)
+            ranges.flags.writeable = not ranges_ro
+            matcher.update(Scan(t_ns=k, ranges_m=ranges, angles_rad=angles, max_range_m=30.0), pose)
 
 
 def health_params(idc: IdcParams | None = None) -> HealthParams:

@@ -1,0 +1,68 @@
+"""Scan matching in a second process (``scanmatch.MatchAhead``): the same results as the sequential run,
+the log read exactly as far, the matcher's errors raised in the caller and no process left behind."""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from gndreplay.config import PRESETS
+from gndreplay.errors import ScanMatchError
+from gndreplay.io import read_ticks
+from gndreplay.replay import RunOptions, run_log
+from gndreplay.scanmatch import MatchAhead, make_matcher
+from gndreplay.scanmatch.ahead import available
+
+SAMPLE = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
+BEHAVIOUR = ("commands.csv", "trajectory_odom.tum", "trajectory_corrected.tum", "trajectory_truth.tum",
+             "config.toml")
+WALL_CLOCK = ("latency_ms", "over_budget")
+
+pytestmark = pytest.mark.skipif(not available(), reason="MatchAhead needs POSIX pipes")
+
+
+def _summary(run: Path) -> dict[str, object]:
+    data = json.loads((run / "summary.json").read_text())
+    return {k: v for k, v in data.items() if k not in WALL_CLOCK}
+
+
+@pytest.mark.parametrize("options", [
+    RunOptions(),  # the goal ahead: ticks past the end feed the lookahead
+    RunOptions(until_s=12.0),  # stopped early: the log read as far as the sequential run reads it
+    RunOptions(goal_xy=(3.0, 1.0), until_s=7.5, every=3),
+], ids=["goal-ahead", "until", "fixed-goal-every"])
+def test_matching_ahead_gives_the_sequential_run_byte_for_byte(tmp_path: Path, options: RunOptions) -> None:
+    cfg = PRESETS["wheelchair"]
+    run_log(SAMPLE, cfg, tmp_path / "seq", options=options)
+    ahead = RunOptions(**{**{f: getattr(options, f) for f in options.__slots__}, "match_ahead": True})
+    run_log(SAMPLE, cfg, tmp_path / "ahead", options=ahead)
+    for name in BEHAVIOUR:
+        assert (tmp_path / "seq" / name).read_bytes() == (tmp_path / "ahead" / name).read_bytes(), name
+    seq, par = _summary(tmp_path / "seq"), _summary(tmp_path / "ahead")
+    assert seq["read_report"] == par["read_report"]  # the same records read, warnings included
+    assert json.dumps(seq, sort_keys=True) == json.dumps(par, sort_keys=True)
+
+
+def test_a_matcher_that_cannot_be_built_fails_in_the_caller() -> None:
+    with MatchAhead(functools.partial(make_matcher, "no-such-matcher")) as ahead,  \
+            pytest.raises(ScanMatchError, match="no-such-matcher"):
+        ahead.ready()
+
+
+def test_the_child_ends_when_the_consumer_stops_early() -> None:
+    ticks = read_ticks(SAMPLE)
+    ahead = MatchAhead(functools.partial(make_matcher, "idc"), depth=4)
+    with pytest.raises(KeyboardInterrupt), ahead:
+        proc = ahead._proc
+        assert proc is not None
+        for k, (tick, res, _ms) in enumerate(ahead.results(ticks)):
+            assert res.pose is not None and tick.index == k
+            if k == 5:
+                raise KeyboardInterrupt  # as Ctrl-C in the middle of a replay
+    assert proc.poll() is not None  # ended, not orphaned
+    with pytest.raises(ProcessLookupError):
+        os.kill(proc.pid, 0)
