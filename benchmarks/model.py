@@ -1,8 +1,10 @@
 """Model-builder and C-space speed: grid integration per scan and free C-space per tick.
 
 Targets: integration <= 1 ms per 361-beam scan on 400 x 400 (one core); C-space a few ms or less. The
-C-space is timed three ways that give the same free mask (the disc sweep ``free_cspace`` uses, and a
-threshold of the numba and the scipy distance transforms).
+C-space is timed per tick along the drive as the planner follows it (``CSpaceTracker``, checked equal to
+``free_cspace`` on every tick) and afresh (``free_cspace``'s disc sweep), and on the final grid three ways
+that give the same free mask (the disc sweep, and a threshold of the numba and the scipy distance
+transforms).
 Synthetic scans are ray-cast in a hall with rooms and pillars (ranges up to the 30 m max range, 1 % invalid
 beams) along a 60 m drive that re-centres the grid many times. When ``gndreplay.io.read_ticks`` exists and
 ../shared/datasets is present, the real MIT CSAIL log (361 beams) is replayed on its raw odometry too.
@@ -23,7 +25,7 @@ from numpy.typing import NDArray
 from scipy import ndimage as ndi
 
 from gndreplay.errors import GndReplayError
-from gndreplay.pipeline.cspace import free_cspace, obstacle_distance_m, squared_distance_cells
+from gndreplay.pipeline.cspace import CSpaceTracker, free_cspace, obstacle_distance_m, squared_distance_cells
 from gndreplay.pipeline.model import GRID_200, GRID_400, OCCUPIED, GridParams, RobotCentredGrid
 from gndreplay.types import Pose2D, Scan
 
@@ -90,6 +92,8 @@ def time_integration(params: GridParams, run: list[tuple[Scan, Pose2D]]) -> Robo
     grid.integrate(run[0][0], run[0][1])  # compile / load the numba cache outside the timing
     grid = RobotCentredGrid(params, centre_xy=(run[0][1].x, run[0][1].y))
     all_ns, shift_ns = [], []
+    tracker = CSpaceTracker(cell_m=params.cell_m, inflate_m=0.4)
+    tracked_ns, sweep_ns = [], []
     for scan, pose in run:
         t0 = time.perf_counter_ns()
         stats = grid.integrate(scan, pose)
@@ -97,10 +101,21 @@ def time_integration(params: GridParams, run: list[tuple[Scan, Pose2D]]) -> Robo
         all_ns.append(dt)
         if stats.shifted_cells != (0, 0):
             shift_ns.append(dt)
+        t0 = time.perf_counter_ns()
+        tracked = tracker.free(grid.cells, grid.offset_cells)
+        tracked_ns.append(time.perf_counter_ns() - t0)
+        t0 = time.perf_counter_ns()
+        swept = free_cspace(grid.cells, cell_m=params.cell_m, inflate_m=0.4)
+        sweep_ns.append(time.perf_counter_ns() - t0)
+        if not np.array_equal(tracked, swept):
+            raise SystemExit("CSpaceTracker and free_cspace differ: a bug")
     n = params.size_cells
     summary(f"integrate {n}x{n}, all scans", all_ns)
     if shift_ns:
         summary(f"integrate {n}x{n}, scans with a re-centring", shift_ns)
+    # the first tick counts the discs afresh (and compiles): left out
+    summary(f"C-space per tick {n}x{n}: CSpaceTracker", tracked_ns[1:])
+    summary(f"C-space per tick {n}x{n}: free_cspace sweep", sweep_ns[1:])
     return grid
 
 
