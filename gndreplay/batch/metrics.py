@@ -30,7 +30,7 @@ __all__ = [
     "relation_metrics",
 ]
 
-LATENCY_MODULES = ("match", "model", "planner", "reactor", "stack", "total")
+LATENCY_MODULES = ("match", "model", "planner", "reactor", "supervisor", "stack", "total")
 LATENCY_STATS = ("median", "p90", "p99", "max")
 #: ``<module>_<stat>_ms`` -> (module, stat) in summary.json's ``latency_ms``.
 LATENCY_METRICS: Mapping[str, tuple[str, str]] = {

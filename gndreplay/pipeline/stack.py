@@ -43,7 +43,7 @@ __all__ = [
     "TickResult", "make_planner", "warm_up",
 ]
 
-MODULES = ("match", "model", "planner", "reactor")
+MODULES = ("match", "model", "planner", "reactor", "supervisor")
 
 NavMode = Literal["gnd", "teleop", "follow", "local"]
 NAV_MODES: tuple[str, ...] = ("gnd", "teleop", "follow", "local")
@@ -101,7 +101,7 @@ class TickResult:
         direction_rad: ND+ motion direction in the robot frame (nan without a region).
         goal: the goal in the corrected frame.
         path_xy: (K, 2) tightened planned path in the corrected frame (empty when the planner failed).
-        timings_ms: per-module wall time [ms] ("match", "model", "planner", "reactor").
+        timings_ms: per-module wall time [ms] ("match", "model", "planner", "reactor", "supervisor").
         planner_nodes: the planner's search effort this tick (NF1: cells the wave labelled; tunnel: nodes
             expanded), also when it failed.
         planner_length_m: length of the planned path / tunnel polyline [m] (nan when the planner failed).
@@ -288,10 +288,12 @@ class NavigationStack:
         goal_rel = _to_robot(pose, goal[None, :])[0]
         # ND+ to the goal itself (the planner failed) chose the goal's own region: a way to it in view
         no_way = self._no_way(planned, pose, nd.region is not None and nd.memory is None)
+        t0 = time.perf_counter_ns()
         verdict = self.supervisor.supervise(Proposal(
             mode, Command(scan.t_ns, nd.v_mps, nd.w_radps, nd.vy_mps), flags,
             want_rad=dm.atan2(target[1], target[0]), gnd=GndGoal(goal_rel, no_way),
         ))
+        timings["supervisor"] = _ms(t0)
         path = planned.waypoints_cells
         path_xy = self.grid.cells_to_world(path) if path.shape[0] else np.zeros((0, 2))
         return TickResult(
@@ -361,10 +363,12 @@ class NavigationStack:
         # no trap escape for the driver: dithering under teleop is the driver's own (and an escape begun
         # under local navigation ends when the driver has the robot again)
         want = math.nan if intention is None else dm.atan2(intention[1], intention[0])
+        t0 = time.perf_counter_ns()
         verdict = self.supervisor.supervise(Proposal(
             mode, Command(scan.t_ns, v, w, vy), flags, want_rad=want, trap=active != "teleop",
             reflexive=points is not None,
         ), points)
+        timings["supervisor"] = _ms(t0)
         self._selector.settle(active, verdict.looking, (pose.x, pose.y), scan.t_ns)
         self._v_out, self._w_out = verdict.command.v_mps, verdict.command.w_radps
         self._follow_overridden = active != "follow" or verdict.mode is not Mode.FOLLOW

@@ -502,7 +502,7 @@ def _timing_stats(ms: NDArray[np.float64], budget: float | None) -> str:
 
 def figure_timing(data: RunData) -> Figure:
     """Fig. 5e: per-module time per tick (one panel each, shared log axis), with each module's budget and
-    the scan period; the last panel is the total (match + model + planner + reactor)."""
+    the scan period; the last panel is the total (match + model + planner + reactor + supervisor)."""
     from matplotlib.lines import Line2D
 
     tm = data.timing

@@ -17,7 +17,7 @@ from .snapshots import SNAPSHOTS_DIR, SnapshotEntry, read_snapshot_index
 __all__ = ["health_rows", "interventions_section", "render_report", "timeline_section", "trajectory_gap",
            "truth_section"]
 
-_LATENCY_ROWS = ("match", "model", "planner", "reactor", "stack", "total")
+_LATENCY_ROWS = ("match", "model", "planner", "reactor", "supervisor", "stack", "total")
 _OVER = {"match": "MATCH_OVER_BUDGET", "model": "MODEL_OVER_BUDGET", "planner": "PLANNER_OVER_BUDGET",
          "reactor": "REACTOR_OVER_BUDGET"}
 

@@ -542,7 +542,8 @@ def read_commands(path: Path) -> Commands:
 
 
 def read_timing(path: Path) -> Timing:
-    """Parse timing.csv (``t,match_ms,model_ms,planner_ms,reactor_ms,total_ms[,flags]``).
+    """Parse timing.csv (``t,match_ms,model_ms,planner_ms,reactor_ms[,supervisor_ms],total_ms[,flags]``;
+    the supervisor's column is optional: the figures and tables show the modules present).
 
     Raises:
         RunDirError: missing file, missing column or a malformed row (named by line).
@@ -569,7 +570,7 @@ def read_timing(path: Path) -> Timing:
                 mask = over[name] = np.zeros(len(body), dtype=bool)
             mask[k] = True
     ms = {header[c].removesuffix("_ms"): data[:, j] for j, c in enumerate(numeric) if c}
-    missing = [m for m in TIMING_MODULES if m not in ms]
+    missing = [m for m in TIMING_MODULES if m not in ms and m != "supervisor"]
     if missing:
         raise RunDirError(f"{path}: missing column(s) {', '.join(m + '_ms' for m in missing)}")
     return Timing(t_s=data[:, 0], ms=ms, over_budget=over)

@@ -313,7 +313,7 @@ def summarise(
     n = len(rec.t_s)
     timing = np.asarray(rec.timing, dtype=np.float64).reshape(n, len(MODULES))
     latency = {m: _latency(timing[:, k]) for k, m in enumerate(MODULES)}
-    latency["stack"] = _latency(timing[:, 1:].sum(axis=1))  # model + planner + reactor
+    latency["stack"] = _latency(timing[:, 1:].sum(axis=1))  # model + planner + reactor + supervisor
     latency["total"] = _latency(timing.sum(axis=1))
     t = np.asarray(rec.t_s)
     agreement = motion_agreement(t, np.asarray(rec.pose).reshape(n, 3), np.asarray(rec.cmd).reshape(n, 3))
