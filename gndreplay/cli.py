@@ -1030,6 +1030,16 @@ def scanmatch(
         ),
     ] = None,
     overwrite: OverwriteOpt = False,
+    parallel: Annotated[
+        bool | None,
+        typer.Option(
+            "--parallel/--no-parallel",
+            help="With several matchers, run them side by side in one pass over the log, one process each: "
+            "the same trajectories, sooner (default: when two CPUs are available).",
+            rich_help_panel=_RUN_PANEL,
+            show_default=False,
+        ),
+    ] = None,
     progress: ProgressOpt = "auto",
     json_out: JsonOpt = False,
     *,
@@ -1056,6 +1066,7 @@ def scanmatch(
     from .evaluation import load_relations
     from .replay import mounting_for
     from .scanmatch import METHODS, run_scanmatch
+    from .scanmatch.ahead import worthwhile
     from .scanmatch.run import log_ticks
 
     chosen = choose("--matcher", matcher, (*METHODS, "all"))
@@ -1072,7 +1083,7 @@ def scanmatch(
             methods, relations=refs, out_dir=out_dir, idc=cfg.scanmatch.idc, kiss=cfg.scanmatch.kiss,
             relations_name=str(relations), overwrite=overwrite, on_pass=watch.on_pass,
             inputs=[Path(log)] + ([relations] if relations is not None else []),
-            on_warning=said.append,
+            on_warning=said.append, parallel=worthwhile() if parallel is None else parallel,
         )
     for line in said:  # after the progress display, which would overwrite it
         typer.echo(f"gndreplay: warning: {line}", err=True)

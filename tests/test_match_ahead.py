@@ -14,7 +14,7 @@ from gndreplay.config import PRESETS
 from gndreplay.errors import ScanMatchError
 from gndreplay.io import read_ticks
 from gndreplay.replay import RunOptions, run_log
-from gndreplay.scanmatch import MatchAhead, make_matcher
+from gndreplay.scanmatch import MatchAhead, make_matcher, run_scanmatch
 from gndreplay.scanmatch.ahead import available
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
@@ -66,3 +66,16 @@ def test_the_child_ends_when_the_consumer_stops_early() -> None:
     assert proc.poll() is not None  # ended, not orphaned
     with pytest.raises(ProcessLookupError):
         os.kill(proc.pid, 0)
+
+
+def test_matchers_side_by_side_give_each_matcher_its_own_pass(tmp_path: Path) -> None:
+    """``scanmatch`` with the matchers in parallel (one pass, a process each) writes the trajectories and
+    reports the failures of one sequential pass per matcher."""
+    rows = {}
+    for parallel in (False, True):
+        rows[parallel] = run_scanmatch(lambda: read_ticks(SAMPLE), out_dir=tmp_path / str(parallel),
+                                       parallel=parallel)
+    for seq, par in zip(rows[False], rows[True], strict=True):
+        assert seq.method == par.method
+        assert Path(seq.tum_path).read_bytes() == Path(par.tum_path).read_bytes()
+        assert seq.to_dict()["failures"] == par.to_dict()["failures"]

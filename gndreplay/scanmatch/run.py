@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import functools
 import itertools
 import math
 import os
@@ -32,13 +34,14 @@ from ..fsutil import check_output_dir, resolve_output_dir, staging_dir
 from ..io import DEFAULT_READ, LogReader, ReadOptions, open_log
 from ..io.clock import fmt_ns, scan_clock
 from ..types import Pose2D, Scan, Tick
-from .base import Matcher, OdomMatcher
+from .ahead import MatchAhead, available
+from .base import Matcher, MatchResult, OdomMatcher
 from .idc import IdcMatcher, IdcParams
 from .kiss import KissIcpMatcher, KissParams
 
-__all__ = ["METHODS", "CorrectedTrajectory", "MatcherReport", "correct_trajectory", "health_params",
-           "interleave_bearings", "keep_by_travel", "log_ticks", "make_matcher", "matcher_report",
-           "relations_time_base", "run_scanmatch", "warm_up_matcher"]
+__all__ = ["METHODS", "CorrectedTrajectory", "MatcherReport", "correct_trajectories", "correct_trajectory",
+           "health_params", "interleave_bearings", "keep_by_travel", "log_ticks", "make_matcher",
+           "matcher_report", "relations_time_base", "run_scanmatch", "warm_up_matcher"]
 
 Method = Literal["idc", "kiss-icp", "odom"]
 METHODS: tuple[Method, ...] = ("odom", "idc", "kiss-icp")
@@ -117,40 +120,81 @@ class CorrectedTrajectory:
         return int(np.count_nonzero(~self.ok))
 
 
-def correct_trajectory(ticks: Iterable[Tick], matcher: Matcher) -> CorrectedTrajectory:
-    """Run ``matcher`` over the ticks (time order) and collect its corrected trajectory and timings."""
-    t: list[int] = []
-    poses: list[tuple[float, float, float]] = []
-    ok: list[bool] = []
-    pairs: list[int] = []
-    resid: list[float] = []
-    iters: list[int] = []
-    ms: list[float] = []
-    reason: list[str] = []
-    odom: list[tuple[float, float, float]] = []
-    truth_t: list[int] = []
-    truth: list[tuple[float, float, float]] = []
+class _Collector:
+    """Accumulates one matcher's (tick, result, ms) into a ``CorrectedTrajectory``."""
+
+    def __init__(self, method: str) -> None:
+        self.method = method
+        self.t: list[int] = []
+        self.poses: list[tuple[float, float, float]] = []
+        self.ok: list[bool] = []
+        self.pairs: list[int] = []
+        self.resid: list[float] = []
+        self.iters: list[int] = []
+        self.ms: list[float] = []
+        self.reason: list[str] = []
+        self.odom: list[tuple[float, float, float]] = []
+        self.truth_t: list[int] = []
+        self.truth: list[tuple[float, float, float]] = []
+
+    def add(self, tick: Tick, res: MatchResult, ms: float) -> None:
+        self.ms.append(ms)
+        self.t.append(tick.t_ns)
+        self.poses.append((res.pose.x, res.pose.y, res.pose.theta))
+        self.ok.append(res.ok)
+        self.pairs.append(res.pairs)
+        self.resid.append(res.residual_m)
+        self.iters.append(res.iterations)
+        self.reason.append("" if res.ok else res.reason)
+        self.odom.append((tick.odom.x, tick.odom.y, tick.odom.theta))
+        if tick.truth is not None:
+            self.truth_t.append(tick.t_ns)
+            self.truth.append((tick.truth.x, tick.truth.y, tick.truth.theta))
+
+    def result(self) -> CorrectedTrajectory:
+        return CorrectedTrajectory(
+            self.method, np.array(self.t, dtype=np.int64),
+            np.array(self.poses, dtype=np.float64).reshape(-1, 3),
+            np.array(self.ok, dtype=bool), np.array(self.pairs, dtype=np.int64),
+            np.array(self.resid, dtype=np.float64), np.array(self.iters, dtype=np.int64),
+            np.array(self.ms, dtype=np.float64), tuple(self.reason),
+            np.array(self.odom, dtype=np.float64).reshape(-1, 3), np.array(self.truth_t, dtype=np.int64),
+            np.array(self.truth, dtype=np.float64).reshape(-1, 3))
+
+
+def _timed(ticks: Iterable[Tick], matcher: Matcher) -> Iterator[tuple[Tick, MatchResult, float]]:
     for tick in ticks:
         t0 = time.perf_counter_ns()
         res = matcher.update(tick.scan, tick.odom)
-        ms.append((time.perf_counter_ns() - t0) * 1e-6)
-        t.append(tick.t_ns)
-        poses.append((res.pose.x, res.pose.y, res.pose.theta))
-        ok.append(res.ok)
-        pairs.append(res.pairs)
-        resid.append(res.residual_m)
-        iters.append(res.iterations)
-        reason.append("" if res.ok else res.reason)
-        odom.append((tick.odom.x, tick.odom.y, tick.odom.theta))
-        if tick.truth is not None:
-            truth_t.append(tick.t_ns)
-            truth.append((tick.truth.x, tick.truth.y, tick.truth.theta))
-    return CorrectedTrajectory(
-        matcher.name, np.array(t, dtype=np.int64), np.array(poses, dtype=np.float64).reshape(-1, 3),
-        np.array(ok, dtype=bool), np.array(pairs, dtype=np.int64), np.array(resid, dtype=np.float64),
-        np.array(iters, dtype=np.int64), np.array(ms, dtype=np.float64), tuple(reason),
-        np.array(odom, dtype=np.float64).reshape(-1, 3), np.array(truth_t, dtype=np.int64),
-        np.array(truth, dtype=np.float64).reshape(-1, 3))
+        yield tick, res, (time.perf_counter_ns() - t0) * 1e-6
+
+
+def correct_trajectory(ticks: Iterable[Tick], matcher: Matcher) -> CorrectedTrajectory:
+    """Run ``matcher`` over the ticks (time order) and collect its corrected trajectory and timings."""
+    out = _Collector(matcher.name)
+    for tick, res, ms in _timed(ticks, matcher):
+        out.add(tick, res, ms)
+    return out.result()
+
+
+def correct_trajectories(ticks: Iterable[Tick], methods: Sequence[Method], *, idc: IdcParams | None = None,
+                         kiss: KissParams | None = None) -> list[CorrectedTrajectory]:
+    """``correct_trajectory`` of every method in one pass over the ticks, each matcher but raw odometry in
+    its own process (``MatchAhead``: one matcher per core, the same results as one pass each)."""
+    outs = [_Collector(m) for m in methods]
+    with contextlib.ExitStack() as stack:
+        streams: list[Iterator[tuple[Tick, MatchResult, float]]] = []
+        for method, copy in zip(methods, itertools.tee(ticks, len(methods)), strict=True):
+            make = functools.partial(make_matcher, method, idc=idc, kiss=kiss)
+            if method == "odom":
+                streams.append(_timed(copy, make()))
+            else:
+                ahead = stack.enter_context(MatchAhead(make, functools.partial(warm_up_matcher, make)))
+                streams.append(ahead.results(copy))
+        for row in zip(*streams, strict=True):
+            for out, (tick, res, ms) in zip(outs, row, strict=True):
+                out.add(tick, res, ms)
+    return [o.result() for o in outs]
 
 
 def keep_by_travel(ticks: Iterable[Tick], dist_m: float, angle_rad: float) -> list[Tick]:
@@ -294,10 +338,13 @@ def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence
                   tol_s: float = 1e-4, relations_name: str = "relations", overwrite: bool = False,
                   inputs: Sequence[str | os.PathLike[str]] = (),
                   on_pass: Callable[[str], None] | None = None,
-                  on_warning: Callable[[str], None] | None = None) -> list[MatcherReport]:
+                  on_warning: Callable[[str], None] | None = None,
+                  parallel: bool = False) -> list[MatcherReport]:
     """The ``gndreplay scanmatch`` command as a function: each matcher over the same log, one report each
     (``matcher_report``: timings, failures, relation errors, errors against the log's ground truth and the
-    matcher's health with the odometry error model of ``idc``).
+    matcher's health with the odometry error model of ``idc``). With ``parallel`` (and more than one
+    method, where ``MatchAhead`` is available) the matchers run side by side in one pass over the log
+    (``correct_trajectories``): the same trajectories, each matcher on its own core.
 
     Args:
         ticks_factory: returns a fresh tick stream of the log (called once per matcher).
@@ -313,7 +360,8 @@ def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence
         relations_name: how error messages name the relations (their file).
         overwrite: replace an earlier gndreplay output at ``out_dir``.
         inputs: the input files (log, relations), which ``out_dir`` must not contain.
-        on_pass: hears each matcher's name before its pass over the log (progress displays).
+        on_pass: hears each matcher's name before its pass over the log (progress displays); in parallel,
+            once, the names joined by " + ".
         on_warning: hears, once, :func:`relations_time_base`'s line when few relations match.
 
     Raises:
@@ -329,10 +377,20 @@ def run_scanmatch(ticks_factory: Callable[[], Iterable[Tick]], methods: Sequence
         target = resolve_output_dir(out, overwrite=overwrite)
     rows: list[MatcherReport] = []
     trajs: list[CorrectedTrajectory] = []
-    for method in methods:
+    together: list[CorrectedTrajectory] = []
+    if parallel and len(methods) > 1 and available():
+        for method in methods:
+            make_matcher(method, idc=idc, kiss=kiss)  # an unknown method fails here, before the pass
         if on_pass is not None:
-            on_pass(method)
-        traj = correct_trajectory(ticks_factory(), make_matcher(method, idc=idc, kiss=kiss))
+            on_pass(" + ".join(methods))
+        together = correct_trajectories(ticks_factory(), methods, idc=idc, kiss=kiss)
+    for k, method in enumerate(methods):
+        if together:
+            traj = together[k]
+        else:
+            if on_pass is not None:
+                on_pass(method)
+            traj = correct_trajectory(ticks_factory(), make_matcher(method, idc=idc, kiss=kiss))
         row = matcher_report(traj, relations, tol_s=tol_s, health=health_params(idc))
         if relations is not None and row.relations is not None and not rows:
             note = relations_time_base(traj.t_ns, relations, row.relations.matched, tol_s=tol_s,
