@@ -113,7 +113,7 @@ from ..errors import ConfigError
 from ..geometry import transform_points
 from ..robot import RobotConfig
 from ..types import Flag
-from .supervisor import _footprint_distance, arc_touches
+from .supervisor import _footprint_distance, arc_touches, kernel_points
 
 __all__ = [
     "NdDiagram",
@@ -455,10 +455,7 @@ def _sectors(pts: F64, geo: _Geometry, robot: RobotConfig,
     ang = geo.angles.copy()
     gaps = np.empty(n, dtype=np.bool_)
     px, py = np.empty(n), np.empty(n)
-    points = np.ascontiguousarray(pts)
-    if not points.flags.writeable:  # one kernel specialisation: writable arrays only
-        points = points.copy()
-    clearance, m = _nd_sectors(points, n / (2.0 * np.pi), params.max_range_m, geo.boundary,
+    clearance, m = _nd_sectors(kernel_points(pts), n / (2.0 * np.pi), params.max_range_m, geo.boundary,
                                params.contact_m, geo.gap_m, robot.shape == "circle", robot.radius_m,
                                robot.front_m, robot.rear_m, robot.width_m / 2.0, dist, ang, gaps, px, py)
     return dist, ang, gaps, px[:m], py[:m], clearance

@@ -382,6 +382,13 @@ def _sweep_touches(points: F64, v: float, vy: float, w: float, t_end: float, tra
     return 0
 
 
+def kernel_points(points_xy: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(M, 2) points as the kernels take them: C-contiguous, float64 and writable (a read-only array would
+    compile a second specialisation of each kernel)."""
+    pts = np.ascontiguousarray(points_xy, dtype=np.float64)
+    return pts if pts.flags.writeable else pts.copy()
+
+
 def arc_touches(
     points_xy: NDArray[np.float64], v_mps: float, vy_mps: float, w_radps: float, t_end_s: float,
     robot: RobotConfig, margin_m: float
@@ -394,9 +401,7 @@ def arc_touches(
     the travel)."""
     if points_xy.shape[0] == 0 or t_end_s <= 0.0:
         return False
-    pts = np.ascontiguousarray(points_xy, dtype=np.float64)
-    if not pts.flags.writeable:  # one kernel specialisation: writable arrays only
-        pts = pts.copy()
+    pts = kernel_points(points_xy)
     travel = math.hypot(v_mps, vy_mps) * t_end_s
     hit = _sweep_touches(pts, v_mps, vy_mps, w_radps, t_end_s, travel, margin_m, robot.outer_radius_m,
                          robot.shape == "circle", robot.radius_m, robot.front_m, robot.rear_m,
@@ -453,10 +458,23 @@ def unconfirmed_cells(grid_xy: NDArray[np.float64], scan_xy: NDArray[np.float64]
     if grid_xy.shape[0] == 0 or scan_xy.shape[0] == 0:
         return grid_xy
     r = 0.5 * math.sqrt(2.0) * cell_m
-    d2 = (np.square(grid_xy[:, None, 0] - scan_xy[None, :, 0])
-          + np.square(grid_xy[:, None, 1] - scan_xy[None, :, 1]))
-    keep: NDArray[np.float64] = grid_xy[~np.any(d2 <= r * r, axis=1)]
-    return keep
+    keep = np.empty(grid_xy.shape[0], dtype=np.bool_)
+    _unconfirmed_kernel(kernel_points(grid_xy), kernel_points(scan_xy), r * r, keep)
+    out: NDArray[np.float64] = grid_xy[keep]
+    return out
+
+
+@njit(cache=True)
+def _unconfirmed_kernel(grid: F64, scan: F64, r2: float, keep: NDArray[np.bool_]) -> None:
+    """keep[i]: no scan point within squared distance ``r2`` of grid point i."""
+    for i in range(grid.shape[0]):
+        gx, gy = grid[i, 0], grid[i, 1]
+        keep[i] = True
+        for j in range(scan.shape[0]):
+            dx, dy = gx - scan[j, 0], gy - scan[j, 1]
+            if dx * dx + dy * dy <= r2:
+                keep[i] = False
+                break
 
 
 def swept_touch(
