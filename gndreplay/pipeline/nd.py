@@ -113,7 +113,7 @@ from ..errors import ConfigError
 from ..geometry import transform_points
 from ..robot import RobotConfig
 from ..types import Flag
-from .supervisor import _footprint_distance, arc_touches, kernel_points
+from .supervisor import arc_touches, footprint_distance_at, kernel_points
 
 __all__ = [
     "NdDiagram",
@@ -416,18 +416,21 @@ def _sectorise_kernel(points: F64, scale: float, max_range_m: float, dist: F64, 
 def _nd_sectors(points: F64, scale: float, max_range_m: float, boundary: F64, contact_m: float, gap_m: float,
                 circle: bool, radius: float, front: float, rear: float, half_w: float, dist: F64, ang: F64,
                 gaps: NDArray[np.bool_], px: F64, py: F64) -> tuple[float, int]:
-    """ND+'s sectors in one pass: ``_sectorise_kernel`` into ``dist`` / ``ang`` (inf / bisectors on entry),
-    each occupied sector's distance moved out to at least ``boundary + contact_m``, the gaps
-    (``_discontinuities``) into ``gaps``, and the occupied sectors' points (x, y) in sector order into
-    ``px`` / ``py``. Returns the smallest exact distance from a point within ``max_range_m`` to the
-    footprint (``_footprint_clearance``; inf without one) and the number of occupied sectors."""
+    """ND+'s sectors in one pass: ``_sectorise_kernel`` into ``dist`` / ``ang`` (inf / bisectors on entry);
+    each occupied sector's distance moved out to at least ``boundary + contact_m``; ``gaps[i]`` True where
+    sectors i and i+1 (mod n) are separated by a gap (exactly one side free, or both occupied with
+    distances differing by at least ``gap_m``: the robot fits through the jump); the occupied sectors'
+    points (x, y) in sector order into ``px`` / ``py``. Returns the smallest exact distance from a point
+    within ``max_range_m`` to the footprint (``NdResult.min_clearance_m``, not along the sector bisectors:
+    at a rectangle's corner the two differ by centimetres; inf without one) and the number of occupied
+    sectors."""
     _sectorise_kernel(points, scale, max_range_m, dist, ang)
     max2 = max_range_m * max_range_m
     clearance = np.inf
     for k in range(points.shape[0]):
         x, y = points[k, 0], points[k, 1]
         if x * x + y * y <= max2:
-            d = _footprint_distance(x, y, circle, radius, front, rear, half_w)
+            d = footprint_distance_at(x, y, circle, radius, front, rear, half_w)
             if d < clearance:
                 clearance = d
     n = dist.size

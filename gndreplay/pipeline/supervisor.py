@@ -56,8 +56,10 @@ __all__ = [
     "doubted_cells",
     "escape_command",
     "footprint_contains",
+    "footprint_distance_at",
     "footprint_signed_distance",
     "gnd_mode",
+    "kernel_points",
     "no_progress",
     "rotate_command",
     "safe_command",
@@ -329,9 +331,10 @@ def _arc_fill(v: float, vy: float, w: float, t_end: float, n: int, px: F64, py: 
 
 
 @njit(cache=True)
-def _footprint_distance(x: float, y: float, circle: bool, radius: float, front: float, rear: float,
-                        half_w: float) -> float:
-    """``footprint_signed_distance`` of one point (the circle of ``radius``, else the rectangle)."""
+def footprint_distance_at(x: float, y: float, circle: bool, radius: float, front: float, rear: float,
+                          half_w: float) -> float:
+    """``footprint_signed_distance`` of one point, for the kernels (the circle of ``radius``, else the
+    rectangle ``[-rear, front] x [-half_w, half_w]``)."""
     if circle:
         return math.hypot(x, y) - radius
     dx = max(x - front, -rear - x)
@@ -373,8 +376,8 @@ def _sweep_touches(points: F64, v: float, vy: float, w: float, t_end: float, tra
         lim = 0.0
         for k in range(n + 1):
             dx, dy = x - px[k], y - py[k]
-            d = _footprint_distance(ct[k] * dx + st[k] * dy, -st[k] * dx + ct[k] * dy, circle, radius, front,
-                                    rear, half_w)
+            qx, qy = ct[k] * dx + st[k] * dy, -st[k] * dx + ct[k] * dy  # in the robot frame at pose k
+            d = footprint_distance_at(qx, qy, circle, radius, front, rear, half_w)
             if k == 0:
                 lim = d - 1e-9
             elif d <= margin and d < lim:
