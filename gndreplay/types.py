@@ -54,8 +54,14 @@ class Flag(enum.IntFlag):
     PLANNER_FALLBACK = enum.auto()  # the tunnel planner's node search failed; NF1's complete plan was used
 
     def names(self) -> list[str]:
-        """Member names set in this value, in declaration order (stable for CSV output)."""
-        return [m.name for m in Flag if m.value and (self & m) == m and m.name]
+        """Member names set in this value, in declaration order (stable for CSV output). Tested on the
+        integer value: every tick's CSV rows ask, and the enum's own ``&`` builds a member each time."""
+        value = int(self)
+        return [name for bit, name in _FLAG_BITS if value & bit == bit]
+
+
+_FLAG_BITS: tuple[tuple[int, str], ...] = tuple((int(m), str(m.name)) for m in Flag if m.value and m.name)
+"""(value, name) of the single flags, in declaration order (``Flag.names``)."""
 
 
 #: Flags that depend on wall-clock time: recorded in timing.csv, not in commands.csv (unless enforced).

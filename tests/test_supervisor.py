@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gndreplay import detmath as dm
 from gndreplay.pipeline.model import FREE, OCCUPIED, UNKNOWN, GridParams, RobotCentredGrid
 from gndreplay.pipeline.selector import swept_area_occupied
 from gndreplay.pipeline.supervision import TrapDetector
@@ -12,6 +13,8 @@ from gndreplay.pipeline.supervisor import (
     Mode,
     SafeCommand,
     SupervisorParams,
+    arc_poses,
+    arc_touches,
     braking_time_s,
     budget_flags,
     escape_command,
@@ -512,3 +515,36 @@ def test_straight_on_replaces_a_turn_only_with_a_full_speed_stop_distance_free()
     assert far.rule is Mode.SAFE_TURN and far.w_radps == 0.0 and far.v_mps == 0.05
     # the wall 10 cm ahead is not touched within the slow command's own horizon: only the new rule stops it
     assert not swept_collision(ahead(0.1), 0.05, 0.0, r, P)
+
+
+def _arc_touches_by_poses(points: np.ndarray, v: float, vy: float, w: float, t_end: float, robot: RobotConfig,
+                          margin: float) -> bool:
+    """``arc_touches``'s rule written over arrays: every point at every pose of ``arc_poses``."""
+    px, py, th = arc_poses(v, vy, w, t_end, robot)
+    dx, dy = points[None, :, 0] - px[:, None], points[None, :, 1] - py[:, None]
+    ct, st = dm.cos_a(th)[:, None], dm.sin_a(th)[:, None]
+    d = footprint_signed_distance(np.stack([ct * dx + st * dy, -st * dx + ct * dy], axis=-1), robot)
+    return bool(np.any((d[1:] <= margin) & (d[1:] < d[:1] - 1e-9)))
+
+
+@pytest.mark.parametrize("robot", [WHEELCHAIR_ROBOT, XR4000_ROBOT], ids=["rectangle", "circle"])
+def test_arc_touches_agrees_with_the_rule_over_every_pose(robot: RobotConfig) -> None:
+    """The kernel (reach filter, early exit) decides as the plain rule over all points and poses."""
+    rng = np.random.default_rng(5)
+    agree = touched = 0
+    for _ in range(400):
+        pts = rng.normal(0.0, 1.0, (int(rng.integers(1, 40)), 2))
+        v, vy = float(rng.normal(0.0, 0.5)), float(rng.normal(0.0, 0.3)) * (robot.drive == "holonomic")
+        w, t_end, margin = float(rng.choice([0.0, rng.normal(0.0, 1.0)])), float(rng.uniform(0.05, 2.0)), 0.02
+        expected = _arc_touches_by_poses(pts, v, vy, w, t_end, robot, margin)
+        agree += arc_touches(pts, v, vy, w, t_end, robot, margin) == expected
+        touched += expected
+    assert agree == 400
+    assert 40 < touched < 360  # both answers are exercised
+
+
+def test_arc_poses_span_the_horizon_evenly() -> None:
+    px, py, th = arc_poses(0.5, 0.0, 0.8, 0.7, WHEELCHAIR_ROBOT)
+    assert th[0] == 0.0 and th[-1] == 0.8 * 0.7
+    assert np.allclose(np.diff(th), th[-1] / (th.size - 1))
+    assert np.allclose(np.hypot(px, py), 2.0 * (0.5 / 0.8) * np.abs(np.sin(th / 2.0)))  # chord of the arc

@@ -113,7 +113,7 @@ from ..errors import ConfigError
 from ..geometry import transform_points
 from ..robot import RobotConfig
 from ..types import Flag
-from .supervisor import arc_touches, footprint_signed_distance
+from .supervisor import arc_touches, footprint_distance_at, kernel_points
 
 __all__ = [
     "NdDiagram",
@@ -412,6 +412,58 @@ def _sectorise_kernel(points: F64, scale: float, max_range_m: float, dist: F64, 
             dist[i] = math.sqrt(dist[i])
 
 
+@njit(cache=True)
+def _nd_sectors(points: F64, scale: float, max_range_m: float, boundary: F64, contact_m: float, gap_m: float,
+                circle: bool, radius: float, front: float, rear: float, half_w: float, dist: F64, ang: F64,
+                gaps: NDArray[np.bool_], px: F64, py: F64) -> tuple[float, int]:
+    """ND+'s sectors in one pass: ``_sectorise_kernel`` into ``dist`` / ``ang`` (inf / bisectors on entry);
+    each occupied sector's distance moved out to at least ``boundary + contact_m``; ``gaps[i]`` True where
+    sectors i and i+1 (mod n) are separated by a gap (exactly one side free, or both occupied with
+    distances differing by at least ``gap_m``: the robot fits through the jump); the occupied sectors'
+    points (x, y) in sector order into ``px`` / ``py``. Returns the smallest exact distance from a point
+    within ``max_range_m`` to the footprint (``NdResult.min_clearance_m``, not along the sector bisectors:
+    at a rectangle's corner the two differ by centimetres; inf without one) and the number of occupied
+    sectors."""
+    _sectorise_kernel(points, scale, max_range_m, dist, ang)
+    max2 = max_range_m * max_range_m
+    clearance = np.inf
+    for k in range(points.shape[0]):
+        x, y = points[k, 0], points[k, 1]
+        if x * x + y * y <= max2:
+            d = footprint_distance_at(x, y, circle, radius, front, rear, half_w)
+            if d < clearance:
+                clearance = d
+    n = dist.size
+    m = 0
+    for i in range(n):
+        if dist[i] < np.inf:
+            lo = boundary[i] + contact_m
+            if not dist[i] >= lo:
+                dist[i] = lo
+            px[m] = dist[i] * dm.cos(ang[i])
+            py[m] = dist[i] * dm.sin(ang[i])
+            m += 1
+    for i in range(n):
+        a, b = dist[i], dist[(i + 1) % n]
+        free_a, free_b = a == np.inf, b == np.inf
+        gaps[i] = free_a != free_b or (not free_a and not free_b and abs(a - b) >= gap_m)
+    return clearance, m
+
+
+def _sectors(pts: F64, geo: _Geometry, robot: RobotConfig,
+             params: NdParams) -> tuple[F64, F64, NDArray[np.bool_], F64, F64, float]:
+    """(dist, ang, gaps, px, py, min_clearance) of ``_nd_sectors`` for ``nd_step`` and ``nd_diagram``."""
+    n = geo.angles.size
+    dist = np.full(n, np.inf)
+    ang = geo.angles.copy()
+    gaps = np.empty(n, dtype=np.bool_)
+    px, py = np.empty(n), np.empty(n)
+    clearance, m = _nd_sectors(kernel_points(pts), n / (2.0 * np.pi), params.max_range_m, geo.boundary,
+                               params.contact_m, geo.gap_m, robot.shape == "circle", robot.radius_m,
+                               robot.front_m, robot.rear_m, robot.width_m / 2.0, dist, ang, gaps, px, py)
+    return dist, ang, gaps, px[:m], py[:m], clearance
+
+
 def sectorise(points: F64, bisectors: F64, max_range_m: float) -> tuple[F64, F64]:
     """Per sector the distance and angle of the closest point (inf / bisector when none within range)."""
     n = bisectors.size
@@ -420,18 +472,6 @@ def sectorise(points: F64, bisectors: F64, max_range_m: float) -> tuple[F64, F64
     if points.shape[0]:
         _sectorise_kernel(np.ascontiguousarray(points), n / (2.0 * np.pi), max_range_m, dist, ang)
     return dist, ang
-
-
-def _discontinuities(dist: F64, gap_m: float) -> NDArray[np.bool_]:
-    """(n,) True where sectors i and i+1 (mod n) are separated by a gap: exactly one side free, or both
-    occupied with distances differing by at least ``gap_m`` (the robot fits through the jump)."""
-    nxt = np.concatenate((dist[1:], dist[:1]))
-    free, free_nxt = np.isinf(dist), np.isinf(nxt)
-    both = ~free & ~free_nxt
-    jump = np.zeros(dist.shape, dtype=bool)
-    jump[both] = np.abs(dist[both] - nxt[both]) >= gap_m
-    gaps: NDArray[np.bool_] = (free != free_nxt) | jump
-    return gaps
 
 
 @njit(cache=True)
@@ -484,8 +524,9 @@ class _Region:
     corner: int  # sector of the discontinuity's near point (-1 for GOAL)
 
 
-def _select_region(dist: F64, ang: F64, bisectors: F64, goal_r: float, goal_a: float, gap_m: float,
-                   prev_rad: float | None = None, commit_rad: float = 0.0) -> _Region | None:
+def _select_region(dist: F64, ang: F64, bisectors: F64, gaps: NDArray[np.bool_], px: F64, py: F64,
+                   goal_r: float, goal_a: float, gap_m: float, prev_rad: float | None = None,
+                   commit_rad: float = 0.0) -> _Region | None:
     """Free walking area: the goal's region if the goal is in view and navigable, else the first
     navigable discontinuity found searching outward from the goal sector, alternating left and right
     (the closer first, left on ties); the region is the one on the discontinuity's rising (far) side.
@@ -494,13 +535,12 @@ def _select_region(dist: F64, ang: F64, bisectors: F64, goal_r: float, goal_a: f
     sub-goal lies within ``commit_rad / 2`` of it and which is at most ``commit_rad`` farther from the goal
     than the first navigable one is taken instead: the region does not change side each time the goal's
     bearing crosses the middle between two gaps (a goal held by a driver who counter-steers, a robot
-    turning in place between two ways round an obstacle)."""
+    turning in place between two ways round an obstacle). ``gaps``: the discontinuities (boundary k lies
+    between sectors k and k+1); ``px``, ``py``: the occupied sectors' points (``_nd_sectors``)."""
     n = dist.size
-    g = int(sector_of(goal_a, n))
-    occ = np.isfinite(dist)
-    px, py = dist[occ] * dm.cos_a(ang[occ]), dist[occ] * dm.sin_a(ang[occ])
-    in_view = (not occ[g]) or goal_r <= dist[g]
-    bounds = np.flatnonzero(_discontinuities(dist, gap_m))  # boundary k lies between k and k+1
+    g = math.floor(goal_a * (n / (2.0 * np.pi)) + _SECTOR_OFFSET) % n  # ``sector_of``
+    in_view = dist[g] == np.inf or goal_r <= dist[g]
+    bounds = np.flatnonzero(gaps)
     if bounds.size == 0:
         if in_view and _navigable(px, py, goal_r, goal_a, gap_m):
             return _Region(0, n - 1, _Kind.GOAL, goal_a, -1)
@@ -576,57 +616,79 @@ def _blend_away(theta_p: float, obstacle_a: float, ratio: float) -> float:
     return wrap(th)
 
 
-def _passage_axis(dist: F64, ang: F64, left: NDArray[np.bool_], right: NDArray[np.bool_], beta: float, *,
-                  min_width_m: float, max_width_m: float, reach_m: float, behind_m: float,
+def _passage_axis(dist: F64, ang: F64, left_side: NDArray[np.bool_], beta: float, *, min_width_m: float,
+                  max_width_m: float, reach_m: float, behind_m: float,
                   front_m: float) -> tuple[float, float, float, float] | None:
-    """The narrowest passage the robot is going through: the closest pair of a left and a right sector
-    point (both within ``reach_m`` of the rotation centre), at least ``min_width_m`` (the robot's width:
-    a narrower slot beside it is not its way) and narrower than ``max_width_m``, whose segment
-    the ray along the region direction ``beta`` crosses ahead of the rotation centre (or at most
-    ``behind_m`` behind it), or the robot's own axis crosses between ``behind_m`` behind and ``front_m``
-    ahead of the rotation centre (the body is in the passage: it leaves along the axis before turning).
-    A pair on the way must have the ray cross its segment, and behind the rotation centre only a pair
-    around the body counts: where the way turns just beyond a door, the ray crosses a side wall behind the
-    axle, and two points along that wall were taken for the passage on some ticks (the direction flipped
-    between the door's axis ahead and the wall's normal, backing up: wheelchair_office_exit).
+    """The narrowest passage the robot is going through: the closest pair of a left and a right occupied
+    sector point (``left_side``: left of the region direction; both within ``reach_m`` of the rotation
+    centre), at least ``min_width_m`` (the robot's width: a narrower slot beside it is not its way) and
+    narrower than ``max_width_m``, whose segment the ray along the region direction ``beta`` crosses ahead of
+    the rotation centre (or at most ``behind_m`` behind it), or the robot's own axis crosses between
+    ``behind_m`` behind and ``front_m`` ahead of the rotation centre (the body is in the passage: it leaves
+    along the axis before turning). A pair on the way must have the ray cross its segment, and behind the
+    rotation centre only a pair around the body counts: where the way turns just beyond a door, the ray
+    crosses a side wall behind the axle, and two points along that wall were taken for the passage on some
+    ticks (the direction flipped between the door's axis ahead and the wall's normal, backing up:
+    wheelchair_office_exit).
 
     Returns (cx, cy, nx, ny): the pair's midpoint and the passage axis, the unit normal of the pair's line
     oriented along ``beta``; None without such a pair. For a door these are the jambs; in a corridor any
     pair across it (the narrowest is the perpendicular one), whose axis runs along the corridor."""
-    near = dist <= reach_m
-    li, ri = np.flatnonzero(left & near), np.flatnonzero(right & near)
-    if li.size == 0 or ri.size == 0:
+    out = np.empty(4)
+    if not _passage_kernel(dist, ang, left_side, beta, min_width_m, max_width_m, reach_m, behind_m, front_m,
+                           out):
         return None
-    lx, ly = dist[li] * dm.cos_a(ang[li]), dist[li] * dm.sin_a(ang[li])
-    rx, ry = dist[ri] * dm.cos_a(ang[ri]), dist[ri] * dm.sin_a(ang[ri])
-    ex, ey = lx[:, None] - rx[None, :], ly[:, None] - ry[None, :]
-    w2 = ex * ex + ey * ey
-    num = rx[None, :] * ey - ry[None, :] * ex
+    return float(out[0]), float(out[1]), float(out[2]), float(out[3])
+
+
+@njit(cache=True, error_model="numpy")
+def _passage_kernel(dist: F64, ang: F64, left_side: NDArray[np.bool_], beta: float, min_width_m: float,
+                    max_width_m: float, reach_m: float, behind_m: float, front_m: float, out: F64) -> bool:
+    """``_passage_axis`` into ``out`` (cx, cy, nx, ny); False: no passage. Pairs in (left, right) sector
+    order, the first of equal widths kept; IEEE division (a zero denominator's pair is no passage)."""
+    n = dist.size
+    lx, ly, rx, ry = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    nl = nr = 0
+    for i in range(n):
+        if dist[i] < np.inf and dist[i] <= reach_m:
+            x, y = dist[i] * dm.cos(ang[i]), dist[i] * dm.sin(ang[i])
+            if left_side[i]:
+                lx[nl], ly[nl] = x, y
+                nl += 1
+            else:
+                rx[nr], ry[nr] = x, y
+                nr += 1
+    if nl == 0 or nr == 0:
+        return False
     bx, by = dm.cos(beta), dm.sin(beta)
-    den = bx * ey - by * ex  # the beta ray meets the line r + s (l - r) at t = (r x (l - r)) / (b x (l - r))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = num / den
-        t_body = num / ey  # the same along the robot's own axis (b = +x)
-        seg = ((t * bx - rx[None, :]) * ex + (t * by - ry[None, :]) * ey) / w2  # where on the pair's segment
-    # the ray crosses the segment itself, not its line extended; behind the rotation centre only a pair
-    # around the body (a door just passed): two points along one side wall, which the ray crosses behind
-    # the axle when the way turns, are no passage (the direction flipped between the door's axis and the
-    # wall's normal there, wheelchair_office_exit)
-    straddles = (ly[:, None] > 0.0) & (ry[None, :] < 0.0)  # one point each side of the body
-    on_way = (np.abs(den) > 1e-12) & (seg >= 0.0) & (seg <= 1.0) & (
-        (t >= 0.0) | ((t > -behind_m) & straddles))
-    in_body = straddles & (np.abs(ey) > 1e-12) & (t_body > -behind_m) & (t_body < front_m)
-    w2 = np.where((on_way | in_body) & (w2 >= min_width_m * min_width_m), w2, np.inf)
-    k = int(np.argmin(w2))
-    a, b = divmod(k, ri.size)
-    width = math.sqrt(float(w2[a, b]))
+    min2 = min_width_m * min_width_m
+    best, ba, bb = np.inf, 0, 0
+    for a in range(nl):
+        for b in range(nr):
+            ex, ey = lx[a] - rx[b], ly[a] - ry[b]
+            w2 = ex * ex + ey * ey
+            if not w2 >= min2 or not w2 < best:
+                continue
+            num = rx[b] * ey - ry[b] * ex
+            den = bx * ey - by * ex  # the beta ray meets the line r + s (l - r) at t = num / den
+            t = num / den
+            seg = ((t * bx - rx[b]) * ex + (t * by - ry[b]) * ey) / w2  # where on the pair's segment
+            straddles = ly[a] > 0.0 and ry[b] < 0.0  # one point each side of the body
+            on_way = abs(den) > 1e-12 and seg >= 0.0 and seg <= 1.0 and (
+                t >= 0.0 or (t > -behind_m and straddles))
+            t_body = num / ey  # the same along the robot's own axis (b = +x)
+            in_body = straddles and abs(ey) > 1e-12 and t_body > -behind_m and t_body < front_m
+            if on_way or in_body:
+                best, ba, bb = w2, a, b
+    width = math.sqrt(best)
     if not width < max_width_m:  # also: no pair on the way (inf)
-        return None
-    ux, uy = (lx[a] - rx[b]) / width, (ly[a] - ry[b]) / width
+        return False
+    ux, uy = (lx[ba] - rx[bb]) / width, (ly[ba] - ry[bb]) / width
     nx, ny = uy, -ux  # the left point's side turned clockwise: the axis through the pair
-    if nx * dm.cos(beta) + ny * dm.sin(beta) < 0.0:
+    if nx * bx + ny * by < 0.0:
         nx, ny = -nx, -ny
-    return 0.5 * float(lx[a] + rx[b]), 0.5 * float(ly[a] + ry[b]), float(nx), float(ny)
+    out[0], out[1], out[2], out[3] = 0.5 * (lx[ba] + rx[bb]), 0.5 * (ly[ba] + ry[bb]), nx, ny
+    return True
 
 
 def _follow_axis(axis: tuple[float, float, float, float], lookahead_m: float) -> float:
@@ -774,10 +836,8 @@ def nd_diagram(obstacles_xy: ArrayLike, robot: RobotConfig, params: NdParams = N
     sectorisation and gap rule as ``nd_step``, computed apart so that a tick is drawn only when asked."""
     pts = np.asarray(obstacles_xy, dtype=np.float64).reshape(-1, 2)
     geo = _geometry(robot, params)
-    dist, _ = sectorise(pts, geo.angles, params.max_range_m)
-    occ = np.isfinite(dist)
-    dist = np.where(occ, np.maximum(dist, geo.boundary + params.contact_m), dist)
-    return NdDiagram(geo.angles, dist, _discontinuities(dist, geo.gap_m), geo.boundary, geo.security)
+    dist, _, gaps, _, _, _ = _sectors(pts, geo, robot, params)
+    return NdDiagram(geo.angles, dist, gaps, geo.boundary, geo.security)
 
 
 def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
@@ -823,13 +883,11 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
 
     geo = _geometry(robot, params)
     n = params.n_sectors
-    dist, ang = sectorise(pts, geo.angles, params.max_range_m)
+    dist, ang, gaps, px, py, min_clearance = _sectors(pts, geo, robot, params)
     occ = np.isfinite(dist)
-    min_clearance = _footprint_clearance(pts, robot, params.max_range_m) if occ.any() else math.inf
-    dist = np.where(occ, np.maximum(dist, geo.boundary + params.contact_m), dist)
 
     goal_r, goal_a = math.hypot(goal[0], goal[1]), wrap(dm.atan2(goal[1], goal[0]))  # -0.0 y: pi
-    region = _select_region(dist, ang, geo.angles, goal_r, goal_a, geo.gap_m,
+    region = _select_region(dist, ang, geo.angles, gaps, px, py, goal_r, goal_a, geo.gap_m,
                             None if prev is None else prev.subgoal_rad, params.commit_rad)
     if region is None:
         return NdResult(Situation.NONE, Flag.REACTOR_NO_REGION, math.nan, 0.0, 0.0, 0.0, None, min_clearance)
@@ -874,7 +932,7 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
     axis: tuple[float, float, float, float] | None = None
     if robot.shape == "rectangle" and robot.drive == "differential" and abs(beta) <= _HALF_PI and (
             region.kind is not _Kind.GOAL or goal_r > robot.front_m):  # a goal within reach: steer to it
-        axis = _passage_axis(dist, ang, occ & left_side, occ & ~left_side, beta,
+        axis = _passage_axis(dist, ang, left_side, beta,
                              min_width_m=geo.gap_m, max_width_m=geo.gap_m + 2.0 * params.security_m,
                              reach_m=robot.front_m + robot.rear_m + params.security_m,
                              behind_m=robot.rear_m + 0.5 * params.security_m, front_m=robot.front_m)
@@ -890,14 +948,6 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
         v, vy, w = drive(theta, v_nd, robot)
     memory = None if region.kind is _Kind.GOAL else NdMemory(region.direction_rad)
     return NdResult(situation, Flag.NONE, theta, v, vy, w, (region.first, region.last), min_clearance, memory)
-
-
-def _footprint_clearance(points: F64, robot: RobotConfig, max_range_m: float) -> float:
-    """Smallest exact distance [m] from the points within ``max_range_m`` to the real footprint (negative
-    inside), not along the sector bisectors: at a rectangle's corner the two differ by centimetres."""
-    with np.errstate(invalid="ignore", over="ignore"):
-        near = points[dm.sqdist(points) <= max_range_m * max_range_m]
-    return float(np.min(footprint_signed_distance(near, robot))) if near.shape[0] else math.inf
 
 
 def _closest(mask: NDArray[np.bool_], ratio: F64) -> int:

@@ -15,6 +15,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
+from itertools import pairwise
 from typing import NamedTuple
 
 import numpy as np
@@ -157,12 +158,10 @@ class TrapDetector:
         self._drives.append((1 if v_mps > 0 else -1) if driving else 0)
         if pose is not None:
             self._poses.append(pose)
-        ev = np.fromiter(self._events, dtype=np.int8)
-        emergencies = int(np.count_nonzero(ev == 2))
-        rot = ev[(ev == 1) | (ev == -1)]
-        sign_changes = int(np.count_nonzero(np.diff(rot) != 0)) if rot.size > 1 else 0
+        emergencies = self._events.count(2)
+        rot = [e for e in self._events if e == 1 or e == -1]
         trapped = emergencies >= self._p.trap_count or (
-            rot.size >= self._p.trap_count and sign_changes >= 2
+            len(rot) >= self._p.trap_count and _changes(rot) >= 2
         ) or self._dithering()
         if trapped:
             self._events.clear()
@@ -182,9 +181,13 @@ class TrapDetector:
 
 def _reversals(signs: deque[int]) -> int:
     """Sign changes in a sequence of -1 / 0 / +1, the zeros skipped."""
-    a = np.fromiter(signs, dtype=np.int8)
-    a = a[a != 0]
-    return int(np.count_nonzero(np.diff(a) != 0)) if a.size > 1 else 0
+    return _changes([a for a in signs if a != 0])
+
+
+def _changes(values: list[int]) -> int:
+    """How many times a sequence changes value from one element to the next (a window of a few dozen
+    ticks: plain Python beats numpy's per-call overhead)."""
+    return sum(1 for a, b in pairwise(values) if a != b)
 
 
 class PoseTrack:

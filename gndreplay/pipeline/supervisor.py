@@ -34,12 +34,15 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from .. import detmath as dm
 from ..geometry import compose, inverse, relative, wrap_angle
 from ..robot import RobotConfig
 from ..types import Flag, Mode
+
+F64 = NDArray[np.float64]
 
 __all__ = [
     "SafeCommand",
@@ -53,8 +56,10 @@ __all__ = [
     "doubted_cells",
     "escape_command",
     "footprint_contains",
+    "footprint_distance_at",
     "footprint_signed_distance",
     "gnd_mode",
+    "kernel_points",
     "no_progress",
     "rotate_command",
     "safe_command",
@@ -296,14 +301,95 @@ def arc_poses(
     travel = math.hypot(v_mps, vy_mps) * t_end_s
     reach = travel + abs(w_radps) * robot.outer_radius_m * t_end_s
     n = min(max(math.ceil(reach / _SWEEP_STEP_M), 1), _SWEEP_MAX_POSES)
-    ts = np.linspace(0.0, t_end_s, n + 1)
-    th = w_radps * ts
-    # constant-twist integration (exact for an arc); the limit w -> 0 is a straight line
-    if abs(w_radps) > 1e-9:
-        s, c1 = dm.sin_a(th) / w_radps, (1.0 - dm.cos_a(th)) / w_radps
-    else:
-        s, c1 = ts, np.zeros_like(ts)
-    return v_mps * s - vy_mps * c1, v_mps * c1 + vy_mps * s, th
+    px, py, th = np.empty(n + 1), np.empty(n + 1), np.empty(n + 1)
+    _arc_fill(v_mps, vy_mps, w_radps, t_end_s, n, px, py, th)
+    return px, py, th
+
+
+@njit(cache=True)
+def _arc_fill(v: float, vy: float, w: float, t_end: float, n: int, px: F64, py: F64, th: F64) -> None:
+    """Fill px, py, th (n + 1,) with the poses along the constant-twist arc at n + 1 evenly spaced times
+    from 0 to ``t_end`` (numpy's ``linspace``, to the bit: i * (t_end / n), the last exactly t_end)
+    (exact for an arc; below 1e-9 rad/s the straight line, its limit)."""
+    step = t_end / n
+    turning = abs(w) > 1e-9
+    for i in range(n + 1):
+        if i == n:
+            t = t_end
+        elif step == 0.0:  # a subnormal t_end (linspace's own branch)
+            t = i / n * t_end + 0.0
+        else:
+            t = i * step + 0.0
+        a = w * t
+        if turning:
+            s, c1 = dm.sin(a) / w, (1.0 - dm.cos(a)) / w
+        else:
+            s, c1 = t, 0.0
+        px[i] = v * s - vy * c1
+        py[i] = v * c1 + vy * s
+        th[i] = a
+
+
+@njit(cache=True)
+def footprint_distance_at(x: float, y: float, circle: bool, radius: float, front: float, rear: float,
+                          half_w: float) -> float:
+    """``footprint_signed_distance`` of one point, for the kernels (the circle of ``radius``, else the
+    rectangle ``[-rear, front] x [-half_w, half_w]``)."""
+    if circle:
+        return math.hypot(x, y) - radius
+    dx = max(x - front, -rear - x)
+    dy = abs(y) - half_w
+    return math.hypot(max(dx, 0.0), max(dy, 0.0)) + min(max(dx, dy), 0.0)
+
+
+@njit(cache=True)
+def _sweep_touches(points: F64, v: float, vy: float, w: float, t_end: float, travel: float, margin: float,
+                   outer_r: float, circle: bool, radius: float, front: float, rear: float,
+                   half_w: float) -> int:
+    """``arc_touches`` on C-contiguous (M, 2) points, ``travel`` = |(v, vy)| t_end given (Python's
+    ``math.hypot`` is not the C library's): 1 touches, 0 not, -1 a non-finite sweep with points within
+    reach (no pose count)."""
+    bound = outer_r + travel + margin
+    b2 = bound * bound
+    m = points.shape[0]
+    idx = np.empty(m, dtype=np.int64)
+    cnt = 0
+    for i in range(m):
+        x, y = points[i, 0], points[i, 1]
+        if x * x + y * y <= b2:
+            idx[cnt] = i
+            cnt += 1
+    if cnt == 0:
+        return 0
+    reach = travel + abs(w) * outer_r * t_end
+    if not math.isfinite(reach):
+        return -1
+    n = min(max(math.ceil(reach / _SWEEP_STEP_M), 1), _SWEEP_MAX_POSES)
+    px, py, th = np.empty(n + 1), np.empty(n + 1), np.empty(n + 1)
+    _arc_fill(v, vy, w, t_end, n, px, py, th)
+    ct, st = np.empty(n + 1), np.empty(n + 1)
+    for k in range(n + 1):
+        ct[k] = dm.cos(th[k])
+        st[k] = dm.sin(th[k])
+    for t in range(cnt):
+        x, y = points[idx[t], 0], points[idx[t], 1]
+        lim = 0.0
+        for k in range(n + 1):
+            dx, dy = x - px[k], y - py[k]
+            qx, qy = ct[k] * dx + st[k] * dy, -st[k] * dx + ct[k] * dy  # in the robot frame at pose k
+            d = footprint_distance_at(qx, qy, circle, radius, front, rear, half_w)
+            if k == 0:
+                lim = d - 1e-9
+            elif d <= margin and d < lim:
+                return 1
+    return 0
+
+
+def kernel_points(points_xy: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(M, 2) points as the kernels take them: C-contiguous, float64 and writable (a read-only array would
+    compile a second specialisation of each kernel)."""
+    pts = np.ascontiguousarray(points_xy, dtype=np.float64)
+    return pts if pts.flags.writeable else pts.copy()
 
 
 def arc_touches(
@@ -313,24 +399,20 @@ def arc_touches(
     """True when the footprint, moved along the constant-twist arc for ``t_end_s``, comes within
     ``margin_m`` of a point *and closer than it is now* (a point beside a robot driving parallel to it,
     or already under it, does not block every motion; one the motion approaches does). Footprint poses
-    are checked every 2 cm of the farthest footprint point's travel (at most 48 poses)."""
+    are checked every 2 cm of the farthest footprint point's travel (at most 48 poses, ``arc_poses``);
+    only points the moving footprint's enclosing circle can reach are tested (the centre moves at most
+    the travel)."""
     if points_xy.shape[0] == 0 or t_end_s <= 0.0:
         return False
+    pts = kernel_points(points_xy)
     travel = math.hypot(v_mps, vy_mps) * t_end_s
-    # only points the moving footprint's enclosing circle can reach (the centre moves at most ``travel``)
-    bound = robot.outer_radius_m + travel + margin_m
-    points_xy = points_xy[dm.sqdist(points_xy) <= bound * bound]
-    if points_xy.shape[0] == 0:
-        return False
-    px, py, th = arc_poses(v_mps, vy_mps, w_radps, t_end_s, robot)
-    # points expressed in each future robot frame: R(-th) (p - t)
-    dx = points_xy[None, :, 0] - px[:, None]
-    dy = points_xy[None, :, 1] - py[:, None]
-    ct, st = dm.cos_a(th)[:, None], dm.sin_a(th)[:, None]
-    local = np.stack([ct * dx + st * dy, -st * dx + ct * dy], axis=-1)
-    d = footprint_signed_distance(local, robot)  # (n + 1, M); row 0 is now
-    closer = d[1:] < d[:1] - 1e-9
-    return bool(np.any((d[1:] <= margin_m) & closer))
+    hit = _sweep_touches(pts, v_mps, vy_mps, w_radps, t_end_s, travel, margin_m, robot.outer_radius_m,
+                         robot.shape == "circle", robot.radius_m, robot.front_m, robot.rear_m,
+                         robot.width_m / 2.0)
+    if hit < 0:
+        raise ValueError(f"arc_touches: a non-finite sweep (v {v_mps}, vy {vy_mps}, w {w_radps}, "
+                         f"t {t_end_s})")
+    return hit == 1
 
 
 def swept_collision(
@@ -379,10 +461,23 @@ def unconfirmed_cells(grid_xy: NDArray[np.float64], scan_xy: NDArray[np.float64]
     if grid_xy.shape[0] == 0 or scan_xy.shape[0] == 0:
         return grid_xy
     r = 0.5 * math.sqrt(2.0) * cell_m
-    d2 = (np.square(grid_xy[:, None, 0] - scan_xy[None, :, 0])
-          + np.square(grid_xy[:, None, 1] - scan_xy[None, :, 1]))
-    keep: NDArray[np.float64] = grid_xy[~np.any(d2 <= r * r, axis=1)]
-    return keep
+    keep = np.empty(grid_xy.shape[0], dtype=np.bool_)
+    _unconfirmed_kernel(kernel_points(grid_xy), kernel_points(scan_xy), r * r, keep)
+    out: NDArray[np.float64] = grid_xy[keep]
+    return out
+
+
+@njit(cache=True)
+def _unconfirmed_kernel(grid: F64, scan: F64, r2: float, keep: NDArray[np.bool_]) -> None:
+    """keep[i]: no scan point within squared distance ``r2`` of grid point i."""
+    for i in range(grid.shape[0]):
+        gx, gy = grid[i, 0], grid[i, 1]
+        keep[i] = True
+        for j in range(scan.shape[0]):
+            dx, dy = gx - scan[j, 0], gy - scan[j, 1]
+            if dx * dx + dy * dy <= r2:
+                keep[i] = False
+                break
 
 
 def swept_touch(
