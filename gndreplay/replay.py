@@ -48,6 +48,7 @@ __all__ = [
     "check_navigation",
     "corrected_stream",
     "far_goal_warning",
+    "matcher_factory",
     "mounting_for",
     "run_replay",
     "warm_up_all",

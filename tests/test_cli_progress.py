@@ -52,11 +52,16 @@ def test_run_progress_can_be_silenced(tmp_path: Path, silent: list[str]) -> None
     assert progress_lines(res.stderr) == []
 
 
-def test_scanmatch_shows_each_matcher_pass(tmp_path: Path) -> None:
-    res = runner.invoke(app, ["scanmatch", str(SAMPLE), "--progress", "plain", "--out", str(tmp_path / "sm")])
+@pytest.mark.parametrize(("flag", "expected"), [
+    ("--no-parallel", {"odom", "idc", "kiss-icp"}),  # one pass per matcher
+    ("--parallel", {"odom + idc + kiss-icp"}),  # one pass, the matchers side by side
+])
+def test_scanmatch_shows_each_matcher_pass(tmp_path: Path, flag: str, expected: set[str]) -> None:
+    res = runner.invoke(app, ["scanmatch", str(SAMPLE), "--progress", "plain", "--out", str(tmp_path / "sm"),
+                              flag])
     assert res.exit_code == 0, res.output
     passes = [m["what"] for m in progress_lines(res.stderr)]
-    assert passes and set(passes) == {f"office.clf.bz2: {m}" for m in ("odom", "idc", "kiss-icp")}
+    assert passes and set(passes) == {f"office.clf.bz2: {m}" for m in expected}
 
 
 def test_simulate_shows_the_scenario_time(tmp_path: Path) -> None:

@@ -247,17 +247,17 @@ def test_matcher_warm_up_compiles_what_real_ticks_need() -> None:
     code = f"""
 from gndreplay.config import PRESETS
 from gndreplay.io import read_ticks
-from gndreplay.replay import _make_matcher, _warm_up_matcher
-from gndreplay.scanmatch import _idc_kernels as k
+from gndreplay.replay import matcher_factory
+from gndreplay.scanmatch import _idc_kernels as k, warm_up_matcher
 
 def signatures():
     return {{n: len(o.signatures) for n, o in vars(k).items() if hasattr(o, "signatures")}}
 
 cfg = PRESETS["wheelchair"]
-_warm_up_matcher(cfg)
+warm_up_matcher(matcher_factory(cfg))
 before = signatures()
 assert before["scan_points"] and before["match_scan"], before
-m = _make_matcher(cfg)
+m = matcher_factory(cfg)()
 for tick, _ in zip(read_ticks({str(SAMPLE)!r}), range(5)):
     m.update(tick.scan, tick.odom)
 after = signatures()

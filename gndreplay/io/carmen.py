@@ -50,17 +50,20 @@ from __future__ import annotations
 import bz2
 import contextlib
 import gzip
+import io
 import itertools
 import logging
 import math
 import os
+import queue
 import re
+import threading
 import zlib
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -294,9 +297,67 @@ def _compose(a: Pose2D, b: Pose2D) -> Pose2D:
 # opening
 
 
+class _Decompressing(io.RawIOBase):
+    """A compressed stream decompressed ahead by a thread, ``_CHUNK`` bytes at a time, at most ``_AHEAD``
+    chunks ahead: bz2 and zlib release the GIL while they work, so a log's decompression overlaps its
+    parsing (on a second core). The same bytes in the same order; a decompression error is raised by the
+    read that reaches it."""
+
+    _CHUNK = 1 << 16
+    _AHEAD = 4
+
+    def __init__(self, stream: io.BufferedIOBase) -> None:
+        super().__init__()
+        self._stream = stream
+        self._chunks: queue.Queue[bytes | BaseException] = queue.Queue(self._AHEAD)
+        self._stop = threading.Event()
+        self._buf = b""
+        self._eof = False
+        self._thread = threading.Thread(target=self._fill, name="gndreplay-decompress", daemon=True)
+        self._thread.start()
+
+    def _fill(self) -> None:
+        while not self._stop.is_set():
+            try:
+                chunk: bytes | BaseException = self._stream.read(self._CHUNK)
+            except BaseException as err:  # handed to the reader, raised where the data ends
+                chunk = err
+            while not self._stop.is_set():
+                try:
+                    self._chunks.put(chunk, timeout=0.1)
+                    break
+                except queue.Full:
+                    continue
+            if not chunk or isinstance(chunk, BaseException):
+                return
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, b: Any) -> int:
+        if not self._buf and not self._eof:
+            chunk = self._chunks.get()
+            if isinstance(chunk, BaseException):
+                self._eof = True
+                raise chunk
+            self._eof = not chunk
+            self._buf = chunk
+        n = min(len(b), len(self._buf))
+        b[:n] = self._buf[:n]
+        self._buf = self._buf[n:]
+        return n
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
+        self._stream.close()
+        super().close()
+
+
 class _LogFile:
-    """A log's bytes, decompressed by suffix (plain / .gz / .bz2; lines are parsed as bytes: faster), and
-    how far into the file on disk they have been read: the progress of a pass whose length is unknown."""
+    """A log's bytes, decompressed by suffix (plain / .gz / .bz2, ahead of the parsing by a thread: lines
+    are parsed as bytes), and how far into the file on disk they have been read: the progress of a pass
+    whose length is unknown."""
 
     def __init__(self, path: Path) -> None:
         self._raw = open(path, "rb")  # noqa: SIM115 - closed by close()
@@ -305,9 +366,9 @@ class _LogFile:
             suffix = path.suffix.lower()
             self._fh: IO[bytes] = self._raw
             if suffix == ".gz":
-                self._fh = gzip.GzipFile(fileobj=self._raw, mode="rb")  # type: ignore[assignment]
+                self._fh = io.BufferedReader(_Decompressing(gzip.GzipFile(fileobj=self._raw, mode="rb")))
             elif suffix == ".bz2":
-                self._fh = bz2.BZ2File(self._raw, "rb")
+                self._fh = io.BufferedReader(_Decompressing(bz2.BZ2File(self._raw, "rb")))
         except BaseException:
             self._raw.close()
             raise
