@@ -8,11 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_report import write_run
 
 from gndreplay.report import MapSink, build_report, load_maps
 from gndreplay.report.maps import HitRaster, save_maps
 from gndreplay.report.mcap_export import MAP_STEP, hits_to_occupancy
-from test_report import write_run
 
 T = 4  # tile side [cells] of the small rasters below
 BUDGET = 4 * 4 * T * T  # 4 x 4 tiles
@@ -23,7 +23,8 @@ def lawnmower_points(side_m: float, rng: np.random.Generator, n: int = 400) -> l
     grows batch after batch, as a long drive does), with points on exact cell edges and a few nan."""
     batches = []
     for x in np.arange(0.0, side_m, side_m / 8):
-        pts = np.column_stack([np.full(n, x) + rng.normal(0.0, 0.3, n), rng.uniform(-side_m / 2, side_m / 2, n)])
+        pts = np.column_stack([np.full(n, x) + rng.normal(0.0, 0.3, n),
+                               rng.uniform(-side_m / 2, side_m / 2, n)])
         pts[:20] = np.round(pts[:20] * 10.0) / 10.0  # on the lattice of 0.1 m (and its multiples)
         pts[20:22] = np.nan
         batches.append(pts)
