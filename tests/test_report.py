@@ -169,7 +169,7 @@ def test_hit_raster_counts_points_in_their_cells_across_tiles() -> None:
     r.add(np.array([[0.05, 0.05], [0.05, 0.05], [-0.05, 0.35], [1.23, -0.91], [np.nan, 0.0]]))
     a, (x0, y0) = r.to_array()
     assert (x0, y0) == pytest.approx((-0.1, -1.0))
-    assert a.sum() == 4 and a.dtype == np.uint32
+    assert a.sum() == 4 and a.dtype == np.uint16
     assert a[int((0.05 - y0) // 0.1), int((0.05 - x0) // 0.1)] == 2
     assert a[int((0.35 - y0) // 0.1), int((-0.05 - x0) // 0.1)] == 1
     assert a[int((-0.91 - y0) // 0.1), int((1.23 - x0) // 0.1)] == 1

@@ -6,6 +6,7 @@ switch, no window. PNGs are saved at a fixed dpi without metadata, so the same f
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -160,7 +161,22 @@ def _hits(ax: Axes, data: RunData, hits: NDArray[Any], extent: Box, box: Box) ->
         if c1 <= c0 or r1 <= r0:
             return
         hits, extent = hits[r0:r1, c0:c1], (x0 + c0 * cx, x0 + c1 * cx, y0 + r0 * cy, y0 + r1 * cy)
-    plot_hit_raster(ax, hits, extent)
+    plot_hit_raster(ax, hits, extent, max_pixels=_raster_pixels(ax, hits.shape, extent, box))
+
+
+def _raster_pixels(ax: Axes, shape: tuple[int, ...], extent: Box, box: Box, most: int = 1600) -> int:
+    """``hit_image``'s ``max_pixels`` for a raster of ``shape`` over ``extent`` drawn in ``box``: pooled
+    no further than one cell per pixel of the saved PNG (the axes at ``DPI``, before the layout, which only
+    shrinks them), so the figure shows the same, and matplotlib never resamples more cells than that
+    (its working copies are several times the image); at most ``most``."""
+    bb = ax.get_window_extent()  # display pixels at the figure's dpi
+    scale = DPI / ax.figure.dpi
+    share_x = min(1.0, (extent[1] - extent[0]) / max(box[1] - box[0], 1e-9))
+    share_y = min(1.0, (extent[3] - extent[2]) / max(box[3] - box[2], 1e-9))
+    px_w = max(1.0, bb.width * scale * share_x)
+    px_h = max(1.0, bb.height * scale * share_y)
+    f = max(1, math.floor(min(shape[1] / px_w, shape[0] / px_h)))
+    return min(most, -(-max(shape) // f))
 
 
 def _set_box(ax: Axes, box: tuple[float, float, float, float]) -> None:

@@ -2,12 +2,14 @@
 
 ``gndreplay report RUN_DIR`` must redraw the figures without the log, so the run keeps what the map panels
 need: two global hit-count rasters (every scan hit placed with the corrected pose and with the raw odometry
-pose) and one snapshot of the robot-centred grid. Memory is bounded by the explored area (tiles are created
-where hits land) and by a fixed number of grid snapshots, never by the log length.
+pose) and one snapshot of the robot-centred grid. Memory is bounded whatever the log's length and the area it
+covers: tiles are created where hits land, up to ``MAX_RASTER_CELLS`` cells per raster, beyond which a
+raster is re-binned at twice the cell side (``HitRaster``); and a fixed number of grid snapshots is kept.
 
 maps.npz keys (all numpy arrays; scalars are 0-d):
     format_version: 1.
-    cell_m: side of a raster cell [m].
+    cell_m: side of a raster cell [m], of both rasters: the configured side (5 cm), or a power-of-two
+        multiple of it when the hits spread over more than ``MAX_RASTER_CELLS`` cells at that side.
     corrected_hits, raw_hits: (H, W) uint16 hit counts (saturated at 65535), ``[row, col]`` with row along
         world y; corrected_origin_xy, raw_origin_xy: (2,) world (x, y) [m] of the outer corner of cell (0, 0).
     scans: number of scans accumulated.
@@ -44,6 +46,7 @@ from ..types import BUDGET_FLAGS, Pose2D, Tick
 __all__ = [
     "MAPS_FILE",
     "MAX_MAPS_BYTES",
+    "MAX_RASTER_CELLS",
     "GridSnapshot",
     "HitRaster",
     "MapSink",
@@ -56,90 +59,176 @@ FORMAT_VERSION = 1
 MAX_MAPS_BYTES = 1 << 30
 """Most bytes the arrays of a maps.npz may declare together, and the largest file read (1 GB: the two
 rasters of 5 cm cells over 1 km x 500 m)."""
+MAX_RASTER_CELLS = 1 << 24
+"""Most cells a hit raster spans (16.8 M: 32 MB of tiles, and at most that in maps.npz); a larger area is
+accumulated at a coarser cell (``HitRaster``)."""
+MAX_ABS_COORD_M = 1e9
+"""Hits farther than this from the origin on either axis are ignored (they would not fit an int64 cell)."""
 _U16_MAX = np.iinfo(np.uint16).max
-_KEY_OFF, _KEY_MUL = 2**20, 2**21
 
 
 class HitRaster:
-    """A sparse, tiled hit-count raster over the plane: square tiles of ``tile_cells`` cells are created
-    where points land, so memory follows the explored area.
+    """A sparse, tiled hit-count raster over the plane whose memory is bounded whatever the area.
+
+    Square tiles of ``tile_cells`` cells are created where points land, so memory follows the explored
+    area, up to ``max_cells``: the tiles' bounding box never spans more cells than that. A point that would
+    widen the box past it first re-bins the raster at twice the cell side (each coarse cell sums its four
+    fine cells), as often as needed, so ``cell_m`` grows with the area covered while tile memory stays
+    under ``2 * max_cells`` bytes and ``to_array`` under ``max_cells`` cells. The counts are those of a
+    raster accumulated at the final cell side from the start, saturated at 65535.
 
     Cell (i, j) of the world lattice spans x in [j c, (j + 1) c), y in [i c, (i + 1) c) with c = cell_m.
+    Points with a non-finite coordinate, or one beyond ``MAX_ABS_COORD_M``, are ignored.
     """
 
-    def __init__(self, cell_m: float = 0.05, *, tile_cells: int = 256, batch_points: int = 1 << 16) -> None:
-        if not cell_m > 0.0:
-            raise ValueError(f"cell_m must be > 0, got {cell_m!r}")
+    def __init__(self, cell_m: float = 0.05, *, tile_cells: int = 256, batch_points: int = 1 << 16,
+                 max_cells: int = MAX_RASTER_CELLS) -> None:
+        if not (math.isfinite(cell_m) and cell_m > 0.0):
+            raise ValueError(f"cell_m must be finite and > 0, got {cell_m!r}")
         if tile_cells < 1:
             raise ValueError(f"tile_cells must be >= 1, got {tile_cells!r}")
-        self.cell_m = float(cell_m)
+        if max_cells < 4 * tile_cells * tile_cells:  # any box shrinks to 2 x 2 tiles, never to one
+            raise ValueError(f"max_cells must hold 2 x 2 tiles (4 * {tile_cells}**2), got {max_cells!r}")
+        self.base_cell_m = float(cell_m)
+        self.level = 0
         self.tile_cells = int(tile_cells)
         self.batch_points = int(batch_points)
-        self._tiles: dict[tuple[int, int], NDArray[np.uint32]] = {}
+        self.max_cells = int(max_cells)
+        self._tiles: dict[tuple[int, int], NDArray[np.uint16]] = {}
+        self._box: tuple[int, int, int, int] | None = None  # tile rows r0..r1, cols c0..c1 (inclusive)
         self._pending: list[NDArray[np.float64]] = []
         self._n_pending = 0
 
     @property
+    def cell_m(self) -> float:
+        """Side of a cell [m]: the base side times 2 ** ``level`` (exact: a power of two)."""
+        return self.base_cell_m * 2.0**self.level
+
+    @property
     def n_tiles(self) -> int:
         """Tiles allocated (after counting the pending points)."""
-        self._flush()
+        self.flush()
         return len(self._tiles)
 
     def add(self, xy: NDArray[np.float64]) -> None:
-        """Count the world points ``xy`` (M, 2) [m] into their cells (non-finite points are ignored).
+        """Count the world points ``xy`` (M, 2) [m] into their cells.
 
         Points are buffered and counted in batches of ``batch_points`` (per-call numpy overhead dominates
-        for a single scan); ``to_array`` and ``n_tiles`` count what is pending first."""
+        for a single scan); ``flush``, ``to_array``, ``n_tiles`` and ``coarsen_to`` count the pending ones
+        first."""
         p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         self._pending.append(p)
         self._n_pending += p.shape[0]
         if self._n_pending >= self.batch_points:
-            self._flush()
+            self.flush()
 
-    def _flush(self) -> None:
+    def flush(self) -> None:
+        """Count the pending points (which may coarsen the raster)."""
         if not self._pending:
             return
         p = np.concatenate(self._pending) if len(self._pending) > 1 else self._pending[0]
         self._pending, self._n_pending = [], 0
-        p = p[np.isfinite(p).all(axis=1)]
+        p = p[(np.abs(p) <= MAX_ABS_COORD_M).all(axis=1)]  # also drops nan
         if p.shape[0] == 0:
             return
+        while True:
+            c = self.cell_m
+            rows = np.floor(p[:, 1] / c).astype(np.int64)
+            cols = np.floor(p[:, 0] / c).astype(np.int64)
+            t = self.tile_cells
+            box = (int(rows.min()) // t, int(rows.max()) // t, int(cols.min()) // t, int(cols.max()) // t)
+            if self._box is not None:
+                box = _union(box, self._box)
+            if self._box_cells(box) <= self.max_cells:
+                break
+            self._coarsen()
+        self._box = box
+        self._accumulate(rows, cols, None)
+
+    def _box_cells(self, box: tuple[int, int, int, int]) -> int:
+        r0, r1, c0, c1 = box
+        return (r1 - r0 + 1) * (c1 - c0 + 1) * self.tile_cells**2
+
+    def _accumulate(self, rows: NDArray[np.int64], cols: NDArray[np.int64],
+                    weights: NDArray[np.uint16] | None) -> None:
+        """Add ``weights`` (None: 1 each) to the cells (rows, cols) of the current level, saturating."""
         t = self.tile_cells
-        rows = np.floor(p[:, 1] / self.cell_m).astype(np.int64)
-        cols = np.floor(p[:, 0] / self.cell_m).astype(np.int64)
         tr, lr = np.divmod(rows, t)
         tc, lc = np.divmod(cols, t)
         local = lr * t + lc
-        key = (tr + _KEY_OFF) * _KEY_MUL + (tc + _KEY_OFF)  # one int64 per tile (|index| < 2**20)
+        r0, c0 = int(tr.min()), int(tc.min())
+        span = int(tc.max()) - c0 + 1
+        key = (tr - r0) * span + (tc - c0)  # one int64 per tile, relative to the points' own box
         order = np.argsort(key, kind="stable")
         k_sorted = key[order]
         cuts = np.flatnonzero(k_sorted[1:] != k_sorted[:-1]) + 1
         for a, b in zip(np.r_[0, cuts].tolist(), np.r_[cuts, key.size].tolist(), strict=True):
             k = int(k_sorted[a])
-            ij = (k // _KEY_MUL - _KEY_OFF, k % _KEY_MUL - _KEY_OFF)
+            ij = (r0 + k // span, c0 + k % span)
+            idx = order[a:b]
+            counts = np.bincount(local[idx], weights=None if weights is None else weights[idx],
+                                 minlength=t * t)
             tile = self._tiles.get(ij)
             if tile is None:
-                tile = self._tiles[ij] = np.zeros((t, t), dtype=np.uint32)
-            np.add.at(tile.reshape(-1), local[order[a:b]], np.uint32(1))  # a view: tiles are C-contiguous
+                tile = self._tiles[ij] = np.zeros((t, t), dtype=np.uint16)
+            flat = tile.reshape(-1)  # a view: tiles are C-contiguous
+            total = flat + counts  # int64 or float64 (weighted): exact far beyond 65535
+            flat[:] = np.minimum(total, _U16_MAX)
 
-    def to_array(self) -> tuple[NDArray[np.uint32], tuple[float, float]]:
-        """The dense raster cropped to the cells that hold hits, and the world (x, y) [m] of the outer
-        corner of its cell (0, 0). An empty raster is (1, 1) zeros at the origin."""
-        self._flush()
-        if not self._tiles:
-            return np.zeros((1, 1), dtype=np.uint32), (0.0, 0.0)
+    def _coarsen(self) -> None:
+        """Re-bin every tile at twice the cell side: cell (i, j) goes to (i // 2, j // 2), counts summed."""
         t = self.tile_cells
-        keys = np.array(list(self._tiles.keys()), dtype=np.int64)
-        r0, c0 = keys.min(axis=0)
-        r1, c1 = keys.max(axis=0) + 1
-        dense = np.zeros(((r1 - r0) * t, (c1 - c0) * t), dtype=np.uint32)
+        old, self._tiles = self._tiles, {}
+        self.level += 1
+        while old:
+            (i, j), tile = old.popitem()  # released as it is re-binned
+            nz = np.flatnonzero(tile)
+            if nz.size:
+                lr, lc = np.divmod(nz, t)
+                self._accumulate((i * t + lr) // 2, (j * t + lc) // 2, tile.reshape(-1)[nz])
+        if self._tiles:
+            keys = np.array(list(self._tiles), dtype=np.int64)
+            lo, hi = keys.min(axis=0), keys.max(axis=0)
+            self._box = (int(lo[0]), int(hi[0]), int(lo[1]), int(hi[1]))
+        else:
+            self._box = None
+
+    def coarsen_to(self, level: int) -> None:
+        """Re-bin until the cell side is ``base_cell_m * 2 ** level`` (no change at or past it)."""
+        self.flush()
+        while self.level < level:
+            self._coarsen()
+
+    def to_array(self) -> tuple[NDArray[np.uint16], tuple[float, float]]:
+        """The dense raster (saturated at 65535) cropped to the cells that hold hits, and the world (x, y)
+        [m] of the outer corner of its cell (0, 0); at most ``max_cells`` cells, built without a larger
+        intermediate. An empty raster is (1, 1) zeros at the origin."""
+        self.flush()
+        t = self.tile_cells
+        row_lo = col_lo = np.iinfo(np.int64).max
+        row_hi = col_hi = np.iinfo(np.int64).min
         for (i, j), tile in self._tiles.items():
-            dense[(i - r0) * t : (i - r0 + 1) * t, (j - c0) * t : (j - c0 + 1) * t] = tile
-        rows = np.flatnonzero(dense.any(axis=1))
-        cols = np.flatnonzero(dense.any(axis=0))
-        cropped = dense[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]
-        origin = ((c0 * t + cols[0]) * self.cell_m, (r0 * t + rows[0]) * self.cell_m)
-        return np.ascontiguousarray(cropped), (float(origin[0]), float(origin[1]))
+            rows = np.flatnonzero(tile.any(axis=1))
+            if rows.size == 0:
+                continue
+            cols = np.flatnonzero(tile.any(axis=0))
+            row_lo, row_hi = min(row_lo, i * t + int(rows[0])), max(row_hi, i * t + int(rows[-1]))
+            col_lo, col_hi = min(col_lo, j * t + int(cols[0])), max(col_hi, j * t + int(cols[-1]))
+        if row_hi < row_lo:
+            return np.zeros((1, 1), dtype=np.uint16), (0.0, 0.0)
+        out = np.zeros((row_hi - row_lo + 1, col_hi - col_lo + 1), dtype=np.uint16)
+        for (i, j), tile in self._tiles.items():
+            a0, a1 = max(i * t, row_lo), min((i + 1) * t, row_hi + 1)
+            b0, b1 = max(j * t, col_lo), min((j + 1) * t, col_hi + 1)
+            if a0 < a1 and b0 < b1:
+                out[a0 - row_lo : a1 - row_lo, b0 - col_lo : b1 - col_lo] = \
+                    tile[a0 - i * t : a1 - i * t, b0 - j * t : b1 - j * t]
+        c = self.cell_m
+        return out, (float(col_lo * c), float(row_lo * c))
+
+
+def _union(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
+    return (min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3]))
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -213,10 +302,11 @@ class MapSink:
     chosen tick is within about duration / max_snapshots of the middle.
 
     Args:
-        cell_m: raster cell side [m].
+        cell_m: raster cell side [m] (coarser where the hits spread over more than ``max_cells`` cells).
         max_range_m: ignore hits farther than this from the laser (None: all hits).
         snapshot_at_s: see above.
         max_snapshots: bound of the candidate buffer (>= 2).
+        max_cells: most cells each raster spans (``HitRaster``).
     """
 
     def __init__(
@@ -226,11 +316,12 @@ class MapSink:
         max_range_m: float | None = None,
         snapshot_at_s: float | None = None,
         max_snapshots: int = 16,
+        max_cells: int = MAX_RASTER_CELLS,
     ) -> None:
         if max_snapshots < 2:
             raise ValueError(f"max_snapshots must be >= 2, got {max_snapshots!r}")
-        self.corrected = HitRaster(cell_m)
-        self.raw = HitRaster(cell_m)
+        self.corrected = HitRaster(cell_m, max_cells=max_cells)
+        self.raw = HitRaster(cell_m, max_cells=max_cells)
         self.max_range_m = max_range_m
         self.snapshot_at_s = snapshot_at_s
         self.max_snapshots = max_snapshots
@@ -313,23 +404,27 @@ class MapSink:
         """RunSink hook for a failed replay: nothing to release (the rasters are in memory)."""
 
 
-def _u16(a: NDArray[np.uint32]) -> NDArray[np.uint16]:
-    return np.minimum(a, _U16_MAX).astype(np.uint16)
-
-
 def save_maps(
     path: Path, corrected: HitRaster, raw: HitRaster, snap: GridSnapshot | None, *, scans: int
 ) -> None:
-    """Write the rasters and the snapshot as a compressed npz (keys in the module docstring)."""
+    """Write the rasters and the snapshot as a compressed npz (keys in the module docstring). The two
+    rasters share one cell side: the finer one is re-binned to the coarser one's first."""
+    if corrected.base_cell_m != raw.base_cell_m:
+        raise ValueError(f"the rasters' cell sides differ: {corrected.base_cell_m} and {raw.base_cell_m} m")
+    corrected.flush()
+    raw.flush()
+    level = max(corrected.level, raw.level)
+    corrected.coarsen_to(level)
+    raw.coarsen_to(level)
     cor, cor_o = corrected.to_array()
     raw_a, raw_o = raw.to_array()
     arrays: dict[str, Any] = {
         "format_version": np.int64(FORMAT_VERSION),
         "cell_m": np.float64(corrected.cell_m),
         "scans": np.int64(scans),
-        "corrected_hits": _u16(cor),
+        "corrected_hits": cor,
         "corrected_origin_xy": np.asarray(cor_o, dtype=np.float64),
-        "raw_hits": _u16(raw_a),
+        "raw_hits": raw_a,
         "raw_origin_xy": np.asarray(raw_o, dtype=np.float64),
     }
     if snap is not None:

@@ -122,11 +122,18 @@ def grid_to_occupancy(cells: NDArray[np.uint8]) -> NDArray[np.int8]:
     return np.take(_OCCUPANCY, c).ravel()
 
 
-def hits_to_occupancy(hits: NDArray[np.uint32]) -> NDArray[np.int8]:
-    """(H, W) hit counts -> row-major int8 OccupancyGrid data: ``MAP_STEP`` per hit up to 100, -1 unhit."""
-    h = np.asarray(hits)
-    occ = np.minimum(h.astype(np.int64) * MAP_STEP, 100)
-    return np.where(h > 0, occ, -1).astype(np.int8).ravel()
+def hits_to_occupancy(hits: NDArray[np.unsignedinteger[Any]]) -> NDArray[np.int8]:
+    """(H, W) hit counts -> row-major int8 OccupancyGrid data: ``MAP_STEP`` per hit up to 100, -1 unhit.
+
+    Converted a block of cells at a time, so the only full-size array is the int8 result."""
+    h = np.asarray(hits).reshape(-1)
+    out = np.empty(h.size, dtype=np.int8)
+    block = 1 << 20
+    for a in range(0, h.size, block):
+        part = h[a : a + block]
+        occ = np.minimum(part, -(-100 // MAP_STEP)).astype(np.int16) * MAP_STEP
+        out[a : a + block] = np.where(part > 0, np.minimum(occ, 100), -1)
+    return out
 
 
 def scan_beams(angles: NDArray[np.float64],

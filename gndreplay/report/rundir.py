@@ -33,6 +33,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+from array import array
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -211,33 +212,33 @@ def tick_tables(run_dir: Path, *, enforce_budgets: bool
 
 class TrajectoryWriter:
     """Raw-odometry, corrected and (where the log has it) true poses of every scan, written as TUM at the
-    end."""
+    end; held packed (``array.array``: 64 bytes per scan, 96 with a true pose)."""
 
     def __init__(self) -> None:
-        self.t_ns: list[int] = []
-        self.odom: list[tuple[float, float, float]] = []
-        self.corrected: list[tuple[float, float, float]] = []
-        self.truth_t_ns: list[int] = []
-        self.truth: list[tuple[float, float, float]] = []
+        self.t_ns = array("q")
+        self.odom = array("d")  # x, y, theta per scan
+        self.corrected = array("d")
+        self.truth_t_ns = array("q")
+        self.truth = array("d")
 
     def add(self, t_ns: int, odom: Pose2D, corrected: Pose2D, truth: Pose2D | None = None) -> None:
         """A scan's stamp, raw-odometry pose, corrected pose and ground-truth pose (None: none at it)."""
         self.t_ns.append(t_ns)
-        self.odom.append((odom.x, odom.y, odom.theta))
-        self.corrected.append((corrected.x, corrected.y, corrected.theta))
+        self.odom.extend((odom.x, odom.y, odom.theta))
+        self.corrected.extend((corrected.x, corrected.y, corrected.theta))
         if truth is not None:
             self.truth_t_ns.append(t_ns)
-            self.truth.append((truth.x, truth.y, truth.theta))
+            self.truth.extend((truth.x, truth.y, truth.theta))
 
     def arrays(self) -> dict[str, tuple[NDArray[np.int64], F64]]:
         """file name -> (stamps [ns], (N, 3) poses) of each trajectory; the truth only when a scan had one."""
         n = len(self.t_ns)
-        t = np.asarray(self.t_ns, dtype=np.int64)
-        out = {ODOM_TRAJECTORY_FILE: (t, np.asarray(self.odom, dtype=np.float64).reshape(n, 3)),
-               CORRECTED_TRAJECTORY_FILE: (t, np.asarray(self.corrected, dtype=np.float64).reshape(n, 3))}
-        if self.truth:
-            out[TRUTH_TRAJECTORY_FILE] = (np.asarray(self.truth_t_ns, dtype=np.int64),
-                                          np.asarray(self.truth, dtype=np.float64).reshape(-1, 3))
+        t = np.array(self.t_ns, dtype=np.int64)
+        out = {ODOM_TRAJECTORY_FILE: (t, np.array(self.odom, dtype=np.float64).reshape(n, 3)),
+               CORRECTED_TRAJECTORY_FILE: (t, np.array(self.corrected, dtype=np.float64).reshape(n, 3))}
+        if self.truth_t_ns:
+            out[TRUTH_TRAJECTORY_FILE] = (np.array(self.truth_t_ns, dtype=np.int64),
+                                          np.array(self.truth, dtype=np.float64).reshape(-1, 3))
         return out
 
     def write(self, run_dir: Path) -> dict[str, tuple[NDArray[np.int64], F64]]:

@@ -18,6 +18,7 @@ with the odometry, the longest stretch without an accepted match, and a warning 
 from __future__ import annotations
 
 import math
+from array import array
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -85,46 +86,56 @@ class SummaryOptions(Protocol):
 
 
 class SummaryRecorder:
-    """Accumulates the per-tick numbers the summary needs (a few floats per tick), as the replay streams."""
+    """Accumulates the per-tick numbers the summary needs as the replay streams, packed: about 150 bytes
+    per tick (numbers in ``array.array``, each text once, ticks holding references to it), so a run of
+    many hours still holds only a few tens of MB."""
 
     def __init__(self, *, enforce_budgets: bool = False) -> None:
         self.enforce_budgets = enforce_budgets
-        self.t_s: list[float] = []
-        self.pose: list[tuple[float, float, float]] = []
-        self.cmd: list[tuple[float, float, float]] = []  # v, w, direction
-        self.timing: list[list[float]] = []
+        self.t_s = array("d")
+        self.pose = array("d")  # x, y, theta per tick
+        self.cmd = array("d")  # v, w, direction per tick
+        self.timing = array("d")  # len(MODULES) per tick
         self.modes: Counter[str] = Counter()
         self.situations: Counter[str] = Counter()
         self.flags: Counter[str] = Counter()
         self.over_budget: Counter[str] = Counter()
-        self.planner: list[tuple[float, float]] = []  # nodes expanded (cells for NF1), path length [m]
-        self.t_ns: list[int] = []
-        self.audit: list[tuple[str, str, str, str]] = []  # desired, active, takeover reason, GND mode / rule
-        self.match_ok: list[bool] = []  # per scan (also those the stack skips): match accepted
+        self.planner = array("d")  # nodes expanded (cells for NF1), path length [m] per tick
+        self.t_ns = array("q")
+        self.audit: tuple[list[str], list[str], list[str], list[str]] = ([], [], [], [])
+        """desired, active, takeover reason, GND mode / rule: one column per field, one entry per tick."""
+        self.match_ok = array("b")  # per scan (also those the stack skips): match accepted
         self.match_reason: list[str] = []  # why it failed ("" when accepted)
+        self._texts: dict[str, str] = {}
+
+    def _text(self, s: str) -> str:
+        """``s`` as the one string object of its value (a tick holds a reference, not a copy)."""
+        return self._texts.setdefault(s, s)
 
     def add_match(self, ok: bool, reason: str) -> None:
         """A scan the matcher corrected: every scan of the run, in time order (``--every`` runs the stack on
         fewer), one per pose of the trajectories."""
-        self.match_ok.append(ok)
-        self.match_reason.append("" if ok else reason)
+        self.match_ok.append(bool(ok))
+        self.match_reason.append("" if ok else self._text(reason))
 
     def add(self, r: TickResult) -> None:
         """A tick the stack ran on."""
         self.t_s.append(r.t_ns / 1e9)
         self.t_ns.append(r.t_ns)
-        self.audit.append((r.desired_mode, r.active_mode, csv_text(r.takeover_reason), r.mode.value))
+        for col, text in zip(self.audit, (r.desired_mode, r.active_mode, csv_text(r.takeover_reason),
+                                          r.mode.value), strict=True):
+            col.append(self._text(text))
         p = r.pose_corrected
-        self.pose.append((p.x, p.y, p.theta))
-        self.cmd.append((r.command.v_mps, r.command.w_radps, r.direction_rad))
-        self.timing.append([r.timings_ms.get(m, 0.0) for m in MODULES])
+        self.pose.extend((p.x, p.y, p.theta))
+        self.cmd.extend((r.command.v_mps, r.command.w_radps, r.direction_rad))
+        self.timing.extend(r.timings_ms.get(m, 0.0) for m in MODULES)
         self.modes[r.mode.value] += 1
         self.situations[r.situation.name] += 1
         for name in recorded_flags(r.flags, enforce_budgets=self.enforce_budgets).names():
             self.flags[name] += 1
         for name in (r.flags & BUDGET_FLAGS).names():
             self.over_budget[name] += 1
-        self.planner.append((float(r.planner_nodes), r.planner_length_m))
+        self.planner.extend((float(r.planner_nodes), r.planner_length_m))
 
 
 def motion_agreement(
@@ -184,7 +195,7 @@ def _latency(values: NDArray[np.float64]) -> dict[str, float]:
 def _planner_stats(rec: SummaryRecorder, cfg: Config) -> dict[str, Any]:
     """Which planner ran and its work per tick: nodes expanded (NF1: cells the wave labelled; tunnel: nodes
     expanded) and the length of the path or tunnel chain it returned, over the ticks where it found one."""
-    stats = np.asarray(rec.planner, dtype=np.float64).reshape(-1, 2)
+    stats = np.array(rec.planner, dtype=np.float64).reshape(-1, 2)
     out: dict[str, Any] = {"kind": cfg.planner.kind}
     for k, name in enumerate(("nodes", "path_m")):
         col = stats[np.isfinite(stats[:, k]), k]
@@ -311,13 +322,13 @@ def summarise(
     non-deterministic part) latency and the ticks over each module's time budget. ``flags`` counts what
     commands.csv records."""
     n = len(rec.t_s)
-    timing = np.asarray(rec.timing, dtype=np.float64).reshape(n, len(MODULES))
+    timing = np.array(rec.timing, dtype=np.float64).reshape(n, len(MODULES))
     latency = {m: _latency(timing[:, k]) for k, m in enumerate(MODULES)}
     latency["stack"] = _latency(timing[:, 1:].sum(axis=1))  # model + planner + reactor + supervisor
     latency["total"] = _latency(timing.sum(axis=1))
-    t = np.asarray(rec.t_s)
-    agreement = motion_agreement(t, np.asarray(rec.pose).reshape(n, 3), np.asarray(rec.cmd).reshape(n, 3))
-    desired, active, reasons, modes = (list(col) for col in zip(*rec.audit, strict=True)) if n else ([],) * 4
+    t = np.array(rec.t_s)
+    agreement = motion_agreement(t, np.array(rec.pose).reshape(n, 3), np.array(rec.cmd).reshape(n, 3))
+    desired, active, reasons, modes = rec.audit
     return {
         "gndreplay_version": __version__,
         "log": str(log),
