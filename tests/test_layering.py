@@ -1,6 +1,6 @@
 """The house is one-way: each layer imports only the layers below it, and no module imports itself back.
 
-Layers (docs/architecture.md): the foundation (types, geometry, detmath, errors, robot, fsutil), io
+Layers (docs/architecture.md): the foundation (types, geometry, detmath, errors, robot, fsutil, compiling), io
 (readers, with evaluation and info beside them), scanmatch, pipeline (which sees only the foundation: no
 log format, no report, no replay loop, no simulator), config, report, replay, sim, batch, cli. Every
 ``import`` in gndreplay/ is read from the source, the lazy ones inside functions included, so a layer
@@ -16,7 +16,7 @@ import gndreplay
 
 ROOT = Path(gndreplay.__file__).resolve().parent
 
-FOUNDATION = {"gndreplay", "types", "geometry", "detmath", "errors", "robot", "fsutil"}
+FOUNDATION = {"gndreplay", "types", "geometry", "detmath", "errors", "robot", "fsutil", "compiling"}
 #: Top-level package or module -> the ones it may import (besides itself and the foundation).
 ALLOWED: dict[str, set[str]] = {
     "io": set(),
