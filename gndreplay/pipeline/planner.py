@@ -130,5 +130,6 @@ class Planner(Protocol):
         """Plan on the robot-centred grid (UNKNOWN / FREE / OCCUPIED cells) from the robot cell to the goal
         (corner coordinates, see ``nf1.plan``). ``offset_rc``: the world cell of grid cell (0, 0), given by a
         caller that plans on one grid re-centred by whole cells tick after tick, so the planner may follow
-        its C-space incrementally (``cspace.CSpaceTracker``); None computes it afresh."""
+        its C-space incrementally (``cspace.CSpaceTracker``); None computes it afresh. Optional: the stack
+        passes it only to planners registered with ``follows_grid`` (``planners.PlannerSpec``)."""
         ...

@@ -55,11 +55,14 @@ class PlannerSpec:
         build: the planner from those settings and the geometry.
         warm_up: compiles (or loads) the planner's kernels before the first timed tick, given those settings
             and the grid's side in cells (``stack.warm_up``).
+        follows_grid: the planner's ``plan`` takes ``offset_rc``, the grid's world cell, and follows its
+            C-space from tick to tick (``planner.Planner``); a planner without it is asked without it.
     """
 
     section: str
     build: Callable[[Any, PlannerGeometry], Planner]
     warm_up: Callable[[Any, int], None] = _no_warm_up
+    follows_grid: bool = False
 
 
 def _nf1(settings: Nf1Params, geometry: PlannerGeometry) -> Planner:
@@ -82,8 +85,8 @@ def _warm_up_tunnel(settings: TunnelParams, size_cells: int) -> None:
 
 
 PLANNERS: dict[str, PlannerSpec] = {
-    "nf1": PlannerSpec("nf1", _nf1),
-    "tunnel": PlannerSpec("tunnel", _tunnel, _warm_up_tunnel),
+    "nf1": PlannerSpec("nf1", _nf1, follows_grid=True),
+    "tunnel": PlannerSpec("tunnel", _tunnel, _warm_up_tunnel, follows_grid=True),
 }
 """Planner kinds (``[planner] kind``, ``--planner``) and how each is made."""
 

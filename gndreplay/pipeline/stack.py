@@ -211,6 +211,7 @@ class NavigationStack:
         self._follower = _make_follower(params, subgoals) if params.nav_mode == "follow" else None
         self.grid = RobotCentredGrid(params.grid)
         self._planner = make_planner(params)
+        self._planner_follows_grid = PLANNERS[params.planner.kind].follows_grid
         self.supervisor = Supervisor(params.robot, params.supervisor, self.grid)
         # the planner's no path to a goal beyond the grid means no free border cell is reachable
         self._no_path_is_no_border = self._planner.no_path_is_no_border
@@ -443,7 +444,9 @@ class NavigationStack:
     def _plan(self, pose: Pose2D, goal: NDArray[np.float64]) -> PlanResult:
         start = self.grid.robot_cell(pose)
         goal_rc = self.grid.world_to_cell_float(goal[None, :])[0]
-        return self._planner.plan(self.grid.cells, start, goal_rc, self.grid.offset_cells)
+        if self._planner_follows_grid:
+            return self._planner.plan(self.grid.cells, start, goal_rc, offset_rc=self.grid.offset_cells)
+        return self._planner.plan(self.grid.cells, start, goal_rc)
 
     def _reactor_target(
         self, pose: Pose2D, goal: NDArray[np.float64], planned: PlanResult
