@@ -248,13 +248,26 @@ def _fit_rows(fig: Figure, ratios: list[float], *, left: float, right: float, bo
     for handles, names, title, where in legends:
         upper = where == "outside right upper"
         y = 1.0 - top / h if upper else 0.5 * (1.0 - top / h + bottom / h)
-        fig.legend(handles, names, loc="upper left" if upper else "center left", bbox_to_anchor=(x, y), title=title, fontsize=8, title_fontsize=8,
-                   frameon=False, handlelength=1.0, borderaxespad=0.0)
+        fig.legend(handles, names, loc="upper left" if upper else "center left", bbox_to_anchor=(x, y),
+                   title=title, fontsize=8, title_fontsize=8, frameon=False, handlelength=1.0,
+                   borderaxespad=0.0)
 
 
 def _pixel_columns(fig: Figure, ax: Axes, dpi: int | None = None) -> int:
     """The pixel columns ``ax`` spans when ``fig`` is saved at ``dpi`` (default ``DPI``)."""
     return max(1, int(np.ceil(ax.get_position().width * fig.get_figwidth() * (dpi or DPI))))
+
+
+def _legend_below(fig: Figure, ax: Axes, *, ncol: int, handles: list[Any] | None = None,
+                  gap_in: float = 0.5) -> None:
+    """The legend of a map panel centred ``gap_in`` inches below it (under its x label, whatever the height
+    its equal aspect gives it)."""
+    from matplotlib.transforms import offset_copy
+
+    below = offset_copy(ax.transAxes, fig=fig, x=0.0, y=-gap_in, units="inches")
+    kw: dict[str, Any] = {} if handles is None else {"handles": handles}
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below, ncol=ncol, fontsize=8,
+              frameon=False, **kw)
 
 
 def _ends(ax: Axes, traj: NDArray[np.float64]) -> None:
@@ -342,7 +355,7 @@ def figure_model(data: RunData) -> Figure:
     ax.set_ylabel("y [m]")
     cell = f", {maps.cell_m * 100:.0f} cm cells" if maps is not None else ""
     ax.set_title(f"Model: scan hits at the corrected poses{cell}{_window_title(w)}", fontsize=10)
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=5, fontsize=8, frameon=False)
+    _legend_below(fig, ax, ncol=5)
 
     if ax_g is None:
         return fig
@@ -372,8 +385,7 @@ def figure_model(data: RunData) -> Figure:
     handles, _ = ax_g.get_legend_handles_labels()
     handles += [Patch(facecolor=c, edgecolor="0.3", label=n)
                 for c, n in (("#9e9e9e", "unknown"), ("#ffffff", "free"), ("#000000", "occupied"))]
-    ax_g.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8,
-                frameon=False)
+    _legend_below(fig, ax_g, handles=handles, ncol=3)
     return fig
 
 
@@ -395,7 +407,7 @@ def figure_raw(data: RunData) -> Figure:
     ax.set_ylabel("y [m]")
     ax.set_title(f"Raw laser data and trajectory from the odometry alone{_window_title(data.window)}",
                  fontsize=10)
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=3, fontsize=8, frameon=False)
+    _legend_below(fig, ax, ncol=3)
     return fig
 
 
