@@ -557,7 +557,10 @@ def test_run_split_redoes_what_the_child_failed_and_raises_what_this_process_rai
 
     from gndreplay.report.split import run_split, split_jobs
 
-    assert split_jobs([1.0, 3.0, 1.0, 1.0]) == ([0, 2, 3], [1])  # the heaviest here, the rest there
+    assert split_jobs([1.0, 3.0, 1.0, 1.0]) == ([1], [0, 2, 3])  # the best balance
+    assert split_jobs([1.4, 1.2, 2.2, 2.0, 1.3]) == ([0, 1, 4], [2, 3])
+    many = split_jobs([1.0] * 40)
+    assert sorted(many[0] + many[1]) == list(range(40)) and len(many[0]) == len(many[1]) == 20
     parent = os.getpid()
 
     def write(k: int, fail_in_child: bool = False) -> None:

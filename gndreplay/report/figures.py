@@ -668,10 +668,11 @@ def figure_names(window: TimeWindow | None, *, truth: bool = False) -> dict[str,
     return {window_figure_name(n, window): FIGURE_MAKERS[n] for n in WINDOW_FIGURES}
 
 
-#: Relative cost of drawing each figure (``build_figures`` shares them out between two processes by it).
+#: Relative cost of drawing each figure, about a tenth of a second each on the Intel log (``build_figures``
+#: shares them out between two processes by it).
 FIGURE_WEIGHTS: Mapping[Callable[[RunData], Figure], float] = {
-    figure_model: 2.0, figure_raw: 1.5, figure_commands: 3.0, figure_timing: 3.0, figure_modes: 2.0,
-    figure_error: 2.0,
+    figure_model: 1.4, figure_raw: 1.2, figure_commands: 2.2, figure_timing: 2.0, figure_modes: 1.3,
+    figure_error: 1.5,
 }
 
 
