@@ -532,3 +532,70 @@ def test_a_malformed_summary_is_one_run_dir_error(run_dir: Path, tmp_path: Path,
     with pytest.raises(RunDirError, match=match):
         build_report(d)
     assert not any(d.glob("fig_*.png")) and not (d / "report.md").exists()
+
+
+# ---- drawing fast: two processes, lines kept to what shows ----------------------------------------------
+
+
+def test_figures_drawn_in_two_processes_are_the_bytes_drawn_in_one(run_dir: Path, tmp_path: Path) -> None:
+    from gndreplay.report.figures import build_figures
+
+    data = load_run(run_dir)
+    one, two = tmp_path / "one", tmp_path / "two"
+    one.mkdir()
+    two.mkdir()
+    names = [p.name for p in build_figures(data, one, split=False)]
+    assert [p.name for p in build_figures(data, two, split=True)] == names
+    assert len(names) >= 5
+    for name in names:
+        assert (one / name).read_bytes() == (two / name).read_bytes(), name
+    assert sorted(p.name for p in two.iterdir()) == sorted(names)  # no temporary file left behind
+
+
+def test_run_split_redoes_what_the_child_failed_and_raises_what_this_process_raises(tmp_path: Path) -> None:
+    import os
+
+    from gndreplay.report.split import run_split, split_jobs
+
+    assert split_jobs([1.0, 3.0, 1.0, 1.0]) == ([1], [0, 2, 3])  # the best balance
+    assert split_jobs([1.4, 1.2, 2.2, 2.0, 1.3]) == ([0, 1, 4], [2, 3])
+    many = split_jobs([1.0] * 40)
+    assert sorted(many[0] + many[1]) == list(range(40)) and len(many[0]) == len(many[1]) == 20
+    parent = os.getpid()
+
+    def write(k: int, fail_in_child: bool = False) -> None:
+        if fail_in_child and os.getpid() != parent:
+            raise RuntimeError("child failed")
+        (tmp_path / f"{k}.txt").write_text(f"{k} by {'parent' if os.getpid() == parent else 'child'}")
+
+    run_split([lambda k=k: write(k, fail_in_child=True) for k in range(4)], split=True)
+    assert sorted(p.read_text() for p in tmp_path.iterdir()) == [f"{k} by parent" for k in range(4)]
+
+    def boom() -> None:
+        if os.getpid() == parent:
+            raise ValueError("parent job failed")
+        write(9)
+
+    with pytest.raises(ValueError, match="parent job failed"):
+        run_split([boom, boom], split=True)
+    assert (tmp_path / "9.txt").read_text() == "9 by child"  # the child was waited for
+
+
+def test_column_extremes_keep_every_columns_least_and_largest_value() -> None:
+    from gndreplay.report.plots import column_extremes
+
+    rng = np.random.default_rng(3)
+    t = np.sort(rng.uniform(-5.0, 105.0, 20_000))
+    y = rng.lognormal(size=t.size)
+    y[[100, 7000, 15000]] = [1e4, 1e-6, np.nan]
+    keep = column_extremes(t, y, span=(0.0, 100.0), columns=300)
+    assert keep.size <= 4 * 302 and np.all(np.diff(keep) > 0)
+    assert {100, 7000} <= set(keep.tolist())
+    col = np.clip(np.floor(t * 3.0), -1, 300).astype(int)
+    for c in np.unique(col):
+        inside, kept = col == c, col[keep] == c
+        assert np.nanmax(y[inside]) == np.nanmax(y[keep][kept])
+        assert np.nanmin(y[inside]) == np.nanmin(y[keep][kept])
+        assert t[inside][0] == t[keep][kept][0] and t[inside][-1] == t[keep][kept][-1]
+    np.testing.assert_array_equal(column_extremes(t[:50], y[:50], span=(0.0, 100.0), columns=300),
+                                  np.arange(50))

@@ -346,3 +346,34 @@ def test_grid_cells_are_read_back_from_the_occupancy_grid() -> None:
     back, origin, cell_m = _grid_cells(SimpleNamespace(info=info, data=data))
     np.testing.assert_array_equal(back, cells)
     assert origin == (-0.1, 0.2) and cell_m == 0.05
+
+
+def test_a_cleared_figure_draws_each_decision_as_a_fresh_one_does() -> None:
+    import io
+
+    from gndreplay.report.decision import clear_decision
+
+    cfg = preset("xr4000")
+    grid = _grid_with_wall()
+    tick = Tick(0, 0, Scan(0, np.array([2.0, np.inf]), np.array([0.0, 0.1]), 8.0), Pose2D(1.0, 2.0, 0.5))
+    views = [decision_view(decision_input(tick, _r(region=(170, 10)), grid, t0_ns=0), cfg, headline="a"),
+             decision_view(decision_input(tick, _r(v=0.0, flags=Flag.EMERGENCY_STOP), grid, t0_ns=0), cfg)]
+
+    def png(fig: object) -> bytes:
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=50)  # type: ignore[attr-defined]
+        return buf.getvalue()
+
+    fresh = []
+    for view in views:
+        fig, ax = decision_figure()
+        draw_decision(ax, view)
+        fresh.append(png(fig))
+    assert fresh[0] != fresh[1]
+    fig, ax = decision_figure()
+    reused = []
+    for view in (*views, views[0]):
+        clear_decision(ax)
+        draw_decision(ax, view)
+        reused.append(png(fig))
+    assert reused == [*fresh, fresh[0]]

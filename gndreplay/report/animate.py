@@ -28,7 +28,7 @@ from ..errors import ConfigError, OutputError
 from ..fsutil import add_to_marker, atomic_path, check_may_write
 from ..geometry import transform_points, wrap_angle
 from ..types import NS_PER_S, Command, Pose2D
-from .decision import DecisionInput, decision_figure, decision_view, draw_decision
+from .decision import DecisionInput, clear_decision, decision_figure, decision_view, draw_decision
 from .mcap_export import MCAP_FILE
 from .rundir import CONFIG_FILE, RunDirError
 
@@ -318,7 +318,7 @@ def animate_run(
         writer = _writer(suffix, rate)
         with atomic_path(out_path) as tmp, writer.saving(fig, tmp, dpi):
             for k, inp in enumerate(_frames(rd, start, stop, set(kept.tolist()), int(stamps[0])), 1):
-                ax.clear()
+                clear_decision(ax)
                 draw_decision(ax, decision_view(inp, cfg, radius_m=radius_m))
                 writer.grab_frame()
                 if on_progress is not None:

@@ -37,8 +37,8 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-__all__ = ["DecisionInput", "DecisionView", "decision_figure", "decision_geometry", "decision_input",
-           "decision_reason", "decision_view", "draw_decision", "grid_from_cells"]
+__all__ = ["DecisionInput", "DecisionView", "clear_decision", "decision_figure", "decision_geometry",
+           "decision_input", "decision_reason", "decision_view", "draw_decision", "grid_from_cells"]
 
 F64 = NDArray[np.float64]
 
@@ -329,6 +329,17 @@ def draw_decision(ax: Axes, view: DecisionView) -> None:
     ax.set_title(view.title, fontsize=8, loc="left", color="black")
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.07), ncol=4, fontsize=7, frameon=False,
               handlelength=1.5, columnspacing=1.2)
+
+
+def clear_decision(ax: Axes) -> None:
+    """Remove what ``draw_decision`` drew on ``ax`` (images, lines, collections, patches, texts, legend,
+    title), keeping the axes, their limits and their ticks: the next decision is drawn on the same axes
+    without building them again (the picture is the same as on fresh axes)."""
+    for artist in (*ax.images, *ax.lines, *ax.collections, *ax.patches, *ax.texts):
+        artist.remove()
+    if ax.legend_ is not None:
+        ax.legend_.remove()
+    ax.set_title("", loc="left")
 
 
 def decision_figure() -> tuple[Figure, Axes]:

@@ -27,6 +27,7 @@ from .plots import (
     SITUATION_COLORS,
     Bands,
     band_spans,
+    flag_labels,
     plot_bands,
     plot_commands,
     plot_flags,
@@ -66,6 +67,7 @@ __all__ = [
 ]
 
 DPI = 120
+PNG_COMPRESS_LEVEL = 1
 FIGURES: Mapping[str, str] = {
     "fig_model.png": "Model: scan hits placed at the corrected poses, corrected and raw trajectories (and "
     "the ground truth, when the log has it, started on the corrected pose), and the robot-centred grid at "
@@ -191,13 +193,81 @@ def _map_height(box: tuple[float, float, float, float], width_in: float, lo: flo
     return float(np.clip(width_in * ratio, lo, hi))
 
 
-def _new_figure(w: float, h: float) -> Figure:
+def _new_figure(w: float, h: float, *, left: float = 0.9, right: float = 0.2, bottom: float = 0.6,
+                top: float = 0.4) -> Figure:
+    """A ``w`` x ``h`` inch figure on the Agg canvas whose subplots fill it less fixed margins [in]: the
+    layout is set here once, not searched for at every draw (as constrained layout does)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(w, h), layout="constrained")
+    fig = Figure(figsize=(w, h))
     FigureCanvasAgg(fig)
+    fig.subplots_adjust(left=left / w, right=1.0 - right / w, bottom=bottom / h, top=1.0 - top / h)
     return fig
+
+
+def _gaps(fig: Figure, ratios: list[float], gap_in: float) -> float:
+    """``hspace`` (a fraction of the mean axes height) that leaves ``gap_in`` inches between the rows of a
+    column of ``len(ratios)`` axes in ``fig``'s subplot area."""
+    p, n = fig.subplotpars, len(ratios)
+    height = (p.top - p.bottom) * fig.get_figheight()
+    mean = max(height - (n - 1) * gap_in, 0.1) / n
+    return gap_in / mean
+
+
+def _text_in(fig: Figure, texts: list[str], size: float) -> float:
+    """The width [in] of the widest of ``texts`` at font ``size`` [pt] (0 for none): margins made to fit
+    labels, measured once instead of by a layout engine at each draw."""
+    if not texts:
+        return 0.0
+    from matplotlib.font_manager import FontProperties
+
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+    prop = FontProperties(size=size)
+    px = max(renderer.get_text_width_height_descent(t, prop, ismath=False)[0] for t in texts)
+    return float(px) / fig.dpi
+
+
+def _legend_in(fig: Figure, names: list[str], title: str, size: float = 8.0) -> float:
+    """The width [in] of a frameless figure legend of ``names`` (handle length 1) titled ``title``."""
+    return max(_text_in(fig, names, size) + 2.4 * size / 72.0, _text_in(fig, [title], size)) + 0.12
+
+
+SideLegend = tuple[list[Any], list[str], str, LegendLoc]  # handles, names, title, where
+
+
+def _fit_rows(fig: Figure, ratios: list[float], *, left: float, right: float, bottom: float, top: float,
+              gap_in: float = 0.1, legends: tuple[SideLegend, ...] = ()) -> None:
+    """Place a column of axes (height ``ratios``) inside fixed margins [in], ``gap_in`` apart, and the
+    ``legends`` in the right margin, which is widened to the widest of them."""
+    w, h = fig.get_figwidth(), fig.get_figheight()
+    right = max([right] + [_legend_in(fig, names, title) + 0.1 for _, names, title, _ in legends])
+    fig.subplots_adjust(left=left / w, right=1.0 - right / w, bottom=bottom / h, top=1.0 - top / h)
+    fig.subplots_adjust(hspace=_gaps(fig, ratios, gap_in))
+    x = 1.0 - (right - 0.1) / w
+    for handles, names, title, where in legends:
+        upper = where == "outside right upper"
+        y = 1.0 - top / h if upper else 0.5 * (1.0 - top / h + bottom / h)
+        fig.legend(handles, names, loc="upper left" if upper else "center left", bbox_to_anchor=(x, y),
+                   title=title, fontsize=8, title_fontsize=8, frameon=False, handlelength=1.0,
+                   borderaxespad=0.0)
+
+
+def _pixel_columns(fig: Figure, ax: Axes, dpi: int | None = None) -> int:
+    """The pixel columns ``ax`` spans when ``fig`` is saved at ``dpi`` (default ``DPI``)."""
+    return max(1, int(np.ceil(ax.get_position().width * fig.get_figwidth() * (dpi or DPI))))
+
+
+def _legend_below(fig: Figure, ax: Axes, *, ncol: int, handles: list[Any] | None = None,
+                  gap_in: float = 0.5) -> None:
+    """The legend of a map panel centred ``gap_in`` inches below it (under its x label, whatever the height
+    its equal aspect gives it)."""
+    from matplotlib.transforms import offset_copy
+
+    below = offset_copy(ax.transAxes, fig=fig, x=0.0, y=-gap_in, units="inches")
+    kw: dict[str, Any] = {} if handles is None else {"handles": handles}
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below, ncol=ncol, fontsize=8,
+              frameon=False, **kw)
 
 
 def _ends(ax: Axes, traj: NDArray[np.float64]) -> None:
@@ -256,11 +326,12 @@ def figure_model(data: RunData) -> Figure:
                    data.traj_odom, *(() if truth is None else (truth,)))
     ax_g: Axes | None = None
     if w is not None and snap is None:
-        fig = _new_figure(9.0, _map_height(box, 8.4) + 1.3)
+        fig = _new_figure(9.0, _map_height(box, 8.4) + 1.3, left=0.8, bottom=1.0, top=0.35)
         ax = fig.subplots()
     else:
-        fig = _new_figure(13.0, max(6.0, _map_height(box, 7.6) + 1.4))
-        ax, ax_g = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.7, 1.0]})
+        fig = _new_figure(13.0, max(6.0, _map_height(box, 7.6) + 1.4), left=0.8, right=0.15, bottom=1.2,
+                          top=0.55)
+        ax, ax_g = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.7, 1.0], "wspace": 0.2})
     if maps is not None:
         _hits(ax, data, maps.corrected_hits, maps.corrected_extent, box)
     else:
@@ -284,7 +355,7 @@ def figure_model(data: RunData) -> Figure:
     ax.set_ylabel("y [m]")
     cell = f", {maps.cell_m * 100:.0f} cm cells" if maps is not None else ""
     ax.set_title(f"Model: scan hits at the corrected poses{cell}{_window_title(w)}", fontsize=10)
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=5, fontsize=8, frameon=False)
+    _legend_below(fig, ax, ncol=5)
 
     if ax_g is None:
         return fig
@@ -314,15 +385,14 @@ def figure_model(data: RunData) -> Figure:
     handles, _ = ax_g.get_legend_handles_labels()
     handles += [Patch(facecolor=c, edgecolor="0.3", label=n)
                 for c, n in (("#9e9e9e", "unknown"), ("#ffffff", "free"), ("#000000", "occupied"))]
-    ax_g.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8,
-                frameon=False)
+    _legend_below(fig, ax_g, handles=handles, ncol=3)
     return fig
 
 
 def figure_raw(data: RunData) -> Figure:
     """Fig. 5c: every scan placed with the raw odometry, and the odometry trajectory."""
     box = _map_box(data, data.maps.raw_extent if data.maps is not None else None, data.traj_odom)
-    fig = _new_figure(9.0, _map_height(box, 8.4) + 1.3)
+    fig = _new_figure(9.0, _map_height(box, 8.4) + 1.3, left=0.8, bottom=1.0, top=0.35)
     ax = fig.subplots()
     _set_box(ax, box)
     if data.maps is not None:
@@ -337,7 +407,7 @@ def figure_raw(data: RunData) -> Figure:
     ax.set_ylabel("y [m]")
     ax.set_title(f"Raw laser data and trajectory from the odometry alone{_window_title(data.window)}",
                  fontsize=10)
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=3, fontsize=8, frameon=False)
+    _legend_below(fig, ax, ncol=3)
     return fig
 
 
@@ -378,8 +448,8 @@ def figure_commands(data: RunData) -> Figure:
     span = _time_axis(data, t)
     n_flags = max(1, sum(1 for m in c.flags.values() if np.any(m)))
     fig = _new_figure(12.0, 5.6 + 0.2 * n_flags)
-    axes = fig.subplots(5, 1, sharex=True,
-                        gridspec_kw={"height_ratios": [3.0, 3.0, 0.45, 0.45, 0.5 + 0.3 * n_flags]})
+    ratios = [3.0, 3.0, 0.45, 0.45, 0.5 + 0.3 * n_flags]
+    axes = fig.subplots(5, 1, sharex=True, gridspec_kw={"height_ratios": ratios})
     ax_v, ax_w, ax_m, ax_s, ax_f = axes
     if len(c) == 0:
         _no_data(ax_v, "no tick")
@@ -389,14 +459,16 @@ def figure_commands(data: RunData) -> Figure:
         (ax_m, c.modes, MODE_COLORS, "GND mode", "outside right upper"),
         (ax_s, c.situations, SITUATION_COLORS, "ND+ situation", "outside right center"),
     )
+    legends: list[SideLegend] = []
     for ax, labels, colors, name, where in strips:
         plot_bands(ax, t, labels, colors=colors, legend=False, min_width=_min_width(span))
         ax.set_ylabel(name.split()[-1], rotation=0, ha="right", va="center", fontsize=8)
         handles, names = ax.get_legend_handles_labels()
         if handles:
-            fig.legend(handles, names, loc=where, title=name, fontsize=8, title_fontsize=8,
-                       frameon=False, handlelength=1.0)
+            legends.append((handles, names, name, where))
     plot_flags(ax_f, t, c.flags)
+    left = max(0.9, _text_in(fig, flag_labels(c.flags), 7.0) + 0.2)
+    _fit_rows(fig, ratios, left=left, right=0.2, bottom=0.5, top=0.3, legends=tuple(legends))
     ax_f.set_xlabel("time since the first scan [s]")
     ax_f.set_xlim(*span)
     ax_v.set_title(f"Motion commands ({len(c)} ticks{_window_title(data.window)}{_envelope_note(len(c))})",
@@ -413,8 +485,8 @@ def figure_modes(data: RunData) -> Figure:
     span = _time_axis(data, t)
     min_width = _min_width(span)
     fig = _new_figure(12.0, 4.8)
-    ax_c, ax_d, ax_a, ax_r = fig.subplots(4, 1, sharex=True,
-                                          gridspec_kw={"height_ratios": [3.0, 0.45, 0.45, 0.45]})
+    ratios = [3.0, 0.45, 0.45, 0.45]
+    ax_c, ax_d, ax_a, ax_r = fig.subplots(4, 1, sharex=True, gridspec_kw={"height_ratios": ratios})
     if len(c) == 0:
         _no_data(ax_c, "no tick")
     for y, key, label in ((c.v_mps, "v", "v [m/s]"), (c.w_radps, "w", "w [rad/s]")):
@@ -434,13 +506,11 @@ def figure_modes(data: RunData) -> Figure:
     for ax, labels, colors, name in strips:
         plot_bands(ax, t, labels, colors=colors, legend=False, skip=("",), min_width=min_width)
         ax.set_ylabel(name, rotation=0, ha="right", va="center", fontsize=8)
-    legends: tuple[tuple[Axes, str, LegendLoc], ...] = (
+    sides: tuple[tuple[Axes, str, LegendLoc], ...] = (
         (ax_a, "navigation mode", "outside right upper"), (ax_r, "reflexive rule", "outside right center"))
-    for ax, title, where in legends:
-        handles, names = ax.get_legend_handles_labels()
-        if handles:
-            fig.legend(handles, names, loc=where, title=title, fontsize=8, title_fontsize=8, frameon=False,
-                       handlelength=1.0)
+    legends = tuple((*ax.get_legend_handles_labels(), title, where) for ax, title, where in sides)
+    _fit_rows(fig, ratios, left=0.85, right=0.2, bottom=0.5, top=0.3, gap_in=0.12,
+              legends=tuple(lg for lg in legends if lg[0]))
     if not np.any(rules != ""):
         ax_r.text(0.5, 0.5, "no reflexive override", transform=ax_r.transAxes, ha="center", va="center",
                   fontsize=7, color="0.4")
@@ -477,7 +547,8 @@ def figure_error(data: RunData) -> Figure:
     t_all = np.concatenate([t_ticks, *(t for t, _ in series.values())]) if series else t_ticks
     span = _time_axis(data, np.sort(t_all))
     fig = _new_figure(12.0, 6.2)
-    ax_p, ax_h, ax_f = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": [3.0, 3.0, 0.5]})
+    ratios = [3.0, 3.0, 0.5]
+    ax_p, ax_h, ax_f = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": ratios})
     bands = band_spans(t_ticks, np.where(failed, "failed", ""), min_width=_min_width(span))
     for ax in (ax_p, ax_h):
         _shade(ax, bands, "failed", legend="MATCH_FAILED", color=FLAG_COLORS["MATCH_FAILED"], alpha=0.12,
@@ -498,6 +569,8 @@ def figure_error(data: RunData) -> Figure:
         ax_p.legend(loc="best", fontsize=8)
     ax_p.set_ylim(bottom=0.0)
     plot_flags(ax_f, t_ticks, {"MATCH_FAILED": failed})
+    _fit_rows(fig, ratios, left=max(0.9, _text_in(fig, flag_labels({"MATCH_FAILED": failed}), 7.0) + 0.2),
+              right=0.2, bottom=0.5, top=0.3, gap_in=0.12)
     ax_f.set_xlabel("time since the first scan [s]")
     ax_f.set_xlim(*span)
     ax_p.set_title(f"Error against the ground truth, each trajectory aligned to it (SE(2) least squares)"
@@ -526,20 +599,23 @@ def figure_timing(data: RunData) -> Figure:
     modules = [m for m in (*TIMING_MODULES, "total") if m in tm.ms]
     fig = _new_figure(12.0, 1.3 + 1.35 * len(modules))
     axes = np.atleast_1d(fig.subplots(len(modules), 1, sharex=True, sharey=True))
+    _fit_rows(fig, [1.0] * len(modules), left=0.85, right=0.2, bottom=0.75, top=0.3, gap_in=0.12)
     period = scan_period_s(data.traj_corrected[:, 0])
     if period is None:
         period = scan_period_s(tm.t_s)
     period_ms = None if period is None else 1e3 * period
     budgets = budgets_ms(data.summary)
+    span = _time_axis(data, t)
+    columns = _pixel_columns(fig, axes[0])
     for ax, m in zip(axes, modules, strict=True):
         b = budgets.get(m)
         plot_timing(ax, t, {m: tm.ms[m]}, budgets_ms={m: b} if b else None, scan_period_ms=period_ms,
-                    ylabel=f"{m} [ms]")
+                    ylabel=f"{m} [ms]", span=span, columns=columns)
         ax.text(0.005, 0.96, _timing_stats(tm.ms[m], b), transform=ax.transAxes, ha="left", va="top",
                 fontsize=8, bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 1.5})
     if t.size == 0:
         _no_data(axes[0], "no tick")
-    axes[-1].set_xlim(*_time_axis(data, t))
+    axes[-1].set_xlim(*span)
     top = max([float(np.max(tm.ms[m])) for m in modules if tm.ms[m].size] + [period_ms or 1.0, 1.0])
     axes[0].set_ylim(top=top * 3.0)
     axes[-1].set_xlabel("time since the first scan [s]")
@@ -549,15 +625,18 @@ def figure_timing(data: RunData) -> Figure:
     if period_ms is not None:
         proxies.append(Line2D([], [], color="black", linestyle=":", linewidth=1.2,
                               label=f"scan period {period_ms:.0f} ms"))
-    fig.legend(handles=proxies, loc="outside lower center", ncol=len(proxies), fontsize=8, frameon=False)
+    fig.legend(handles=proxies, loc="lower center", bbox_to_anchor=(0.5, 0.0), ncol=len(proxies), fontsize=8,
+               frameon=False)
     return fig
 
 
 def save_figure(fig: Figure, path: Path, *, dpi: int = DPI) -> Path:
     """Save as PNG at ``dpi`` with no metadata (byte-identical for the same figure), atomically: a failure
-    leaves the previous file (or none), never half a PNG."""
+    leaves the previous file (or none), never half a PNG. zlib's fastest level: a third less time than its
+    default for files about a tenth larger."""
     with atomic_path(Path(path)) as tmp:
-        fig.savefig(tmp, dpi=dpi, format="png", metadata={"Software": None})
+        fig.savefig(tmp, dpi=dpi, format="png", metadata={"Software": None},
+                    pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
     return path
 
 
@@ -589,9 +668,33 @@ def figure_names(window: TimeWindow | None, *, truth: bool = False) -> dict[str,
     return {window_figure_name(n, window): FIGURE_MAKERS[n] for n in WINDOW_FIGURES}
 
 
-def build_figures(data: RunData, out_dir: Path, *, dpi: int = DPI) -> list[Path]:
+#: Relative cost of drawing each figure, about a tenth of a second each on the Intel log (``build_figures``
+#: shares them out between two processes by it).
+FIGURE_WEIGHTS: Mapping[Callable[[RunData], Figure], float] = {
+    figure_model: 1.4, figure_raw: 1.2, figure_commands: 2.2, figure_timing: 2.0, figure_modes: 1.3,
+    figure_error: 1.5,
+}
+
+
+def import_agg() -> None:
+    """Import matplotlib's Figure and Agg canvas (before the drawing is split, so that it is paid once)."""
+
+
+def build_figures(data: RunData, out_dir: Path, *, dpi: int = DPI, split: bool | None = None) -> list[Path]:
     """Draw the figures of ``data`` into ``out_dir`` under the names of ``figure_names`` (fig_error.png when
     the run has ground truth), replacing earlier ones (the caller checks they are gndreplay's:
-    ``fsutil.check_may_write``)."""
-    return [save_figure(make(data), Path(out_dir) / name, dpi=dpi)
-            for name, make in figure_names(data.window, truth=data.has_truth).items()]
+    ``fsutil.check_may_write``). ``split``: draw some in a second process (``split.run_split``; None:
+    where two CPUs are free); the files are the same bytes either way."""
+    from functools import partial
+
+    from .split import run_split
+
+    def draw(make: Callable[[RunData], Figure], path: Path) -> None:
+        save_figure(make(data), path, dpi=dpi)
+
+    makers = figure_names(data.window, truth=data.has_truth)
+    paths = [Path(out_dir) / name for name in makers]
+    import_agg()
+    run_split([partial(draw, make, path) for make, path in zip(makers.values(), paths, strict=True)],
+              [FIGURE_WEIGHTS.get(make, 2.0) for make in makers.values()], split=split)
+    return paths

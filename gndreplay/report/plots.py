@@ -30,6 +30,8 @@ __all__ = [
     "Bands",
     "band_spans",
     "column_envelope",
+    "column_extremes",
+    "flag_labels",
     "hit_image",
     "plot_bands",
     "plot_commands",
@@ -281,6 +283,40 @@ def column_envelope(t: ArrayLike, y: ArrayLike, *, span: tuple[float, float], co
     return x, lo, hi, mean
 
 
+def column_extremes(t: ArrayLike, y: ArrayLike, *, span: tuple[float, float], columns: int
+                    ) -> NDArray[np.intp]:
+    """The indices of the points of a line (``t`` ascending) that keep its look at ``columns`` pixel columns
+    of ``span``: in each column its first and last point and those of its least and largest value (NaN
+    ignored), in time order, so a one-tick spike is drawn as the full line draws it. At most 4 per column
+    (and per stretch before and after the span)."""
+    tt, yy = np.asarray(t, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    n = tt.size
+    if n <= 4 * columns:
+        return np.arange(n)
+    t0, t1 = span
+    col = np.clip(np.floor((tt - t0) * (columns / max(t1 - t0, 1e-12))), -1, columns).astype(np.intp)
+    first = np.flatnonzero(np.r_[True, col[1:] != col[:-1]])
+    last = np.r_[first[1:], n] - 1
+    size = last - first + 1
+    group = np.repeat(np.arange(first.size), size)
+    finite = np.isfinite(yy)
+    low = np.where(finite, yy, np.inf)
+    high = np.where(finite, yy, -np.inf)
+    lo_at = first + _first_true(low == np.repeat(np.minimum.reduceat(low, first), size), group, first.size)
+    hi_at = first + _first_true(high == np.repeat(np.maximum.reduceat(high, first), size), group, first.size)
+    return np.unique(np.concatenate([first, last, lo_at, hi_at]))
+
+
+def _first_true(mask: NDArray[np.bool_], group: NDArray[np.intp], groups: int) -> NDArray[np.intp]:
+    """Per group (``group``: ascending, contiguous), the offset in it of its first True (0 when none)."""
+    start = np.searchsorted(group, np.arange(groups))
+    hit = np.flatnonzero(mask)
+    g, k = np.unique(group[hit], return_index=True)
+    out = np.zeros(groups, dtype=np.intp)
+    out[g] = hit[k] - start[g]
+    return out
+
+
 def plot_series(ax: Axes, t: ArrayLike, y: ArrayLike, *, span: tuple[float, float], columns: int,
                 color: str, label: str | None = None, linewidth: float = 0.8, zorder: float = 2.0) -> None:
     """A per-tick series as a step line (a value holds until the next tick); with more ticks than
@@ -330,12 +366,21 @@ def plot_commands(ax_v: Axes, ax_w: Axes, t: ArrayLike, v: ArrayLike, w: ArrayLi
                       ncol=3)
 
 
+def _fired(flags: Mapping[str, ArrayLike], order: Sequence[str]) -> list[str]:
+    names = [n for n in order if n in flags and np.any(flags[n])]
+    return names + sorted(n for n in flags if n not in order and np.any(flags[n]))
+
+
+def flag_labels(flags: Mapping[str, ArrayLike], *, order: Sequence[str] = FLAG_ORDER) -> list[str]:
+    """The row labels ``plot_flags`` gives the flags that fired: name and count of ticks."""
+    return [f"{n} ({int(np.count_nonzero(flags[n]))})" for n in _fired(flags, order)]
+
+
 def plot_flags(ax: Axes, t: ArrayLike, flags: Mapping[str, ArrayLike], *,
                order: Sequence[str] = FLAG_ORDER) -> None:
     """One row per flag that fired, a tick mark at each tick where it did (flags in ``order`` first)."""
     tt = np.asarray(t, dtype=np.float64)
-    names = [n for n in order if n in flags and np.any(flags[n])]
-    names += sorted(n for n in flags if n not in order and np.any(flags[n]))
+    names = _fired(flags, order)
     if not names:
         ax.text(0.5, 0.5, "no flag fired", transform=ax.transAxes, ha="center", va="center", fontsize=8,
                 color="0.4")
@@ -345,21 +390,30 @@ def plot_flags(ax: Axes, t: ArrayLike, flags: Mapping[str, ArrayLike], *,
     offsets = [float(len(names) - 1 - k) for k in range(len(names))]
     ax.eventplot(pos, lineoffsets=offsets, linelengths=0.7, linewidths=0.8,
                  colors=[FLAG_COLORS.get(n, "#555555") for n in names])
-    ax.set_yticks(offsets, [f"{n} ({int(np.count_nonzero(flags[n]))})" for n in names], fontsize=7)
+    ax.set_yticks(offsets, flag_labels(flags, order=order), fontsize=7)
     ax.set_ylim(-0.6, len(names) - 0.4)
     ax.grid(True, axis="x", linewidth=0.3, alpha=0.6)
 
 
 def plot_timing(ax: Axes, t: ArrayLike, timings_ms: Mapping[str, ArrayLike], *,
                 budgets_ms: Mapping[str, float] | None = None, scan_period_ms: float | None = None,
-                floor_ms: float = 1e-3, ylabel: str = "time per tick [ms]") -> None:
+                floor_ms: float = 1e-3, ylabel: str = "time per tick [ms]",
+                span: tuple[float, float] | None = None, columns: int = 0) -> None:
     """Per-module computation time [ms] per tick on a log axis (values below ``floor_ms`` are drawn at it),
     each module's budget as a dashed line of its colour (one grey line for modules sharing a budget), and
-    the scan period as a dotted black line. A "total" series is drawn fainter, behind the modules."""
+    the scan period as a dotted black line. A "total" series is drawn fainter, behind the modules.
+    With ``columns`` (the axes' pixel columns over ``span``), each line keeps only the points that show
+    at that width (``column_extremes``: every spike stays). Tick labels are plain numbers (0.01, 1, 100)."""
+    from matplotlib.ticker import FuncFormatter
+
     tt = np.asarray(t, dtype=np.float64)
     for name, ms in timings_ms.items():
         y = np.maximum(np.asarray(ms, dtype=np.float64), floor_ms)
-        ax.plot(tt, y, color=MODULE_COLORS.get(name), linewidth=0.6 if name != "total" else 0.5,
+        x = tt
+        if columns > 0 and span is not None and tt.size == y.size:
+            keep = column_extremes(tt, y, span=span, columns=columns)
+            x, y = tt[keep], y[keep]
+        ax.plot(x, y, color=MODULE_COLORS.get(name), linewidth=0.6 if name != "total" else 0.5,
                 alpha=0.85 if name != "total" else 0.45, label=name, zorder=2 if name != "total" else 1.5)
     same: dict[float, list[str]] = {}  # modules sharing a budget share one line
     for name, b in (budgets_ms or {}).items():
@@ -373,5 +427,6 @@ def plot_timing(ax: Axes, t: ArrayLike, timings_ms: Mapping[str, ArrayLike], *,
         ax.axhline(scan_period_ms, color="black", linestyle=":", linewidth=1.2,
                    label=f"scan period {scan_period_ms:.0f} ms")
     ax.set_yscale("log")
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax.set_ylabel(ylabel)
     ax.grid(True, which="major", linewidth=0.3, alpha=0.6)

@@ -27,6 +27,7 @@ import io
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..config import Config, load_config
 from ..errors import ConfigError
@@ -35,8 +36,19 @@ from ..io.userfile import read_text
 from ..pipeline.model import RobotCentredGrid
 from ..pipeline.stack import TickResult
 from ..types import NS_PER_S, REFLEXIVE_MODES, Flag, Mode, Pose2D, Tick
-from .decision import DecisionInput, decision_figure, decision_input, decision_view, draw_decision
+from .decision import (
+    DecisionInput,
+    clear_decision,
+    decision_figure,
+    decision_input,
+    decision_view,
+    draw_decision,
+)
 from .rundir import CONFIG_FILE, RunDirError, csv_text
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 __all__ = [
     "EVENT_KINDS",
@@ -209,12 +221,15 @@ class _Pending:
 class SnapshotSink:
     """A ``RunSink`` writing snapshots/ (PNGs and index.csv) for the key events of the run (module
     docstring). ``config``: the run's configuration (None: read the run directory's config.toml at
-    ``finish``, which the replay writes before the sinks finish). Give it before the ``ReportSink``, whose
-    report.md links the snapshots."""
+    ``finish``, which the replay writes before the sinks finish). ``split``: draw the snapshots in two
+    processes (``split.run_split``; None: where two CPUs are free; the files are the same either way).
+    Give it before the ``ReportSink``, whose report.md links the snapshots."""
 
-    def __init__(self, options: SnapshotOptions = SnapshotOptions(), config: Config | None = None) -> None:
+    def __init__(self, options: SnapshotOptions = SnapshotOptions(), config: Config | None = None, *,
+                 split: bool | None = None) -> None:
         self.options = options
         self.config = config
+        self.split = split  # draw in two processes (``split.run_split``; None: where two CPUs are free)
         self.gate = EventGate(options)
         self._t0_ns: int | None = None
         self._prev: TickResult | None = None
@@ -236,22 +251,39 @@ class SnapshotSink:
 
     def finish(self, run_dir: Path) -> None:
         """Draw the kept ticks into ``run_dir/snapshots/`` with index.csv and the folder's marker."""
-        from .figures import save_figure
+        from functools import partial
+
+        from .figures import import_agg, save_figure
+        from .split import run_split
 
         run_dir = Path(run_dir)
         cfg = self.config if self.config is not None else load_config(run_dir / CONFIG_FILE)
         out = run_dir / SNAPSHOTS_DIR
         out.mkdir(exist_ok=True)
+        opts = self.options
+        drawn: list[tuple[Figure, Axes]] = []  # one figure per process, cleared between snapshots
+
+        def draw(inp: DecisionInput, headline: str, path: Path) -> None:
+            if not drawn:
+                drawn.append(decision_figure())
+            fig, ax = drawn[0]
+            clear_decision(ax)
+            draw_decision(ax, decision_view(inp, cfg, headline=headline, radius_m=opts.radius_m))
+            save_figure(fig, path, dpi=opts.dpi)
+
         rows = [INDEX_HEADER]
+        jobs, names = [], []
         for k, p in enumerate(self._pending, start=1):
             name = _file_name(k, p.events, p.inp.t_s)
             headline = "; ".join(f"{e.kind}: {e.reason}" for e in p.events)
-            fig, ax = decision_figure()
-            draw_decision(ax, decision_view(p.inp, cfg, headline=headline, radius_m=self.options.radius_m))
-            save_figure(fig, out / name, dpi=self.options.dpi)
-            self.written.append(name)
+            jobs.append(partial(draw, p.inp, headline, out / name))
+            names.append(name)
             rows += [f"{format_stamp(p.inp.t_ns)},{p.inp.t_s:.3f},{e.kind},{csv_text(e.reason)},{name}\n"
                      for e in p.events]
+        if jobs:
+            import_agg()
+        run_split(jobs, split=self.split)
+        self.written += names
         atomic_write_text(out / INDEX_FILE, "".join(rows))
         write_marker(out)  # the folder lists what gndreplay wrote in it (an --overwrite may replace them)
         self._pending.clear()
