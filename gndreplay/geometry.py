@@ -6,6 +6,8 @@ a ∘ b (b expressed in a's frame, mapped to a's parent frame).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -20,6 +22,12 @@ def wrap_angle(a: ArrayLike) -> F64 | float:
     """Wrap angles [rad] to (-pi, pi]; scalars in, float out."""
     w = np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2.0 * np.pi)
     return float(w) if np.ndim(w) == 0 else w
+
+
+def wrap_scalar(a: float) -> float:
+    """``wrap_angle`` of one float, without numpy: the same bits (Python's float ``%`` is numpy's ``mod``:
+    fmod, then the divisor's sign)."""
+    return math.pi - (math.pi - a) % (2.0 * math.pi)
 
 
 def rotation(theta: float) -> F64:

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import detmath as dm
-from .geometry import compose, inverse, wrap_angle
+from .geometry import wrap_angle, wrap_scalar
 
 __all__ = [
     "BUDGET_FLAGS",
@@ -110,11 +110,23 @@ class Pose2D:
         return np.array([self.x, self.y, self.theta], dtype=np.float64)
 
     def compose(self, other: Pose2D) -> Pose2D:
-        """self ∘ other."""
-        return Pose2D.from_array(compose(self.as_array(), other.as_array()))
+        """self ∘ other (``geometry.compose`` in scalars: the same bits)."""
+        c, s = dm.cos(self.theta), dm.sin(self.theta)
+        return Pose2D(self.x + c * other.x - s * other.y, self.y + s * other.x + c * other.y,
+                      wrap_scalar(wrap_scalar(self.theta + other.theta)))
 
     def inverse(self) -> Pose2D:
-        return Pose2D.from_array(inverse(self.as_array()))
+        """``geometry.inverse`` in scalars: the same bits."""
+        c, s = dm.cos(self.theta), dm.sin(self.theta)
+        return Pose2D(-(c * self.x + s * self.y), s * self.x - c * self.y,
+                      wrap_scalar(wrap_scalar(-self.theta)))
+
+    def to_local(self, x: float, y: float) -> tuple[float, float]:
+        """The world point (x, y) in this pose's frame: ``transform_points(inverse(pose), [(x, y)])`` in
+        scalars, the same bits."""
+        inv = self.inverse()
+        c, s = dm.cos(inv.theta), dm.sin(inv.theta)
+        return inv.x + c * x - s * y, inv.y + s * x + c * y
 
 
 IDENTITY = Pose2D(0.0, 0.0, 0.0)

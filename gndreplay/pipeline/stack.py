@@ -18,11 +18,11 @@ from functools import partial
 from typing import Literal
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from .. import detmath as dm
 from ..errors import FOLLOW_NEEDS_SUBGOALS, ConfigError
-from ..geometry import transform_points, wrap_angle
+from ..geometry import wrap_angle
 from ..robot import RobotConfig
 from ..types import Command, Flag, Mode, Pose2D, Scan, Subgoal
 from .cspace import free_cspace
@@ -164,9 +164,10 @@ def _ms(t0: int) -> float:
     return (time.perf_counter_ns() - t0) / 1e6
 
 
-def _to_robot(pose: Pose2D, xy: NDArray[np.float64]) -> NDArray[np.float64]:
-    """World points (K, 2) into the robot frame of ``pose``."""
-    return transform_points(pose.inverse().as_array(), xy)
+def _to_robot(pose: Pose2D, xy: ArrayLike) -> NDArray[np.float64]:
+    """A world point (x, y) in the robot frame of ``pose``, as a (2,) array."""
+    p = np.asarray(xy, dtype=np.float64).reshape(2)
+    return np.array(pose.to_local(float(p[0]), float(p[1])))
 
 
 class NavigationStack:
@@ -284,9 +285,9 @@ class NavigationStack:
 
         mode = gnd_mode(planner_ok, not (nd.flag & Flag.REACTOR_NO_REGION))
         if mode is Mode.MND and planned.ok:  # enforced planner time-out: steer to the goal itself
-            target = _to_robot(pose, goal[None, :])[0]
+            target = _to_robot(pose, goal)
             nd = self._nd("gnd", pose, obstacles, target)
-        goal_rel = _to_robot(pose, goal[None, :])[0]
+        goal_rel = _to_robot(pose, goal)
         # ND+ to the goal itself (the planner failed) chose the goal's own region: a way to it in view
         no_way = self._no_way(planned, pose, nd.region is not None and nd.memory is None)
         t0 = time.perf_counter_ns()
@@ -318,7 +319,7 @@ class NavigationStack:
         t0 = time.perf_counter_ns()
         desired: str = p.nav_mode
         goal = np.asarray(goal_xy, dtype=np.float64)
-        goal_rel = _to_robot(pose, goal[None, :])[0]
+        goal_rel = _to_robot(pose, goal)
         path_xy: NDArray[np.float64] = np.zeros((0, 2))
         subgoal_index, reason, done = -1, "", False
         v = vy = w = 0.0
@@ -351,7 +352,7 @@ class NavigationStack:
             flags |= Flag.GOAL_REACHED
         elif active == "local":
             if self._follower is not None:  # past the obstacle on the path, not at it (follow.local_target)
-                intention = _to_robot(pose, np.asarray(self._follower.local_target(self.grid))[None, :])[0]
+                intention = _to_robot(pose, self._follower.local_target(self.grid))
             elif desired == "teleop":
                 intention = self._selector.teleop_target(pose, (v, vy, w), self.grid)
             if intention is None:  # a still command is never taken over; kept for the type checker
@@ -456,7 +457,7 @@ class NavigationStack:
             bearing = float(wrap_angle(planned.direction_rad - pose.theta))
             d = self.params.planner.lookahead_m
             return np.array([d * dm.cos(bearing), d * dm.sin(bearing)])
-        return _to_robot(pose, goal[None, :])[0]
+        return _to_robot(pose, goal)
 
 # the mode column of a tick the desired module or a local strategy commanded unchanged (ND+ as local
 # navigation reports its own mND / ROTATE); ``active_mode`` names the module that won in any case
