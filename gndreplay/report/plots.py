@@ -83,6 +83,7 @@ MODULE_COLORS: Mapping[str, str] = {
     "model": "#377eb8",
     "planner": "#e41a1c",
     "reactor": "#4daf4a",
+    "supervisor": "#ff7f00",
     "total": "#222222",
 }
 FLAG_ORDER: Sequence[str] = (
