@@ -79,3 +79,53 @@ def test_matchers_side_by_side_give_each_matcher_its_own_pass(tmp_path: Path) ->
         assert seq.method == par.method
         assert Path(seq.tum_path).read_bytes() == Path(par.tum_path).read_bytes()
         assert seq.to_dict()["failures"] == par.to_dict()["failures"]
+
+
+_FAILING = '''
+from gndreplay.scanmatch import make_matcher
+
+
+class Failing:
+    name = "failing"
+
+    def __init__(self):
+        self.inner, self.k = make_matcher("odom"), 0
+
+    def update(self, scan, odom):
+        self.k += 1
+        if self.k == 6:
+            raise ValueError("no match at the sixth scan")
+        return self.inner.update(scan, odom)
+
+
+def make():
+    return Failing()
+'''
+
+
+@pytest.mark.parametrize("depth", [1, 32])
+def test_a_matcher_error_is_raised_at_its_tick_after_the_earlier_results(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, depth: int) -> None:
+    """The child ends at its matcher's error while the caller still sends it ticks (a full pipe at depth
+    32): the caller gets the results before it, then the matcher's own error, not a broken pipe."""
+    (tmp_path / "failing_matcher.py").write_text(_FAILING)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))
+    import failing_matcher  # type: ignore[import-not-found]
+
+    seen = []
+    with MatchAhead(failing_matcher.make, depth=depth) as ahead, \
+            pytest.raises(ValueError, match="the sixth scan"):
+        for tick, _res, _ms in ahead.results(read_ticks(SAMPLE)):
+            seen.append(tick.index)
+    assert seen == [0, 1, 2, 3, 4]
+
+
+def test_a_killed_child_is_one_error_in_the_caller() -> None:
+    with MatchAhead(functools.partial(make_matcher, "odom")) as ahead, \
+            pytest.raises(RuntimeError, match="ended unexpectedly"):
+        for k, _ in enumerate(ahead.results(read_ticks(SAMPLE))):
+            if k == 2:
+                assert ahead._proc is not None
+                ahead._proc.kill()
+                ahead._proc.wait()

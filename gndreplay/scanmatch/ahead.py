@@ -174,18 +174,24 @@ class MatchAhead:
         assert self._tx is not None
         pending: deque[Tick] = deque()
         it = iter(ticks)
-        eager, exhausted = True, False
+        eager, exhausted, ended = True, False, False
         while True:
-            while not exhausted and len(pending) < (self.depth if eager else 1):
+            while not exhausted and not ended and len(pending) < (self.depth if eager else 1):
                 tick = next(it, None)
                 if tick is None:
                     exhausted = True
                     break
-                self._tx.send((tick.scan, tick.odom))
+                try:
+                    self._tx.send((tick.scan, tick.odom))
+                except BrokenPipeError:  # the child ended: what it owes (its exception) is still to be read
+                    ended = True
+                    break
                 pending.append(tick)
                 if ahead_while is not None and not ahead_while(tick):
                     eager = False
             if not pending:
+                if ended:
+                    raise RuntimeError("the scan matcher's process ended unexpectedly")
                 return
             res, ms = self._recv()
             yield pending.popleft(), res, ms
