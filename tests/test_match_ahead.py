@@ -129,3 +129,27 @@ def test_a_killed_child_is_one_error_in_the_caller() -> None:
                 assert ahead._proc is not None
                 ahead._proc.kill()
                 ahead._proc.wait()
+
+
+_CTRL_C = '''
+import functools, os, signal, sys, time
+from gndreplay.scanmatch import MatchAhead, make_matcher
+try:
+    with MatchAhead(functools.partial(make_matcher, "idc")) as ahead:
+        time.sleep(0.1)  # the child is still importing
+        os.killpg(0, signal.SIGINT)  # as a terminal's Ctrl-C: the whole foreground process group
+        time.sleep(10)
+except KeyboardInterrupt:
+    print("interrupted", ahead._proc, file=sys.stderr)
+'''
+
+
+def test_ctrl_c_while_the_child_starts_is_heard_by_the_caller_alone() -> None:
+    """Ctrl-C reaches the caller only: the child, still importing, prints no traceback of its own."""
+    import subprocess
+    import sys
+
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    done = subprocess.run([sys.executable, "-c", _CTRL_C], capture_output=True, text=True, timeout=60,
+                          env=env, start_new_session=True)
+    assert done.stderr.strip() == "interrupted None", done.stderr

@@ -110,8 +110,11 @@ class MatchAhead:
         env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH", "")) if p)
         code = f"from gndreplay.scanmatch.ahead import serve; serve({to_child_r}, {from_child_w})"
         try:
+            # its own process group: a terminal's Ctrl-C (or a SIGTERM to the group) reaches only the
+            # caller, which closes the pipes; the child would otherwise print KeyboardInterrupt's traceback
+            # while still importing, before ``serve`` ignores SIGINT
             self._proc = subprocess.Popen([sys.executable, "-c", code], pass_fds=(to_child_r, from_child_w),
-                                          env=env, stdin=subprocess.DEVNULL)
+                                          env=env, stdin=subprocess.DEVNULL, process_group=0)
         except BaseException:
             for fd in (to_child_r, to_child_w, from_child_r, from_child_w):
                 os.close(fd)
