@@ -153,3 +153,14 @@ def test_ctrl_c_while_the_child_starts_is_heard_by_the_caller_alone() -> None:
     done = subprocess.run([sys.executable, "-c", _CTRL_C], capture_output=True, text=True, timeout=60,
                           env=env, start_new_session=True)
     assert done.stderr.strip() == "interrupted None", done.stderr
+
+
+def test_a_make_that_does_not_pickle_fails_on_entry_and_stops_the_child(
+        capfd: pytest.CaptureFixture[str]) -> None:
+    import pickle
+
+    ahead = MatchAhead(lambda: make_matcher("odom"))
+    with pytest.raises((pickle.PicklingError, AttributeError)), ahead:
+        pass
+    assert ahead._proc is None  # closed: the child waited for
+    assert "Traceback" not in capfd.readouterr().err  # the child ended quietly

@@ -54,7 +54,10 @@ def serve(read_fd: int, write_fd: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and closes the pipe
     rx, tx = Connection(read_fd, writable=False), Connection(write_fd, readable=False)
     try:
-        make, warm_up = rx.recv()
+        setup = rx.recv()
+        if setup is None:  # closed before it was set up
+            return
+        make, warm_up = setup
         if warm_up is not None:
             with CompileListener(lambda name: tx.send((_COMPILED, name))):
                 warm_up()
@@ -73,8 +76,11 @@ def serve(read_fd: int, write_fd: int) -> None:
     except BaseException as exc:  # the parent re-raises it at the tick it belongs to
         try:
             tx.send(exc)
+        except OSError:  # the parent closed the pipe: nobody left to tell
+            return
         except Exception:  # an exception that does not pickle
-            tx.send(RuntimeError(f"scan matcher failed: {exc!r}"))
+            with contextlib.suppress(OSError):
+                tx.send(RuntimeError(f"scan matcher failed: {exc!r}"))
 
 
 class MatchAhead:
@@ -123,7 +129,11 @@ class MatchAhead:
         os.close(from_child_w)
         self._tx = Connection(to_child_w, readable=False)
         self._rx = Connection(from_child_r, writable=False)
-        self._tx.send((self._make, self._warm_up))
+        try:
+            self._tx.send((self._make, self._warm_up))
+        except BaseException:  # e.g. a ``make`` that does not pickle: no ``__exit__`` will stop the child
+            self.close()
+            raise
         return self
 
     def __exit__(self, *exc: object) -> None:
