@@ -5,6 +5,7 @@ from __future__ import annotations
 import bz2
 import gzip
 import math
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -369,6 +370,24 @@ def test_truncated_compressed_log_is_an_error(tmp_path: Path, suffix: str) -> No
     data = p.read_bytes()
     p.write_bytes(data[: len(data) * 2 // 3])
     with pytest.raises(LogFormatError, match=r"cut\.clf\.(bz2|gz): truncated or corrupt data after line \d+"):
+        list(read_ticks(p))
+
+
+@pytest.mark.parametrize("suffix", [".clf.bz2", ".clf.gz"])
+def test_a_truncated_compressed_log_is_read_to_its_last_whole_line(tmp_path: Path, suffix: str) -> None:
+    """Every line that decompresses before the cut is read: the error names the last of them."""
+    rng = np.random.default_rng(3)
+    text = "".join(flaser(f"{i}.0", list(rng.uniform(1, 9, 181).round(3))) for i in range(1, 1500)).encode()
+    data = bz2.compress(text, 1) if suffix == ".clf.bz2" else gzip.compress(text)  # bz2: 100 kB blocks
+    cut = data[: len(data) * 2 // 3]
+    unpacked = bz2.BZ2Decompressor().decompress(cut) if suffix == ".clf.bz2" else \
+        zlib.decompressobj(31).decompress(cut)
+    whole = unpacked.count(b"\n")
+    assert 0 < whole < 1499
+    p = tmp_path / ("cut" + suffix)
+    p.write_bytes(cut)
+    message = rf"cut\.clf\.(bz2|gz): truncated or corrupt data after line {whole}:"
+    with pytest.raises(LogFormatError, match=message):
         list(read_ticks(p))
 
 

@@ -319,7 +319,9 @@ class _Decompressing(io.RawIOBase):
     def _fill(self) -> None:
         while not self._stop.is_set():
             try:
-                chunk: bytes | BaseException = self._stream.read(self._CHUNK)
+                # read1: one decompression step, so the data before an error is handed over first (a
+                # read of the whole chunk would drop what it had decompressed when the error came)
+                chunk: bytes | BaseException = self._stream.read1(self._CHUNK)
             except BaseException as err:  # handed to the reader, raised where the data ends
                 chunk = err
             while not self._stop.is_set():
