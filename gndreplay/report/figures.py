@@ -678,6 +678,8 @@ FIGURE_WEIGHTS: Mapping[Callable[[RunData], Figure], float] = {
 
 def import_agg() -> None:
     """Import matplotlib's Figure and Agg canvas (before the drawing is split, so that it is paid once)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: F401
+    from matplotlib.figure import Figure  # noqa: F401
 
 
 def build_figures(data: RunData, out_dir: Path, *, dpi: int = DPI, split: bool | None = None) -> list[Path]:
