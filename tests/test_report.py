@@ -581,6 +581,21 @@ def test_run_split_redoes_what_the_child_failed_and_raises_what_this_process_rai
     assert (tmp_path / "9.txt").read_text() == "9 by child"  # the child was waited for
 
 
+def test_run_split_runs_every_job_here_when_no_process_can_be_forked(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import os
+
+    from gndreplay.report.split import run_split
+
+    def no_fork() -> int:
+        raise BlockingIOError(11, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(os, "fork", no_fork)
+    jobs = [lambda k=k: (tmp_path / f"{k}.txt").write_text(str(os.getpid())) for k in range(3)]
+    run_split(jobs, split=True)
+    assert sorted(p.read_text() for p in tmp_path.iterdir()) == [str(os.getpid())] * 3
+
+
 def test_column_extremes_keep_every_columns_least_and_largest_value() -> None:
     from gndreplay.report.plots import column_extremes
 

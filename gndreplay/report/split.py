@@ -66,7 +66,12 @@ def run_split(jobs: Sequence[Job], weights: Sequence[float] | None = None, *, sp
             job()
         return
     theirs, ours = split_jobs(w)
-    pid = os.fork()
+    try:
+        pid = os.fork()
+    except OSError:  # no process to spare (EAGAIN, ENOMEM): all of them here
+        for job in jobs:
+            job()
+        return
     if pid == 0:  # the child: never returns into the caller's code
         code = 1
         try:
