@@ -123,7 +123,7 @@ def test_a_matcher_error_is_raised_at_its_tick_after_the_earlier_results(
 
 def test_a_killed_child_is_one_error_in_the_caller() -> None:
     with MatchAhead(functools.partial(make_matcher, "odom")) as ahead, \
-            pytest.raises(RuntimeError, match="ended unexpectedly"):
+            pytest.raises(ScanMatchError, match="ended unexpectedly"):
         for k, _ in enumerate(ahead.results(read_ticks(SAMPLE))):
             if k == 2:
                 assert ahead._proc is not None

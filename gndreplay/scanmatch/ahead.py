@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from ..compiling import CompileListener
+from ..errors import ScanMatchError
 from ..types import Tick
 from .base import Matcher, MatchResult
 
@@ -111,16 +112,18 @@ class MatchAhead:
             raise RuntimeError("MatchAhead needs POSIX pipes")
         to_child_r, to_child_w = os.pipe()
         from_child_r, from_child_w = os.pipe()
-        package_root = str(Path(__file__).resolve().parents[2])
-        env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH", "")) if p)
-        code = f"from gndreplay.scanmatch.ahead import serve; serve({to_child_r}, {from_child_w})"
+        # this gndreplay, also from a source tree: its root is put first on the child's path unless the
+        # path holds it already (an installed package: site-packages, which must stay after the standard
+        # library)
+        root = str(Path(__file__).resolve().parents[2])
+        code = (f"import sys; root = {root!r}; sys.path[:0] = [] if root in sys.path else [root]; "
+                f"from gndreplay.scanmatch.ahead import serve; serve({to_child_r}, {from_child_w})")
         try:
             # its own process group: a terminal's Ctrl-C (or a SIGTERM to the group) reaches only the
             # caller, which closes the pipes; the child would otherwise print KeyboardInterrupt's traceback
             # while still importing, before ``serve`` ignores SIGINT
             self._proc = subprocess.Popen([sys.executable, "-c", code], pass_fds=(to_child_r, from_child_w),
-                                          env=env, stdin=subprocess.DEVNULL, process_group=0)
+                                          stdin=subprocess.DEVNULL, process_group=0)
         except BaseException:
             for fd in (to_child_r, to_child_w, from_child_r, from_child_w):
                 os.close(fd)
@@ -161,10 +164,19 @@ class MatchAhead:
         try:
             msg = self._rx.recv()
         except EOFError:
-            raise RuntimeError("the scan matcher's process ended unexpectedly") from None
+            raise self._ended() from None
         if isinstance(msg, BaseException):
             raise msg
         return msg
+
+    def _ended(self) -> ScanMatchError:
+        """The error of a child that ended owing results (killed, out of memory, crashed)."""
+        status = None
+        if self._proc is not None:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                status = self._proc.wait(timeout=2.0)
+        return ScanMatchError(f"the scan matcher's process ended unexpectedly (exit status {status}); "
+                              "--no-match-ahead matches in this process")
 
     def ready(self, on_compile: Callable[[str], None] | None = None) -> None:
         """Wait until the child has warmed up; ``on_compile`` hears each kernel it compiled."""
@@ -204,7 +216,7 @@ class MatchAhead:
                     eager = False
             if not pending:
                 if ended:
-                    raise RuntimeError("the scan matcher's process ended unexpectedly")
+                    raise self._ended()
                 return
             res, ms = self._recv()
             yield pending.popleft(), res, ms
