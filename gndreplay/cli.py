@@ -1237,6 +1237,74 @@ def report(
 
 @app.command(cls=_Command)
 @cli_errors
+def compare(
+    run_a: Annotated[Path, typer.Argument(help="The reference run directory (A).", show_default=False)],
+    run_b: Annotated[
+        Path, typer.Argument(help="The run directory compared with it (B).", show_default=False)
+    ],
+    tolerance: Annotated[
+        Path | None,
+        typer.Option(
+            "--tolerance",
+            help="TOML with a [tolerance] table: v_mps, vy_mps, w_radps, pose_m, pose_rad, path_m "
+            "(absolute; default 0: exact).",
+            show_default=False,
+        ),
+    ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out", help="Write compare.json and fig_compare.png into this new folder.", show_default=False
+        ),
+    ] = None,
+    overwrite: OverwriteOpt = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Compare two run directories (of run, simulate or batch): the first tick whose command differs, the
+    first stage that differed at or before it, ticks differing per field, latency per module and the
+    outcome of closed-loop runs.
+
+    The command (commands.csv) is compared tick by tick on the ticks' stamps; the stages are the corrected
+    pose, the planner's work (timing.csv), the reactor's situation and the supervisor's mode and flags.
+    Module times are wall clock: they are reported, never a difference. Exit 0: the same within tolerance;
+    1: different; 2: a run directory or the tolerance file cannot be read.
+
+    [bold]Examples[/]
+
+      gndreplay compare out/aces out/aces-2
+      gndreplay compare out/aces out/aces-2 --tolerance tol.toml --out out/aces-compare
+    """
+    from .report.compare import (
+        Tolerance,
+        compare_runs,
+        comparison_lines,
+        comparison_to_dict,
+        load_compare_run,
+        read_tolerance,
+        write_comparison,
+    )
+
+    tol = read_tolerance(tolerance) if tolerance is not None else Tolerance()
+    a, b = load_compare_run(run_a), load_compare_run(run_b)
+    result = compare_runs(a, b, tol)
+    written = None
+    if out is not None:
+        written = write_comparison(out, a, b, result, overwrite=overwrite, inputs=[run_a, run_b])
+    if json_out:
+        import json
+
+        typer.echo(json.dumps(comparison_to_dict(result), indent=2, allow_nan=False))
+    else:
+        for line in comparison_lines(result):
+            typer.echo(line)
+        if written is not None:
+            typer.echo(f"written: {written}")
+    if not result.same:
+        raise typer.Exit(1)
+
+
+@app.command(cls=_Command)
+@cli_errors
 @navigation_options
 def simulate(
     scenario: Annotated[

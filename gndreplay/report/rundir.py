@@ -331,12 +331,14 @@ class Commands:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class Timing:
-    """timing.csv as arrays: t_s (K,), ms per module name (K,) (match, model, planner, reactor, total) and
-    over_budget: flag name -> (K,) bool mask for the ``*_OVER_BUDGET`` flags that fired."""
+    """timing.csv as arrays: t_s (K,), ms per module name (K,) (match, model, planner, reactor, total),
+    over_budget: flag name -> (K,) bool mask for the ``*_OVER_BUDGET`` flags that fired, and planner: the
+    planner's work per tick, ``nodes`` and ``path_m`` (K,) (NaN without a plan), when the file has them."""
 
     t_s: F64
     ms: Mapping[str, F64]
     over_budget: Mapping[str, NDArray[np.bool_]] = field(default_factory=dict)
+    planner: Mapping[str, F64] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -455,7 +457,8 @@ def window_run(data: RunData, t_from: float | None, t_to: float | None) -> RunDa
     )
     j = inside(tm.t_s)
     timing = Timing(t_s=tm.t_s[j], ms={n: v[j] for n, v in tm.ms.items()},
-                    over_budget={n: m[j] for n, m in tm.over_budget.items() if np.any(m[j])})
+                    over_budget={n: m[j] for n, m in tm.over_budget.items() if np.any(m[j])},
+                    planner={n: v[j] for n, v in tm.planner.items()})
     return RunData(
         run_dir=data.run_dir, commands=commands, timing=timing,
         traj_odom=data.traj_odom[inside(data.traj_odom[:, 0])],
@@ -542,6 +545,10 @@ def read_commands(path: Path) -> Commands:
     )
 
 
+#: timing.csv's columns of the planner's work -> the names in ``Timing.planner``.
+_PLANNER_COLUMNS = {"planner_nodes": "nodes", "path_m": "path_m"}
+
+
 def read_timing(path: Path) -> Timing:
     """Parse timing.csv (``t,match_ms,model_ms,planner_ms,reactor_ms[,supervisor_ms],total_ms[,flags]``;
     the supervisor's column is optional: the figures and tables show the modules present).
@@ -554,6 +561,8 @@ def read_timing(path: Path) -> Timing:
     if not header or header[0] != "t":
         raise RunDirError(f"{path}: expected a header starting with t")
     numeric = [k for k, name in enumerate(header) if k == 0 or name.endswith("_ms")]
+    work = [k for k, name in enumerate(header) if name in _PLANNER_COLUMNS]
+    numeric += work
     flag_col = header.index("flags") if "flags" in header else None
     body = rows[1:]
     data = np.empty((len(body), len(numeric)), dtype=np.float64)
@@ -570,11 +579,12 @@ def read_timing(path: Path) -> Timing:
             if mask is None:
                 mask = over[name] = np.zeros(len(body), dtype=bool)
             mask[k] = True
-    ms = {header[c].removesuffix("_ms"): data[:, j] for j, c in enumerate(numeric) if c}
+    ms = {header[c].removesuffix("_ms"): data[:, j] for j, c in enumerate(numeric) if c and c not in work}
+    planner = {_PLANNER_COLUMNS[header[c]]: data[:, j] for j, c in enumerate(numeric) if c in work}
     missing = [m for m in TIMING_MODULES if m not in ms and m != "supervisor"]
     if missing:
         raise RunDirError(f"{path}: missing column(s) {', '.join(m + '_ms' for m in missing)}")
-    return Timing(t_s=data[:, 0], ms=ms, over_budget=over)
+    return Timing(t_s=data[:, 0], ms=ms, over_budget=over, planner=planner)
 
 
 def read_tum(path: Path) -> F64:
