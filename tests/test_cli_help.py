@@ -40,7 +40,7 @@ def visible(text: str) -> str:
 
 
 def test_every_command_is_checked() -> None:
-    assert set(COMMANDS) == {"info", "run", "scanmatch", "report", "simulate", "batch"}
+    assert set(COMMANDS) == {"info", "run", "scanmatch", "report", "compare", "simulate", "batch"}
 
 
 @pytest.mark.parametrize("columns", [250, 80])

@@ -479,12 +479,14 @@ def comparison_lines(c: Comparison) -> list[str]:
         lines += [f"  {m.module:<12} {m.median_a:10.4f} {m.median_b:10.4f} {_ratio_text(m.median_ratio)} "
                   f"{m.p99_a:10.4f} {m.p99_b:10.4f} {_ratio_text(m.p99_ratio)}" for m in c.latency]
     if c.outcome is not None:
+        if "outcome" in c.outcome.values and "outcome" not in c.outcome.changed:
+            lines.append(f"outcome: {_fmt(c.outcome.values['outcome'][0])} in both")
         if c.outcome.changed:
-            lines.append("outcome changed: " + ", ".join(
+            lines.append("scores changed: " + ", ".join(
                 f"{k} {_fmt(c.outcome.values[k][0])} -> {_fmt(c.outcome.values[k][1])}"
                 for k in c.outcome.changed))
         else:
-            lines.append("outcome: the same")
+            lines.append("scores: the same")
     lines += [f"note: {n}" for n in c.notes]
     return lines
 
