@@ -199,3 +199,50 @@ def test_outcome_of_closed_loop_runs(runs: dict[str, Path], tmp_path: Path) -> N
     (b / "result.json").write_text("{")
     code, _, err = _invoke(a, b)
     assert code == 2 and str(b / "result.json") in err
+
+
+def _edit_csv(path: Path, row: int, column: str, value: str) -> None:
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    rows[row + 1][rows[0].index(column)] = value
+    with open(path, "w", newline="") as f:
+        csv.writer(f, lineterminator="\n").writerows(rows)
+
+
+def _edit_tum(path: Path, row: int, dx: float) -> None:
+    lines = path.read_text().splitlines(keepends=True)
+    body = [k for k, line in enumerate(lines) if not line.startswith("#")]
+    parts = lines[body[row]].split()
+    parts[1] = repr(float(parts[1]) + dx)
+    lines[body[row]] = " ".join(parts) + "\n"
+    path.write_text("".join(lines))
+
+
+def test_first_stage_in_pipeline_order(runs: dict[str, Path], tmp_path: Path) -> None:
+    """Edits at or before the divergent tick are found in pipeline order; those after it are not stages."""
+    b = tmp_path / "b"
+    shutil.copytree(runs["a"], b)
+    a_run = load_compare_run(runs["a"])
+    t = a_run.commands.t_s
+    _edit_csv(b / "commands.csv", 8, "v", "0.123456")
+    _edit_csv(b / "commands.csv", 9, "situation", "LS2")
+    c = compare_runs(a_run, load_compare_run(b))
+    assert c.divergence is not None and c.divergence.index_a == 8
+    assert set(c.divergence.fields) == {"v"}
+    assert c.stage is not None and c.stage.stage == "reactor" and "v" in c.stage.evidence
+    assert [s.stage for s in c.stages] == ["reactor"]  # the situation changed after the divergence
+
+    _edit_csv(b / "timing.csv", 6, "path_m", "99.000")
+    _edit_csv(b / "commands.csv", 7, "mode", "SAFE_SLOW")
+    c = compare_runs(a_run, load_compare_run(b))
+    assert c.divergence is not None and c.divergence.index_a == 7
+    assert c.divergence.fields["mode"] == (str(a_run.commands.modes[7]), "SAFE_SLOW")
+    assert [s.stage for s in c.stages] == ["planner", "supervisor"]
+    assert c.stage is not None and c.stage.t_s == t[6] and c.stage.b["path_m"] == 99.0
+
+    _edit_tum(b / "trajectory_corrected.tum", 3, 0.5)
+    c = compare_runs(a_run, load_compare_run(b))
+    assert c.stage is not None and c.stage.stage == "pose" and c.stage.t_s == a_run.corrected[3, 0]
+    assert c.stage.b[0] == pytest.approx(c.stage.a[0] + 0.5)
+    assert compare_runs(a_run, load_compare_run(b), Tolerance(pose_m=1.0, path_m=100.0)).stage.stage == (
+        "supervisor")

@@ -334,14 +334,15 @@ def _tick_stages(a: CompareRun, b: CompareRun, ia: NDArray[np.intp], ib: NDArray
 
 
 def _command_stage(d: Divergence, mode_a: str, mode_b: str) -> StageDivergence:
-    """The stage behind a command that differs while every recorded stage before it agrees: the
-    supervisor when a reflexive rule produced it in either run, else the reactor (ND+, or in the multi-loop
-    modes the selector and local navigation: what timing.csv's reactor column times)."""
+    """The stage behind a command (or navigation-mode fields) that differs while every recorded stage
+    before it agrees: the supervisor when a reflexive rule produced it in either run, else the reactor
+    (ND+, or in the multi-loop modes the selector and local navigation: what timing.csv's reactor column
+    times)."""
     stage = "supervisor" if mode_a in REFLEXIVE_MODES or mode_b in REFLEXIVE_MODES else "reactor"
-    keys = [n for n in ("v", "vy", "w") if n in d.fields]
+    keys = list(d.fields)
     return StageDivergence(stage, d.t_s, d.elapsed_s, {n: d.fields[n][0] for n in keys} | {"mode": mode_a},
                            {n: d.fields[n][1] for n in keys} | {"mode": mode_b},
-                           f"{COMMANDS_FILE} {', '.join(keys)} under the same mode, situation and flags")
+                           f"{COMMANDS_FILE} {', '.join(keys)}; mode, situation and flags the same")
 
 
 def _ratio(b: float, a: float) -> float | None:
