@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import nullcontext
@@ -34,7 +33,7 @@ from .pipeline.model import GridParams
 from .pipeline.stack import MatchInfo, NavigationStack, TickResult, warm_up
 from .report.rundir import RunSink, StagedSink, TrajectoryWriter, tick_tables, write_config, write_summary
 from .report.summary import SummaryRecorder, summarise
-from .scanmatch import MatchAhead, Matcher, MatchResult, make_matcher, warm_up_matcher
+from .scanmatch import MatchAhead, Matcher, MatchResult, make_matcher, timed_matches, warm_up_matcher
 from .types import Pose2D, Subgoal, Tick
 
 if TYPE_CHECKING:
@@ -111,11 +110,7 @@ def _matched(ticks: Iterable[Tick], cfg: Config, ahead: MatchAhead | None,
     if ahead is not None:
         yield from ahead.results(ticks, ahead_while)
         return
-    matcher = matcher_factory(cfg)()
-    for tick in ticks:
-        t0 = time.perf_counter_ns()
-        res = matcher.update(tick.scan, tick.odom)
-        yield tick, res, (time.perf_counter_ns() - t0) / 1e6
+    yield from timed_matches(ticks, matcher_factory(cfg)())
 
 
 def corrected_stream(ticks: Iterable[Tick], cfg: Config, options: RunOptions,
@@ -126,11 +121,9 @@ def corrected_stream(ticks: Iterable[Tick], cfg: Config, options: RunOptions,
     Ticks after ``until_s`` are yielded with ``in_range`` False when a goal lookahead needs them (goal
     ahead); with a fixed goal the stream stops at the first one.
     """
-    t_first: int | None = None
     s, prev = 0.0, None
     in_range = True
-
-    first: list[int] = []  # the reader's first stamp, seen by ``within`` before any tick is consumed
+    first: list[int] = []  # the log's first stamp, set by whichever reads the first tick: here or ahead
 
     def within(tick: Tick) -> bool:
         if not first:
@@ -138,9 +131,7 @@ def corrected_stream(ticks: Iterable[Tick], cfg: Config, options: RunOptions,
         return options.until_s is None or (tick.t_ns - first[0]) / 1e9 <= options.until_s
 
     for tick, res, ms in _matched(ticks, cfg, ahead, within):
-        if t_first is None:
-            t_first = tick.t_ns
-        if in_range and options.until_s is not None and (tick.t_ns - t_first) / 1e9 > options.until_s:
+        if in_range and not within(tick):
             in_range = False
             if options.goal_xy is not None:
                 break

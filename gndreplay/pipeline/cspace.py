@@ -198,8 +198,9 @@ def free_cspace(
     return _free_of_disc(cells, OCCUPIED, UNKNOWN, bool(unknown_is_free), half_width)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _is_obstacle(v: np.uint8, occupied: np.uint8, unknown: np.uint8, unknown_is_free: bool) -> bool:
+    """The grid code ``v`` blocks the disc: OCCUPIED, or UNKNOWN unless unknown space is free."""
     return v == occupied or (not unknown_is_free and v == unknown)
 
 
@@ -265,12 +266,10 @@ def _update_discs(
     disc, keeping ``free_out`` in step; ``prev_out`` becomes ``cells``."""
     n_r, n_c = cells.shape
     pad = half_width.shape[0] - 1
-    check_unknown = not unknown_is_free
     for r in range(n_r):
         row_gone = r - d_row < 0 or r - d_row >= n_r
         for c in range(n_c):
-            v = prev[r, c]
-            if ((v == occupied) | (check_unknown & (v == unknown))) and (
+            if _is_obstacle(prev[r, c], occupied, unknown, unknown_is_free) and (
                     row_gone or c - d_col < 0 or c - d_col >= n_c):
                 _add_disc(counts, free, r, c, half_width, -1)
     h_r, h_c = n_r + 2 * pad, n_c + 2 * pad
@@ -287,12 +286,11 @@ def _update_discs(
         src_r = r + d_row
         for c in range(n_c):
             v = cells[r, c]
-            ob = (v == occupied) | (check_unknown & (v == unknown))
+            ob = _is_obstacle(v, occupied, unknown, unknown_is_free)
             src_c = c + d_col
             was = False
             if 0 <= src_r < n_r and 0 <= src_c < n_c:
-                w = prev[src_r, src_c]
-                was = (w == occupied) | (check_unknown & (w == unknown))
+                was = _is_obstacle(prev[src_r, src_c], occupied, unknown, unknown_is_free)
             if ob != was:
                 _add_disc(counts_out, free_out, r, c, half_width, 1 if ob else -1)
             prev_out[r, c] = v
@@ -309,7 +307,6 @@ def _changed_discs(
     eight at a time through the uint64 views ``*_words`` of the same bytes) add or remove their disc where
     their obstacle state changed, in place; ``prev`` becomes ``cells``."""
     n_c = cells.shape[1]
-    check_unknown = not unknown_is_free
     flat, prev_flat = cells.ravel(), prev.ravel()
     for w in range(cells_words.shape[0]):
         if cells_words[w] == prev_words[w]:
@@ -318,8 +315,8 @@ def _changed_discs(
             v, old = flat[k], prev_flat[k]
             if v == old:
                 continue
-            ob = (v == occupied) | (check_unknown & (v == unknown))
-            was = (old == occupied) | (check_unknown & (old == unknown))
+            ob = _is_obstacle(v, occupied, unknown, unknown_is_free)
+            was = _is_obstacle(old, occupied, unknown, unknown_is_free)
             if ob != was:
                 _add_disc(counts, free, k // n_c, k % n_c, half_width, 1 if ob else -1)
             prev_flat[k] = v

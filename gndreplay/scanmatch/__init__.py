@@ -27,6 +27,7 @@ from .run import (
     make_matcher,
     matcher_report,
     run_scanmatch,
+    timed_matches,
     warm_up_matcher,
 )
 
@@ -50,5 +51,6 @@ __all__ = [
     "make_matcher",
     "matcher_report",
     "run_scanmatch",
+    "timed_matches",
     "warm_up_matcher",
 ]

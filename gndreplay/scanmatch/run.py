@@ -41,7 +41,7 @@ from .kiss import KissIcpMatcher, KissParams
 
 __all__ = ["METHODS", "CorrectedTrajectory", "MatcherReport", "correct_trajectories", "correct_trajectory",
            "health_params", "interleave_bearings", "keep_by_travel", "log_ticks", "make_matcher",
-           "matcher_report", "relations_time_base", "run_scanmatch", "warm_up_matcher"]
+           "matcher_report", "relations_time_base", "run_scanmatch", "timed_matches", "warm_up_matcher"]
 
 Method = Literal["idc", "kiss-icp", "odom"]
 METHODS: tuple[Method, ...] = ("odom", "idc", "kiss-icp")
@@ -162,17 +162,18 @@ class _Collector:
             np.array(self.truth, dtype=np.float64).reshape(-1, 3))
 
 
-def _timed(ticks: Iterable[Tick], matcher: Matcher) -> Iterator[tuple[Tick, MatchResult, float]]:
+def timed_matches(ticks: Iterable[Tick], matcher: Matcher) -> Iterator[tuple[Tick, MatchResult, float]]:
+    """(tick, ``matcher``'s result, the wall-clock ms of its update) for each tick, in order."""
     for tick in ticks:
         t0 = time.perf_counter_ns()
         res = matcher.update(tick.scan, tick.odom)
-        yield tick, res, (time.perf_counter_ns() - t0) * 1e-6
+        yield tick, res, (time.perf_counter_ns() - t0) / 1e6
 
 
 def correct_trajectory(ticks: Iterable[Tick], matcher: Matcher) -> CorrectedTrajectory:
     """Run ``matcher`` over the ticks (time order) and collect its corrected trajectory and timings."""
     out = _Collector(matcher.name)
-    for tick, res, ms in _timed(ticks, matcher):
+    for tick, res, ms in timed_matches(ticks, matcher):
         out.add(tick, res, ms)
     return out.result()
 
@@ -187,7 +188,7 @@ def correct_trajectories(ticks: Iterable[Tick], methods: Sequence[Method], *, id
         for method, copy in zip(methods, itertools.tee(ticks, len(methods)), strict=True):
             make = functools.partial(make_matcher, method, idc=idc, kiss=kiss)
             if method == "odom":
-                streams.append(_timed(copy, make()))
+                streams.append(timed_matches(copy, make()))
             else:
                 ahead = stack.enter_context(MatchAhead(make, functools.partial(warm_up_matcher, make)))
                 streams.append(ahead.results(copy))
