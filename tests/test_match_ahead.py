@@ -134,6 +134,9 @@ def test_a_killed_child_is_one_error_in_the_caller() -> None:
 _CTRL_C = '''
 import functools, os, signal, sys, time
 from gndreplay.scanmatch import MatchAhead, make_matcher
+# Python ignores SIGINT when it started with it ignored (a background job of a non-interactive shell, some
+# CI runners): as in a terminal, Ctrl-C raises KeyboardInterrupt here
+signal.signal(signal.SIGINT, signal.default_int_handler)
 try:
     with MatchAhead(functools.partial(make_matcher, "idc")) as ahead:
         time.sleep(0.1)  # the child is still importing
