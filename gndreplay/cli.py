@@ -223,6 +223,7 @@ _CONFIG_PANEL = "Configuration"
 _MODE_PANEL = "Navigation mode (multi-loop)"
 _RUN_PANEL = "Run"
 _SIM_PANEL = "Scenarios"
+_BASELINE_PANEL = "Baseline and sweeps"
 _SNAPSHOT_PANEL = "Snapshots"
 
 
@@ -388,6 +389,15 @@ SetOpt = Annotated[
         help="Override one configuration key, section.key=value (repeatable; applied last), e.g. "
         "--set reactor.security_m=0.4.",
         rich_help_panel=_CONFIG_PANEL,
+        show_default=False,
+    ),
+]
+ToleranceOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--tolerance",
+        help="TOML with a [tolerance] table: v_mps, vy_mps, w_radps, pose_m, pose_rad, path_m "
+        "(absolute; default 0: exact).",
         show_default=False,
     ),
 ]
@@ -1242,15 +1252,7 @@ def compare(
     run_b: Annotated[
         Path, typer.Argument(help="The run directory compared with it (B).", show_default=False)
     ],
-    tolerance: Annotated[
-        Path | None,
-        typer.Option(
-            "--tolerance",
-            help="TOML with a [tolerance] table: v_mps, vy_mps, w_radps, pose_m, pose_rad, path_m "
-            "(absolute; default 0: exact).",
-            show_default=False,
-        ),
-    ] = None,
+    tolerance: ToleranceOpt = None,
     out: Annotated[
         Path | None,
         typer.Option(
@@ -1470,8 +1472,7 @@ def batch(
         Path | None,
         typer.Option(
             "--thresholds",
-            help="TOML of pass/fail limits and per-input settings (relations, goal; for scenarios "
-            "min_success_rate, ...).",
+            help="TOML of pass/fail limits and per-input settings.",
             show_default=False,
         ),
     ] = None,
@@ -1479,8 +1480,7 @@ def batch(
         Path,
         typer.Option(
             "--out",
-            help="Batch folder (default out/batch), a run directory per input; beside an earlier one "
-            "(out/batch-2, ...) unless --overwrite.",
+            help="Batch folder (default out/batch; taken: beside it).",
             show_default=False,
             rich_help_panel=_RUN_PANEL,
         ),
@@ -1490,7 +1490,7 @@ def batch(
         Path | None,
         typer.Option(
             "--junit",
-            help="Also write JUnit XML (a test case per input and scenario x seed).",
+            help="Also write JUnit XML (a test case per input and check).",
             rich_help_panel=_RUN_PANEL,
             show_default=False,
         ),
@@ -1499,7 +1499,7 @@ def batch(
         str | None,
         typer.Option(
             "--dask",
-            help="Send the inputs to this dask.distributed scheduler (pip install 'gndreplay[dask]').",
+            help="Run on this dask scheduler (pip install 'gndreplay[dask]').",
             show_default=False,
         ),
     ] = None,
@@ -1513,7 +1513,7 @@ def batch(
         bool | None,
         typer.Option(
             "--figures/--no-figures",
-            help="Draw each run's figures (a log's also maps.npz, report.md). Default: scenario runs only.",
+            help="Draw each run's figures (default: scenario runs only).",
             rich_help_panel=_RUN_PANEL,
         ),
     ] = None,
@@ -1522,33 +1522,65 @@ def batch(
         typer.Option(
             "--timeout",
             callback=_bounded("--timeout", 0.001, _MAX_SECONDS),
-            help="Per-input time limit (s, default 3600): a longer input is stopped and reported as an "
-            "error.",
+            help="Per-input time limit [s] (default 3600).",
             show_default=False,
         ),
     ] = 3600.0,
+    baseline: Annotated[
+        Path | None,
+        typer.Option(
+            "--baseline",
+            help="Earlier batch folder: compare each run with its run there; a change fails.",
+            show_default=False,
+            rich_help_panel=_BASELINE_PANEL,
+        ),
+    ] = None,
+    update_baseline: Annotated[
+        bool,
+        typer.Option(
+            "--update-baseline",
+            help="Write this batch as the new --baseline (changes reported, not failed).",
+            rich_help_panel=_BASELINE_PANEL,
+        ),
+    ] = False,
+    tolerance: Annotated[
+        Path | None,
+        typer.Option(
+            "--tolerance",
+            help="TOML [tolerance] of the behaviour check (as compare's; default exact).",
+            show_default=False,
+            rich_help_panel=_BASELINE_PANEL,
+        ),
+    ] = None,
+    latency_ratio: Annotated[
+        float,
+        typer.Option(
+            "--latency-ratio",
+            callback=_bounded("--latency-ratio", 0.0, 1e6),
+            help="Fail when a module's median time is over this times the baseline's (0: off).",
+            rich_help_panel=_BASELINE_PANEL,
+        ),
+    ] = 1.5,
     quiet: QuietOpt = False,
     progress: ProgressOpt = "auto",
     *,
     read: ReadOptions,
     setup: Setup,
 ) -> None:
-    """Replay many logs and run closed-loop scenarios in parallel; check thresholds; write summary.csv,
-    summary.md and JUnit XML.
+    """Replay many logs and run closed-loop scenarios in parallel worker processes; check thresholds,
+    compare with a baseline, sweep configuration keys; write summary.csv, summary.md and JUnit XML.
 
-    Each input runs in its own worker process: a bad, crashing or hung input (over --timeout) fails alone.
-    A scenario (a .yaml file, or --scenarios) runs once per seed as `gndreplay simulate` does and passes
-    when the robot reaches the goal; scenarios.csv gives each scenario's success rate, collisions, goals
-    missed, time-outs, mean time and minimum clearance over its seeds. The configuration and navigation
-    options apply to logs and scenarios alike. Exit 0: all passed; 1: a threshold was exceeded; 2: an
-    input could not be read.
+    A scenario runs once per seed and passes when the robot reaches the goal. --baseline compares each run
+    with the same run of an earlier batch (first divergent tick and stage, outcome, latency per module); a
+    --set listing several values is a sweep over their combinations. Exit 0: all passed; 1: a threshold
+    failed or a run changed against the baseline; 2: an input could not be read.
 
     [bold]Examples[/]
 
       gndreplay batch ../shared/datasets/carmen --jobs 2 --junit out/junit.xml
-      gndreplay batch logs/ --thresholds ci.toml --until 120
-      gndreplay batch --scenarios all --seeds 1-20 --jobs 2 --no-figures
-      gndreplay batch my_world.yaml --scenarios u_trap,enclosed --seeds 1,3,5 --preset xr4000
+      gndreplay batch --scenarios all --seeds 1-20 --jobs 2 --thresholds ci.toml
+      gndreplay batch logs/ --until 120 --baseline ci/baseline   # --update-baseline accepts changes
+      gndreplay batch --scenarios u_trap --set reactor.security_m=0.3,0.5 --set robot.vmax_mps=1,2
     """
     import os
 
@@ -1558,10 +1590,13 @@ def batch(
     from .replay import RunOptions
     from .sim.runner import parse_latency
 
-    cfg = setup.config()
+    against = _baseline(baseline, update=update_baseline, tolerance=tolerance, ratio=latency_ratio)
+    if against is not None and against.update:
+        out, overwrite = against.folder, True
     sim = SimOptions(latency_s=parse_latency(latency), perfect_odometry=perfect_odometry,
                      time_limit_s=time_limit, figures=figures is not False, config=setup.path,
                      preset=setup.preset, overrides=setup.overrides, subgoals=setup.subgoals)
+    settings = _sweep_settings(setup, sim)
     job_list = expand_inputs(
         inputs or [], scenarios=scenarios or [], seeds=None if seeds is None else parse_seeds(seeds)
     )
@@ -1571,12 +1606,42 @@ def batch(
     with _Progress(_progress_style(progress, quiet=quiet)) as shown:
         shown.start("batch", len(job_list))
         advance = None if shown.style == "none" else _counter(shown, len(job_list), "inputs")
-        result = run_batch(job_list, cfg=cfg, options=options, thresholds=limits, out_dir=out, workers=jobs,
-                           dask_address=dask, progress=advance, junit=junit, read=read, timeout_s=timeout,
-                           overwrite=overwrite, sim=sim, figures=figures is True)
+        result = run_batch(job_list, cfg=settings[0].cfg, options=options, thresholds=limits, out_dir=out,
+                           workers=jobs, dask_address=dask, progress=advance, junit=junit, read=read,
+                           timeout_s=timeout, overwrite=overwrite, sim=settings[0].sim,
+                           figures=figures is True, sweep=settings if settings[0].point.name else (),
+                           baseline=against)
     _said_moved(Path(os.path.abspath(out)), result.out_dir, "batch")
     _print_batch(result, quiet=quiet)
     raise typer.Exit(result.exit_code)
+
+
+def _baseline(folder: Path | None, *, update: bool, tolerance: Path | None, ratio: float) -> Any:
+    """The ``batch.Baseline`` the baseline options ask for (None without --baseline).
+
+    Raises:
+        ConfigError: --update-baseline or --tolerance without --baseline; a bad tolerance file.
+    """
+    from .batch import Baseline
+    from .report.compare import Tolerance, read_tolerance
+
+    if folder is None:
+        if update or tolerance is not None:
+            raise ConfigError(f"{'--update-baseline' if update else '--tolerance'}: name the baseline folder "
+                              "with --baseline DIR")
+        return None
+    return Baseline(folder, read_tolerance(tolerance) if tolerance is not None else Tolerance(), ratio,
+                    update=update)
+
+
+def _sweep_settings(setup: Setup, sim: Any) -> list[Any]:
+    """One ``batch.Setting`` per combination of the --set sweep (one when nothing is swept), each
+    configuration validated before anything runs."""
+    from .batch import Setting, sweep_points
+
+    return [Setting(p, setup.config(sets=p.sets),
+                    dataclasses.replace(sim, overrides=dataclasses.replace(setup.overrides, sets=p.sets)))
+            for p in sweep_points(setup.overrides.sets)]
 
 
 def _print_batch(result: object, *, quiet: bool) -> None:
@@ -1595,10 +1660,13 @@ def _print_batch(result: object, *, quiet: bool) -> None:
     for a in result.aggregates:
         if a.failures:
             typer.echo(
-                f"gndreplay: fail: {a.scenario} over {a.runs} seeds: {'; '.join(a.failures)}", err=True
+                f"gndreplay: fail: {a.label} over {a.runs} seeds: {'; '.join(a.failures)}", err=True
             )
+    _print_check_lines(result)
     if quiet:
         return
+    _print_baseline(result)
+    _print_sweep(result)
     table = Table(title=f"batch: {len(result.results)} inputs in {result.wall_s:.1f} s", title_justify="left")
     for col in ("input", "status", "ticks", "stack p99 ms", "reactor p99 ms", "match failures", "why"):
         table.add_column(
@@ -1609,7 +1677,7 @@ def _print_batch(result: object, *, quiet: bool) -> None:
         m = r.metrics
         why = r.error if r.status == "error" else "; ".join(r.failures)
         table.add_row(
-            r.name,
+            r.label,
             f"[{style[r.status]}]{r.status}[/]",
             str(r.ticks),
             _num(m.get("stack_p99_ms")),
@@ -1621,6 +1689,60 @@ def _print_batch(result: object, *, quiet: bool) -> None:
     typer.echo(
         f"summary: {result.summary_csv}, {result.summary_md}" + (f", {result.junit}" if result.junit else "")
     )
+
+
+def _print_check_lines(result: Any) -> None:
+    """One line on stderr per failed (or, updating the baseline, accepted) baseline check."""
+    verb = "accepted" if result.baseline_updated else "fail"
+    for c in result.checks:
+        for why in (c.behaviour_failure, c.latency_failure):
+            if why:
+                typer.echo(f"gndreplay: {verb}: {c.label}: {why}", err=True)
+        if c.error:
+            typer.echo(f"gndreplay: error: {c.label}: baseline: {c.error}", err=True)
+
+
+def _print_baseline(result: Any) -> None:
+    """The table of the runs against the baseline (input, verdict, first divergence, outcome change, latency
+    ratio), when there is one."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from .batch.baseline import ratio_text
+
+    if not result.checks and not result.missing:
+        return
+    title = "against the baseline" + (" (written as the new baseline)" if result.baseline_updated else "")
+    table = Table(title=title, title_justify="left")
+    for col in ("input", "verdict", "first divergence", "outcome change", "latency ratio"):
+        table.add_column(col, justify="right" if col == "latency ratio" else "left")
+    style = {"same": "green", "new": "cyan", "error": "red"}
+    for c in result.checks:
+        table.add_row(escape(c.label), f"[{style.get(c.verdict, 'yellow')}]{c.verdict}[/]",
+                      escape(c.error or c.divergence or "-"), escape(c.outcome_change or "-"),
+                      ratio_text(c.latency_ratio) + (f" {c.slowest_module}" if c.slowest_module else ""))
+    _console().print(table)
+    if result.missing:
+        typer.echo("not in this batch (in the baseline): " + ", ".join(result.missing))
+
+
+def _print_sweep(result: Any) -> None:
+    """The sweep table (one row per combination), when the batch swept configuration keys."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from .batch.sweep import sweep_rows
+
+    if not any(p.name for p in result.points):
+        return
+    header, rows = sweep_rows(result.points, result.results)
+    keys = len(result.points[0].values)
+    table = Table(title=f"sweep: {len(rows)} combinations", title_justify="left")
+    for k, col in enumerate(header):
+        table.add_column(escape(col), justify="left" if k < keys else "right")
+    for row in rows:
+        table.add_row(*(escape(str(v)) if k < keys + 4 else _num(v, "{:.3g}") for k, v in enumerate(row)))
+    _console().print(table)
 
 
 def _num(value: object, fmt: str = "{:.2f}") -> str:

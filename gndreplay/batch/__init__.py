@@ -9,11 +9,16 @@ pass/fail thresholds, and a CI exit code.
 ...                 sim=SimOptions(time_limit_s=60))
 >>> res.exit_code                                                          # 0 pass, 1 threshold, 2 error
 
+``run_batch(..., baseline=Baseline(Path("ci/baseline"), Tolerance()))`` checks every run against an earlier
+batch folder; ``sweep=[Setting(point, cfg, sim) for point in sweep_points(sets)]`` runs every input under
+each combination of a ``--set key=a,b`` sweep.
+
 Importing this package is cheap (no numpy / numba / replay code): worker processes import it first and pin
 the numeric libraries to one thread before the replay code is loaded.
 """
 
 from .aggregate import ScenarioAggregate, aggregate_scenarios
+from .baseline import DEFAULT_LATENCY_RATIO, BaselineCheck, check_baseline
 from .jobs import (
     SCENARIO_SUFFIXES,
     Job,
@@ -37,8 +42,18 @@ from .metrics import (
     metrics_from_summary,
 )
 from .report import CSV_COLUMNS, SCENARIO_CSV_COLUMNS, junit_xml, scenarios_csv, summary_csv, summary_md
-from .run import DASK_EXTRA_HINT, DEFAULT_TIMEOUT_S, BatchResult, make_tasks, run_batch, run_tasks
+from .run import (
+    DASK_EXTRA_HINT,
+    DEFAULT_TIMEOUT_S,
+    Baseline,
+    BatchResult,
+    Setting,
+    make_tasks,
+    run_batch,
+    run_tasks,
+)
 from .scenarios import SimOptions, run_scenario
+from .sweep import SweepPoint, sweep_points
 from .thresholds import (
     AGGREGATE_KEYS,
     DEFAULT_LIMITS,
@@ -56,6 +71,7 @@ __all__ = [
     "COUNT_METRICS",
     "CSV_COLUMNS",
     "DASK_EXTRA_HINT",
+    "DEFAULT_LATENCY_RATIO",
     "DEFAULT_LIMITS",
     "DEFAULT_TIMEOUT_S",
     "LATENCY_METRICS",
@@ -64,6 +80,8 @@ __all__ = [
     "SCENARIO_METRICS",
     "SCENARIO_SUFFIXES",
     "THRESHOLD_KEYS",
+    "Baseline",
+    "BaselineCheck",
     "BatchResult",
     "InputResult",
     "InputRule",
@@ -72,11 +90,14 @@ __all__ = [
     "RunOutcome",
     "Runner",
     "ScenarioAggregate",
+    "Setting",
     "SimOptions",
     "Status",
+    "SweepPoint",
     "Task",
     "Thresholds",
     "aggregate_scenarios",
+    "check_baseline",
     "check_limits",
     "execute",
     "expand_inputs",
@@ -99,5 +120,6 @@ __all__ = [
     "special_file_kind",
     "summary_csv",
     "summary_md",
+    "sweep_points",
     "unique_names",
 ]

@@ -35,6 +35,7 @@ class ScenarioAggregate:
         limits: the aggregate thresholds checked (empty: none asked for).
         failures: one message per aggregate threshold exceeded.
         run_failures: runs whose own thresholds failed (status "fail").
+        variant: the sweep combination ("" outside a sweep): a scenario is aggregated per combination.
     """
 
     scenario: str
@@ -51,6 +52,12 @@ class ScenarioAggregate:
     failures: tuple[str, ...] = ()
 
     run_failures: int = 0
+    variant: str = ""
+
+    @property
+    def label(self) -> str:
+        """Its name in the batch: ``variant/scenario`` in a sweep, else ``scenario``."""
+        return f"{self.variant}/{self.scenario}" if self.variant else self.scenario
 
     @property
     def status(self) -> Status:
@@ -84,15 +91,16 @@ def _metrics(done: Sequence[InputResult]) -> dict[str, float]:
 def aggregate_scenarios(
     results: Sequence[InputResult], thresholds: Thresholds | None = None
 ) -> tuple[ScenarioAggregate, ...]:
-    """One aggregate per scenario of ``results`` (rows with a ``group``), in order of first appearance,
-    checked against the aggregate limits of ``thresholds`` (None: the defaults, which have none)."""
+    """One aggregate per scenario of ``results`` (rows with a ``group``) and sweep combination, in order of
+    first appearance, checked against the aggregate limits of ``thresholds`` (None: the defaults, which have
+    none)."""
     thresholds = thresholds if thresholds is not None else Thresholds()
-    groups: dict[str, list[InputResult]] = {}
+    groups: dict[tuple[str, str], list[InputResult]] = {}
     for r in results:
         if r.group:
-            groups.setdefault(r.group, []).append(r)
+            groups.setdefault((r.variant, r.group), []).append(r)
     out = []
-    for name, rows in groups.items():
+    for (variant, name), rows in groups.items():
         done = [r for r in rows if r.status != "error"]
         metrics = _metrics(done)
         limits = thresholds.aggregate_limits(name, Path(rows[0].path))
@@ -111,6 +119,7 @@ def aggregate_scenarios(
                 limits=limits,
                 failures=check_limits(metrics, limits),
                 run_failures=sum(r.status == "fail" for r in rows),
+                variant=variant,
             )
         )
     return tuple(out)

@@ -13,6 +13,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from .aggregate import ScenarioAggregate
+from .baseline import BaselineCheck, ratio_text
+from .sweep import SweepPoint, sweep_rows
 from .worker import InputResult
 
 __all__ = [
@@ -24,6 +26,7 @@ __all__ = [
     "scenarios_csv",
     "summary_csv",
     "summary_md",
+    "sweep_csv",
 ]
 
 #: ``name`` of the root element of the JUnit files gndreplay writes (how an earlier one is recognised).
@@ -66,6 +69,7 @@ METRIC_COLUMNS: tuple[str, ...] = (
 )
 CSV_COLUMNS: tuple[str, ...] = (
     "name",
+    "variant",
     "status",
     "ticks",
     "scenario",
@@ -112,6 +116,7 @@ _AGGREGATE_COLUMNS: tuple[str, ...] = (
 )
 SCENARIO_CSV_COLUMNS: tuple[str, ...] = (
     "scenario",
+    "variant",
     "status",
     "runs",
     "errors",
@@ -126,6 +131,7 @@ SCENARIO_CSV_COLUMNS: tuple[str, ...] = (
 )
 SUITE = "gndreplay.batch"
 SCENARIO_SUITE = "gndreplay.batch.scenarios"
+BASELINE_SUITE = "gndreplay.batch.baseline"
 _XML_INVALID = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
 
 
@@ -153,7 +159,7 @@ def summary_csv(results: Sequence[InputResult]) -> str:
         CSV_COLUMNS,
         (
             [
-                r.name, r.status, r.ticks, r.group, r.seed if r.group else "", r.outcome,
+                r.name, r.variant, r.status, r.ticks, r.group, r.seed if r.group else "", r.outcome,
                 *(_cell(m, r.metrics.get(m)) for m in METRIC_COLUMNS), f"{r.wall_s:.3f}",
                 "; ".join(r.failures), r.error, r.path, "" if r.run_dir is None else str(r.run_dir)
             ]
@@ -189,21 +195,81 @@ def _pct(count: int, of: int) -> str:
     return f"{count}/{of} ({100.0 * count / of:.0f} %)" if of else "-"
 
 
-def summary_md(results: Sequence[InputResult], aggregates: Sequence[ScenarioAggregate] = ()) -> str:
-    """summary.md text: a totals line and a Markdown table, one row per log; then, when there are
-    scenarios, one row per scenario run and a table of the per-scenario aggregates over seeds."""
+def _baseline_md(checks: Sequence[BaselineCheck], missing: Sequence[str], *, updated: bool) -> list[str]:
+    """The baseline section of summary.md: a verdict line and one table row per input."""
+    changed = sum(bool(c.behaviour_failure) for c in checks)
+    slower = sum(bool(c.latency_failure) for c in checks)
+    verdict = (f"{len(checks)} inputs against the baseline: {changed} behaviour changed, {slower} slower, "
+               f"{sum(c.new for c in checks)} new, {sum(bool(c.error) for c in checks)} unreadable")
+    lines = ["", "## Against the baseline", "", verdict + (" (accepted: written as the new baseline)"
+                                                            if updated else "")]
+    if missing:
+        lines += ["", "Not in this batch: " + ", ".join(missing)]
+    verdicts = {"same": "same", "new": "new"}
+    lines += ["", *_table(
+        ["input", "verdict", "first divergence", "outcome change", "latency ratio"],
+        ["---", "---", "---", "---", "---:"],
+        [[c.label, verdicts.get(c.verdict, c.verdict.upper()), c.error or c.divergence or "-",
+          c.outcome_change or "-",
+          ratio_text(c.latency_ratio) + (f" ({c.slowest_module})" if c.slowest_module else "")]
+         for c in checks],
+    )]
+    return lines
+
+
+def _sweep_md(points: Sequence[SweepPoint], results: Sequence[InputResult]) -> list[str]:
+    """The sweep section of summary.md: one row of metrics per combination."""
+    header, rows = sweep_rows(points, results)
+    keys = len(points[0].values)
+    cells = [[str(v) if k < keys + 4 else _sweep_cell(v) for k, v in enumerate(row)] for row in rows]
+    return ["", "## Sweep", "", "One row per combination, over its inputs: success over the scenario runs, "
+            "sums of counts, the mean time of the successes, the smallest clearance, the worst stack p99.",
+            "", *_table(header, ["---"] * keys + ["---:"] * (len(header) - keys), cells)]
+
+
+def _sweep_cell(value: object) -> str:
+    return "-" if not isinstance(value, float) or math.isnan(value) else f"{value:.3g}" if abs(value) < 1000 \
+        else f"{value:.0f}"
+
+
+def sweep_csv(points: Sequence[SweepPoint], results: Sequence[InputResult]) -> str:
+    """sweep.csv text: the sweep table (``sweep_rows``), one row per combination (empty cell: no run
+    reported the metric)."""
+    header, rows = sweep_rows(points, results)
+    return _csv_text(header, ([("" if isinstance(v, float) and math.isnan(v) else
+                                f"{v:.6g}" if isinstance(v, float) else v) for v in row] for row in rows))
+
+
+def summary_md(
+    results: Sequence[InputResult],
+    aggregates: Sequence[ScenarioAggregate] = (),
+    *,
+    checks: Sequence[BaselineCheck] = (),
+    missing: Sequence[str] = (),
+    points: Sequence[SweepPoint] = (),
+    baseline_updated: bool = False,
+) -> str:
+    """summary.md text, fit for a CI job summary: a totals line; with a baseline, its table (input,
+    verdict, first divergence, outcome change, latency ratio); in a sweep, the table of the combinations;
+    then one row per log; when there are scenarios, one row per scenario run and a table of the
+    per-scenario aggregates over seeds."""
     n = {s: sum(r.status == s for r in results) for s in ("pass", "fail", "error")}
     lines = [
         "# gndreplay batch",
         "",
         f"{len(results)} inputs: {n['pass']} pass, {n['fail']} fail, {n['error']} error",
     ]
+    if checks or missing:
+        lines += _baseline_md(checks, missing, updated=baseline_updated)
+    if any(p.name for p in points):
+        lines += _sweep_md(points, results)
     logs = [r for r in results if not r.group]
     if logs:
+        lines += ["", "## Logs"] if len(lines) > 3 else []
         lines += ["", *_table(
             ["input", "status", "ticks", *(h for h, _ in _MD_METRICS), "notes"],
             ["---", "---", "---:", *("---:" for _ in _MD_METRICS), "---"],
-            [[r.name, _status(r.status), str(r.ticks), *(_cell(m, r.metrics.get(m)) for _, m in _MD_METRICS),
+            [[r.label, _status(r.status), str(r.ticks), *(_cell(m, r.metrics.get(m)) for _, m in _MD_METRICS),
               _note(r)] for r in logs],
         )]
     runs = [r for r in results if r.group]
@@ -211,7 +277,7 @@ def summary_md(results: Sequence[InputResult], aggregates: Sequence[ScenarioAggr
         lines += ["", "## Scenario runs", "", *_table(
             ["run", "status", "seed", "outcome", *(h for h, _ in _MD_SCENARIO_METRICS), "notes"],
             ["---", "---", "---:", "---", *("---:" for _ in _MD_SCENARIO_METRICS), "---"],
-            [[r.name, _status(r.status), str(r.seed), r.outcome,
+            [[r.label, _status(r.status), str(r.seed), r.outcome,
               *(_cell(m, r.metrics.get(m)) for _, m in _MD_SCENARIO_METRICS), _note(r)] for r in runs],
         )]
     if aggregates:
@@ -223,7 +289,7 @@ def summary_md(results: Sequence[InputResult], aggregates: Sequence[ScenarioAggr
             ["scenario", "status", "runs", "success", "collisions", "goal missed", "time-outs", "errors",
              "mean time s", "min clearance m", "stack p99 ms", "notes"],
             ["---", "---", *("---:" for _ in range(9)), "---"],
-            [[a.scenario, _status(a.status), str(a.runs), _pct(a.successes, a.runs - a.errors),
+            [[a.label, _status(a.status), str(a.runs), _pct(a.successes, a.runs - a.errors),
               str(a.collisions), str(a.goal_missed), str(a.timeouts), str(a.errors),
               _cell("mean_time_to_goal_s", a.metrics.get("mean_time_to_goal_s")),
               _cell("clearance_m", a.metrics.get("clearance_m")),
@@ -239,7 +305,8 @@ def scenarios_csv(aggregates: Sequence[ScenarioAggregate]) -> str:
         SCENARIO_CSV_COLUMNS,
         (
             [
-                a.scenario, a.status, a.runs, a.errors, a.successes, a.collisions, a.goal_missed, a.timeouts,
+                a.scenario, a.variant, a.status, a.runs, a.errors, a.successes, a.collisions, a.goal_missed,
+                a.timeouts,
                 *(_cell(m, a.metrics.get(m)) for m in _AGGREGATE_COLUMNS), " ".join(str(s) for s in a.seeds),
                 "; ".join(a.failures), a.path
             ]
@@ -253,27 +320,82 @@ def _x(text: str) -> str:
     return _XML_INVALID.sub("\ufffd", text)
 
 
-def junit_xml(results: Sequence[InputResult], aggregates: Sequence[ScenarioAggregate] = ()) -> str:
-    """JUnit XML: one ``<testsuite name="gndreplay.batch">`` with one ``<testcase>`` per input (a scenario:
-    per scenario and seed); a ``<failure>`` lists the thresholds exceeded (a run that did not reach its
-    goal says how it ended), an ``<error>`` carries an unreadable input's message. Scenarios with aggregate
-    thresholds add a ``<testsuite name="gndreplay.batch.scenarios">``, one test case per scenario."""
+def _counts(tests: int, fail: int, err: int, time_s: float, skipped: int | None = None) -> dict[str, str]:
+    """A suite's count attributes (``skipped`` only where the JUnit schema allows it: on a testsuite)."""
+    out = {"tests": str(tests), "failures": str(fail), "errors": str(err)}
+    if skipped is not None:
+        out["skipped"] = str(skipped)
+    return out | {"time": f"{time_s:.3f}"}
+
+
+def _baseline_cases(
+    root: ET.Element, checks: Sequence[BaselineCheck], *, updated: bool
+) -> tuple[int, int, int]:
+    """The baseline suite: a behaviour and a latency test case per input checked (an input new to the
+    baseline: skipped; an unreadable baseline run: an error). Returns (tests, failures, errors)."""
+    cases: list[tuple[str, str, str, str]] = []  # (check, label, kind, message); kind: "", failure, ...
+    for c in checks:
+        for check, failure in (("behaviour", c.behaviour_failure), ("latency", c.latency_failure)):
+            if c.error:
+                cases.append((check, c.label, "error", c.error))
+            elif c.new:
+                cases.append((check, c.label, "skipped", "not in the baseline"))
+            elif failure and not updated:
+                cases.append((check, c.label, "failure", failure))
+            else:
+                cases.append((check, c.label, "", failure))
+    fail = sum(k == "failure" for _, _, k, _ in cases)
+    err = sum(k == "error" for _, _, k, _ in cases)
+    skipped = sum(k == "skipped" for _, _, k, _ in cases)
+    suite = ET.SubElement(root, "testsuite", {"name": BASELINE_SUITE, **_counts(len(cases), fail, err, 0.0,
+                                                                               skipped)})
+    by_label = {c.label: c for c in checks}
+    for check, label, kind, message in cases:
+        case = ET.SubElement(suite, "testcase", {"classname": f"{BASELINE_SUITE}.{check}", "name": _x(label),
+                                                 "time": "0.000"})
+        if kind:
+            attrs = {"message": _x(message)} | ({} if kind == "skipped" else {"type": f"baseline-{check}"})
+            node = ET.SubElement(case, kind, attrs)
+            if kind != "skipped":
+                node.text = _x(message)
+        c = by_label[label]
+        out = [f"baseline run: {_x(c.baseline_run)}"] if c.baseline_run else []
+        if check == "behaviour":
+            out += [f"first divergence: {_x(c.divergence or 'none')}",
+                    f"outcome change: {_x(c.outcome_change or 'none')}"]
+        else:
+            out += [f"largest module median ratio: {ratio_text(c.latency_ratio)} {c.slowest_module}".rstrip()]
+        if updated and message and kind == "":
+            out.append(f"accepted as the new baseline: {_x(message)}")
+        if out:
+            ET.SubElement(case, "system-out").text = "\n".join(out)
+    return len(cases), fail, err
+
+
+def junit_xml(
+    results: Sequence[InputResult],
+    aggregates: Sequence[ScenarioAggregate] = (),
+    *,
+    checks: Sequence[BaselineCheck] = (),
+    baseline_updated: bool = False,
+) -> str:
+    """JUnit XML (valid against the JUnit schema Jenkins, GitLab and GitHub's reporters read): one
+    ``<testsuite name="gndreplay.batch">`` with one ``<testcase>`` per input (a scenario: per scenario and
+    seed; in a sweep named ``combination/input``); a ``<failure>`` lists the thresholds exceeded (a run
+    that did not reach its goal says how it ended), an ``<error>`` carries an unreadable input's message.
+    Scenarios with aggregate thresholds add a ``<testsuite name="gndreplay.batch.scenarios">``, one test
+    case per scenario; a baseline comparison a ``<testsuite name="gndreplay.batch.baseline">`` with a
+    behaviour and a latency test case per input."""
     checked = [a for a in aggregates if a.limits]
     failures = sum(r.status == "fail" for r in results) + sum(bool(a.failures) for a in checked)
     errors = sum(r.status == "error" for r in results)
     total_s = sum(r.wall_s for r in results)
-
-    def counts(tests: int, fail: int, err: int, time_s: float) -> dict[str, str]:
-        return {"tests": str(tests), "failures": str(fail), "errors": str(err), "skipped": "0",
-                "time": f"{time_s:.3f}"}
-
-    root = ET.Element("testsuites", {"name": JUNIT_SUITES_NAME,
-                                     **counts(len(results) + len(checked), failures, errors, total_s)})
-    suite = ET.SubElement(root, "testsuite", {"name": SUITE, **counts(
-        len(results), sum(r.status == "fail" for r in results), errors, total_s)})
+    root = ET.Element("testsuites", {"name": JUNIT_SUITES_NAME})
+    suite = ET.SubElement(root, "testsuite", {"name": SUITE, **_counts(
+        len(results), sum(r.status == "fail" for r in results), errors, total_s, 0)})
     for r in results:
         case = ET.SubElement(
-            suite, "testcase", {"classname": SUITE, "name": _x(r.name), "time": f"{r.wall_s:.3f}"}
+            suite, "testcase", {"classname": SUITE, "name": _x(r.label), "time": f"{r.wall_s:.3f}"}
         )
         if r.status == "fail":
             node = ET.SubElement(case, "failure", {"message": _x("; ".join(r.failures)), "type": "threshold"})
@@ -282,6 +404,8 @@ def junit_xml(results: Sequence[InputResult], aggregates: Sequence[ScenarioAggre
             node = ET.SubElement(case, "error", {"message": _x(r.error), "type": r.error_type or "error"})
             node.text = _x(r.detail or r.error)
         out = [f"path: {_x(r.path)}", f"ticks: {r.ticks}"]
+        if r.variant:
+            out.append(f"combination: {_x(r.variant)}")
         if r.group:
             out += [f"scenario: {_x(r.group)}", f"seed: {r.seed}"]
             if r.outcome:
@@ -291,12 +415,13 @@ def junit_xml(results: Sequence[InputResult], aggregates: Sequence[ScenarioAggre
         out += [f"{m}: {_cell(m, v)}" for m, v in r.metrics.items() if m != "ticks"]
         ET.SubElement(case, "system-out").text = "\n".join(out)
     if checked:
-        agg_s = {a.scenario: sum(r.wall_s for r in results if r.group == a.scenario) for a in checked}
-        scen = ET.SubElement(root, "testsuite", {"name": SCENARIO_SUITE, **counts(
-            len(checked), sum(bool(a.failures) for a in checked), 0, sum(agg_s.values()))})
+        agg_s = {a.label: sum(r.wall_s for r in results if r.group == a.scenario and r.variant == a.variant)
+                 for a in checked}
+        scen = ET.SubElement(root, "testsuite", {"name": SCENARIO_SUITE, **_counts(
+            len(checked), sum(bool(a.failures) for a in checked), 0, sum(agg_s.values()), 0)})
         for a in checked:
-            case = ET.SubElement(scen, "testcase", {"classname": SCENARIO_SUITE, "name": _x(a.scenario),
-                                                    "time": f"{agg_s[a.scenario]:.3f}"})
+            case = ET.SubElement(scen, "testcase", {"classname": SCENARIO_SUITE, "name": _x(a.label),
+                                                    "time": f"{agg_s[a.label]:.3f}"})
             if a.failures:
                 node = ET.SubElement(case, "failure", {"message": _x("; ".join(a.failures)),
                                                        "type": "threshold"})
@@ -307,6 +432,11 @@ def junit_xml(results: Sequence[InputResult], aggregates: Sequence[ScenarioAggre
             out += [f"{m}: {_cell(m, v)}" for m, v in a.metrics.items()]
             out += [f"limit {k}: {v:g}" for k, v in a.limits.items()]
             ET.SubElement(case, "system-out").text = "\n".join(out)
+    tests = len(results) + len(checked)
+    if checks:
+        n, fail, err = _baseline_cases(root, checks, updated=baseline_updated)
+        tests, failures, errors = tests + n, failures + fail, errors + err
+    root.attrib |= _counts(tests, failures, errors, total_s)
     ET.indent(root)
     return ET.tostring(root, encoding="unicode", xml_declaration=True) + "\n"
 

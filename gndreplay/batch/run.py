@@ -24,10 +24,18 @@ from .. import fsutil
 from ..errors import ConfigError, OutputError
 from ..fsutil import atomic_write_text
 from .aggregate import ScenarioAggregate, aggregate_scenarios
+from .baseline import (
+    DEFAULT_LATENCY_RATIO,
+    BaselineCheck,
+    check_baseline,
+    check_baseline_dir,
+    missing_from_batch,
+)
 from .jobs import Job, special_files
 from .pool import Emit, run_pool, timeout_result
-from .report import is_own_junit, junit_xml, scenarios_csv, summary_csv, summary_md
+from .report import is_own_junit, junit_xml, scenarios_csv, summary_csv, summary_md, sweep_csv
 from .scenarios import SimOptions
+from .sweep import SweepPoint
 from .thresholds import Thresholds
 from .worker import InputResult, Runner, Task, crash_message, error_result, execute, run_input
 
@@ -35,8 +43,18 @@ if TYPE_CHECKING:
     from ..config import Config
     from ..io import ReadOptions
     from ..replay import RunOptions
+    from ..report.compare import Tolerance
 
-__all__ = ["DASK_EXTRA_HINT", "DEFAULT_TIMEOUT_S", "BatchResult", "make_tasks", "run_batch", "run_tasks"]
+__all__ = [
+    "DASK_EXTRA_HINT",
+    "DEFAULT_TIMEOUT_S",
+    "Baseline",
+    "BatchResult",
+    "Setting",
+    "make_tasks",
+    "run_batch",
+    "run_tasks",
+]
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +63,34 @@ ProgressFn = Callable[[InputResult], None]
 #: Default per-input time limit [s]: generous (the longest dev log replays in minutes on one core).
 DEFAULT_TIMEOUT_S = 3600.0
 _DASK_POLL_S = 0.2
+
+
+@dataclass(frozen=True, slots=True)
+class Setting:
+    """One configuration a batch runs every input under: a sweep's combination (``point``), the stack
+    configuration of the logs and how the scenarios are run and configured."""
+
+    point: SweepPoint
+    cfg: Config
+    sim: SimOptions | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Baseline:
+    """The batch folder every run is compared with (``batch.baseline``).
+
+    Attributes:
+        folder: the baseline batch folder.
+        tolerance: the behaviour tolerances (``gndreplay compare --tolerance``).
+        max_latency_ratio: a module's median time over the baseline's above this fails (0: not judged).
+        update: the batch is written to ``folder`` as the new baseline (the comparison with the old one,
+            if any, is reported; its differences do not fail the batch).
+    """
+
+    folder: Path
+    tolerance: Tolerance
+    max_latency_ratio: float = DEFAULT_LATENCY_RATIO
+    update: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,6 +104,10 @@ class BatchResult:
         junit: the JUnit XML file, if one was asked for.
         wall_s: wall time of the whole batch [s].
         aggregates: one per scenario, over its seeds (see ``aggregate_scenarios``).
+        checks: one per input with a run, against the baseline (empty without ``--baseline``).
+        missing: the baseline's inputs this batch did not run.
+        baseline_updated: the batch was written as the new baseline (its checks do not fail it).
+        points: the sweep's combinations (one unnamed point when nothing is swept).
     """
 
     results: tuple[InputResult, ...]
@@ -67,6 +117,10 @@ class BatchResult:
     junit: Path | None
     wall_s: float
     aggregates: tuple[ScenarioAggregate, ...] = ()
+    checks: tuple[BaselineCheck, ...] = ()
+    missing: tuple[str, ...] = ()
+    baseline_updated: bool = False
+    points: tuple[SweepPoint, ...] = ()
 
     def count(self, status: str) -> int:
         """Inputs with this status ("pass", "fail" or "error")."""
@@ -75,10 +129,13 @@ class BatchResult:
     @property
     def exit_code(self) -> int:
         """0 all inputs passed, 1 a threshold was exceeded (by an input or a scenario's aggregate over
-        seeds), 2 an input could not be read (or crashed)."""
-        if self.count("error"):
+        seeds) or a run's behaviour or latency changed against the baseline, 2 an input (or its baseline
+        run) could not be read, or crashed."""
+        if self.count("error") or (any(c.error for c in self.checks) and not self.baseline_updated):
             return 2
-        return 1 if self.count("fail") or any(a.failures for a in self.aggregates) else 0
+        changed = not self.baseline_updated and any(
+            c.behaviour_failure or c.latency_failure for c in self.checks)
+        return 1 if self.count("fail") or any(a.failures for a in self.aggregates) or changed else 0
 
 
 def _absolute(path: Path) -> Path:
@@ -96,10 +153,12 @@ def make_tasks(
     read: ReadOptions | None = None,
     sim: SimOptions | None = None,
     figures: bool = False,
+    variant: str = "",
 ) -> list[Task]:
     """One task per job: per-input settings and limits from ``thresholds``, absolute paths (workers may run
-    elsewhere; also ``sim``'s config file), run directory ``out_dir / job.name``, and the job's goal folded
-    into the options. Scenario jobs get ``sim`` (None: ``SimOptions()``), logs ``figures``.
+    elsewhere; also ``sim``'s config file), run directory ``out_dir / job.name`` (in a sweep
+    ``out_dir / variant / job.name``), and the job's goal folded into the options. Scenario jobs get ``sim``
+    (None: ``SimOptions()``), logs ``figures``.
 
     Raises:
         ConfigError: duplicate or empty job names, no jobs, or inputs that are FIFOs, devices or sockets
@@ -133,11 +192,12 @@ def make_tasks(
                 job=job,
                 cfg=cfg,
                 options=opts,
-                run_dir=out_dir / job.name,
+                run_dir=out_dir / variant / job.name if variant else out_dir / job.name,
                 limits=thresholds.limits_for(job),
                 read=read,
                 sim=sim if job.kind == "scenario" else None,
                 figures=figures and job.kind == "log",
+                variant=variant,
             )
         )
     return tasks
@@ -304,6 +364,8 @@ def run_batch(
     overwrite: bool = False,
     sim: SimOptions | None = None,
     figures: bool = False,
+    sweep: Sequence[Setting] = (),
+    baseline: Baseline | None = None,
 ) -> BatchResult:
     """Run every job in its own worker process and write the batch folder: one run directory per input,
     ``summary.csv``, ``summary.md`` (and ``junit``); with scenario jobs also ``scenarios.csv``, the
@@ -334,21 +396,29 @@ def run_batch(
             scenario's own preset).
         figures: draw each log's figures, maps.npz and report.md in its run directory (a scenario run's
             figures: ``sim.figures``).
+        sweep: run every job under each of these settings (a sweep's combinations, each in its folder
+            ``out_dir / point.name``) instead of ``cfg`` and ``sim``; sweep.csv gives a row per setting.
+        baseline: compare every run with the same run in this baseline batch folder (two checks per input,
+            in summary.md and the JUnit file); with ``update``, ``out_dir`` is the baseline folder.
 
     Raises:
         ConfigError: no jobs, bad names, FIFO / device inputs, ``workers`` < 1, bad timeout, dask missing
-            or unreachable.
+            or unreachable, a baseline folder that is not a batch folder.
         OutputError: ``out_dir`` (or ``junit``) is unsafe to write, or the disk is full (quota, read-only)
             while writing.
     """
     t0 = time.perf_counter()
     thresholds = thresholds if thresholds is not None else Thresholds()
     out_dir = _absolute(Path(out_dir))
-    tasks = make_tasks(
-        jobs, cfg=cfg, options=options, thresholds=thresholds, out_dir=out_dir, read=read, sim=sim,
-        figures=figures,
-    )
+    settings = tuple(sweep) or (Setting(SweepPoint("", (), ()), cfg, sim),)
+    tasks = [
+        task
+        for s in settings
+        for task in make_tasks(jobs, cfg=s.cfg, options=options, thresholds=thresholds, out_dir=out_dir,
+                               read=read, sim=s.sim, figures=figures, variant=s.point.name)
+    ]
     _check_run_args(workers, timeout_s)
+    old_baseline = _baseline_folder(baseline)
     inputs = [t.job.path for t in tasks]
     fsutil.check_output_dir(out_dir, inputs=inputs, overwrite=overwrite)
     junit_rel, junit_out = _junit_place(junit, out_dir, inputs=inputs, overwrite=overwrite)
@@ -359,25 +429,44 @@ def run_batch(
         return _moved(r, tmp, target)
 
     stage = fsutil.staging_dir(target, overwrite=overwrite, base=out_dir)
+    points = tuple(s.point for s in settings)
+    checks: tuple[BaselineCheck, ...] = ()
+    missing: tuple[str, ...] = ()
     with stage as tmp:
-        staged = [replace(t, run_dir=tmp / t.run_dir.name) for t in tasks]
+        for point in points:
+            if point.name:
+                _mkdirs_marked(tmp, Path(point.name))
+        staged = [replace(t, run_dir=tmp / t.run_dir.relative_to(out_dir)) for t in tasks]
         shown = None if progress is None else (lambda r: progress(final(r, tmp)))
         results = tuple(
-            final(r, tmp)
-            for r in run_tasks(
+            final(replace(r, variant=t.variant), tmp)
+            for t, r in zip(tasks, run_tasks(
                 staged, workers=workers, dask_address=dask_address, runner=runner, progress=shown,
                 timeout_s=timeout_s,
-            )
+            ), strict=True)
         )
         fsutil.remove_stale_staging(tmp)  # left by an input whose worker was killed
+        for point in points:
+            if point.name:
+                fsutil.remove_stale_staging(tmp / point.name)
+                fsutil.write_marker(tmp / point.name)
         aggregates = aggregate_scenarios(results, thresholds)
+        if baseline is not None and old_baseline is not None:
+            checks = check_baseline(results, batch_dir=target, runs_dir=tmp, baseline=old_baseline,
+                                    tolerance=baseline.tolerance, max_ratio=baseline.max_latency_ratio)
+            missing = missing_from_batch(results, old_baseline)
+        updated = baseline is not None and baseline.update
         atomic_write_text(tmp / "summary.csv", summary_csv(results))
-        atomic_write_text(tmp / "summary.md", summary_md(results, aggregates))
+        atomic_write_text(tmp / "summary.md", summary_md(results, aggregates, checks=checks, missing=missing,
+                                                         points=points, baseline_updated=updated))
         if aggregates:
             atomic_write_text(tmp / "scenarios.csv", scenarios_csv(aggregates))
+        if any(p.name for p in points):
+            atomic_write_text(tmp / "sweep.csv", sweep_csv(points, results))
         if junit_rel is not None:
             _mkdirs_marked(tmp, junit_rel.parent)
-            atomic_write_text(tmp / junit_rel, junit_xml(results, aggregates))
+            atomic_write_text(tmp / junit_rel, junit_xml(results, aggregates, checks=checks,
+                                                         baseline_updated=updated))
             fsutil.add_to_marker((tmp / junit_rel).parent, [junit_rel.name])
     if stage.out != target:  # a concurrent batch took the name first: the folder is at the next free one
         results = tuple(_moved(r, target, stage.out) for r in results)
@@ -385,12 +474,24 @@ def run_batch(
     if junit_out is not None:
         with fsutil.write_errors(junit_out):
             junit_out.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(junit_out, junit_xml(results, aggregates))
+            atomic_write_text(junit_out,
+                              junit_xml(results, aggregates, checks=checks, baseline_updated=updated))
     junit_path = target / junit_rel if junit_rel is not None else junit_out
     return BatchResult(
         results, target, target / "summary.csv", target / "summary.md", junit_path, time.perf_counter() - t0,
-        aggregates,
+        aggregates, checks=checks, missing=missing, baseline_updated=updated, points=points,
     )
+
+
+def _baseline_folder(baseline: Baseline | None) -> Path | None:
+    """The baseline folder to compare with, checked before any work; None without one (or, updating, when
+    there is none yet: the first baseline)."""
+    if baseline is None:
+        return None
+    folder = _absolute(baseline.folder)
+    if baseline.update and not folder.exists():
+        return None
+    return check_baseline_dir(folder)
 
 
 def _moved(r: InputResult, old: Path, new: Path) -> InputResult:

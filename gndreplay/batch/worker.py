@@ -76,6 +76,7 @@ class Task:
         sim: how to run a scenario and configure its stack (None: ``SimOptions()``).
         figures: draw a log's figures, maps.npz and report.md (``report.sinks.default_sinks``); a scenario
             run's come from ``sim``.
+        variant: the sweep combination it belongs to (``SweepPoint.name``; "" outside a sweep).
     """
 
     job: Job
@@ -86,6 +87,7 @@ class Task:
     read: ReadOptions | None = None
     sim: SimOptions | None = None
     figures: bool = False
+    variant: str = ""
 
 
 class RunOutcome(Protocol):
@@ -148,6 +150,7 @@ class InputResult:
         detail: traceback of a crash ("" otherwise).
         group, seed: a scenario run's scenario (its name in the batch) and seed ("" and 0 for a log).
         outcome: how a scenario run ended, in words (``"collision with door at 3.10 s"``; "" otherwise).
+        variant: the sweep combination it ran under ("" outside a sweep).
     """
 
     name: str
@@ -164,6 +167,12 @@ class InputResult:
     group: str = ""
     seed: int = 0
     outcome: str = ""
+    variant: str = ""
+
+    @property
+    def label(self) -> str:
+        """Its name in the batch: ``variant/name`` in a sweep, else ``name``."""
+        return f"{self.variant}/{self.name}" if self.variant else self.name
 
 
 def crash_message(err: BaseException) -> str:
