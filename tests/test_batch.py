@@ -801,17 +801,6 @@ def deterministic(results: tuple[InputResult, ...]) -> list[tuple[Any, ...]]:
     ]
 
 
-@pytest.fixture(scope="module")
-def dask_cluster() -> Any:
-    distributed = pytest.importorskip("distributed")
-    # ":0": any free port for the scheduler's HTTP server (None still binds the fixed 8787, and a second
-    # test run on the same machine then fails to start its cluster)
-    with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
-    ) as cluster:
-        yield cluster
-
-
 def test_dask_gives_the_process_pool_results(tmp_path: Path, dask_cluster: Any) -> None:
     specs = {"good1": "GOOD 7 1.0 0", "bad": "BAD", "crash": "CRASH", "good2": "GOOD 9 2.0 1"}
     pool = fake_batch(tmp_path, specs, out="pool", workers=2)

@@ -314,3 +314,34 @@ def test_every_kind_of_junit_case_is_valid_against_the_schema() -> None:
     assert 'tests="11" failures="3" errors="3"' in text.splitlines()[1]
     assert 'name="reactor.security_m=0.3/b"' in text
     validate_junit(junit_xml(results))
+
+
+# ---------------------------------------------------------------- a sweep on dask = the process pool
+
+
+def test_a_20_run_sweep_on_a_dask_cluster_gives_the_process_pools_bytes(
+    tmp_path: Path, dask_cluster: Any
+) -> None:
+    from gndreplay.batch import Setting, SimOptions, expand_inputs, run_batch, sweep_points
+    from gndreplay.config import CliOverrides, configure
+    from gndreplay.replay import RunOptions
+
+    sets = ["reactor.security_m=0.3,0.4,0.5,0.6,0.7", "robot.vmax_mps=0.3,0.5"]
+    settings = [Setting(p, configure(overrides=CliOverrides(sets=p.sets)),
+                        SimOptions(time_limit_s=4.0, figures=False, overrides=CliOverrides(sets=p.sets)))
+                for p in sweep_points(sets)]
+    jobs = expand_inputs([SAMPLE_LOG], scenarios=["u_trap"], seeds=(1,))
+    kw: dict[str, Any] = dict(cfg=settings[0].cfg, options=RunOptions(until_s=8.0), sweep=settings)
+    pool = run_batch(jobs, out_dir=tmp_path / "pool", workers=2, **kw)
+    dask = run_batch(jobs, out_dir=tmp_path / "dask", dask_address=dask_cluster.scheduler_address, **kw)
+    assert len(pool.results) == len(dask.results) == 20
+    assert all(r.status != "error" for r in (*pool.results, *dask.results))
+    for a, b in zip(pool.results, dask.results, strict=True):
+        assert a.label == b.label and a.run_dir is not None and b.run_dir is not None
+        for name in ("commands.csv", "trajectory_corrected.tum", "trajectory_odom.tum"):
+            assert (Path(a.run_dir) / name).read_bytes() == (Path(b.run_dir) / name).read_bytes(), name
+    assert len(rows(tmp_path / "pool" / "sweep.csv")) == 10
+    drop = ("_ms", "wall_s", "run_dir", "ms_per_step", "ms_per_tick")
+    rows_a, rows_b = rows(tmp_path / "pool" / "summary.csv"), rows(tmp_path / "dask" / "summary.csv")
+    assert [{k: v for k, v in r.items() if not k.endswith(drop)} for r in rows_a] == [
+        {k: v for k, v in r.items() if not k.endswith(drop)} for r in rows_b]
