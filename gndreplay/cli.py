@@ -396,8 +396,7 @@ ToleranceOpt = Annotated[
     Path | None,
     typer.Option(
         "--tolerance",
-        help="TOML with a [tolerance] table: v_mps, vy_mps, w_radps, pose_m, pose_rad, path_m "
-        "(absolute; default 0: exact).",
+        help="TOML [tolerance] table of absolute tolerances (default: exact).",
         show_default=False,
     ),
 ]
@@ -1543,15 +1542,7 @@ def batch(
             rich_help_panel=_BASELINE_PANEL,
         ),
     ] = False,
-    tolerance: Annotated[
-        Path | None,
-        typer.Option(
-            "--tolerance",
-            help="TOML [tolerance] of the behaviour check (as compare's; default exact).",
-            show_default=False,
-            rich_help_panel=_BASELINE_PANEL,
-        ),
-    ] = None,
+    tolerance: ToleranceOpt = None,
     latency_ratio: Annotated[
         float,
         typer.Option(

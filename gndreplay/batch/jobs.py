@@ -134,16 +134,21 @@ def unique_names(paths: Sequence[Path]) -> list[str]:
         safe_name(f"{p.parent.name}-{s}") if counts[s] > 1 and p.parent.name else s
         for p, s in zip(paths, stems, strict=True)
     ]
-    used: set[str] = set(RESERVED_NAMES)
-    names: list[str] = []
-    for name in wanted:
+    return numbered(wanted, RESERVED_NAMES)
+
+
+def numbered(names: Sequence[str], reserved: Iterable[str] = ()) -> list[str]:
+    """``names`` made unique, and distinct from ``reserved``, by numbering repeats (``-2``, ``-3``)."""
+    used: set[str] = set(reserved)
+    out: list[str] = []
+    for name in names:
         candidate, k = name, 1
         while candidate in used:
             k += 1
             candidate = f"{name}-{k}"
         used.add(candidate)
-        names.append(candidate)
-    return names
+        out.append(candidate)
+    return out
 
 
 def special_files(path: Path) -> list[str]:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from .. import fsutil
 from ..errors import ConfigError
 from ..io.userfile import brief
+from .jobs import numbered
 from .worker import InputResult
 
 __all__ = ["MAX_COMBINATIONS", "SWEEP_COLUMNS", "SweepPoint", "split_values", "sweep_points", "sweep_rows"]
@@ -95,20 +96,6 @@ def _folder_name(values: Sequence[tuple[str, str]]) -> str:
     return fsutil.safe_name(_UNSAFE.sub("_", ",".join(f"{k}={v}" for k, v in values)), "combination")
 
 
-def _unique_names(names: list[str]) -> list[str]:
-    """``names`` made unique by numbering repeats (two values that the folder-name rule maps alike)."""
-    used: set[str] = set()
-    out = []
-    for name in names:
-        candidate, k = name, 1
-        while candidate in used:
-            k += 1
-            candidate = f"{name}-{k}"
-        used.add(candidate)
-        out.append(candidate)
-    return out
-
-
 def sweep_points(sets: Sequence[str]) -> tuple[SweepPoint, ...]:
     """The combinations of the ``--set`` pairs: one unnamed point with every pair when none lists several
     values, else the cross product of the listed values (the first key varying slowest).
@@ -136,7 +123,7 @@ def sweep_points(sets: Sequence[str]) -> tuple[SweepPoint, ...]:
         )
         values = tuple((key, value) for key, value in zip(keys, combo, strict=True))
         points.append(SweepPoint(_folder_name(values), values, pairs))
-    names = _unique_names([p.name for p in points])
+    names = numbered([p.name for p in points])
     return tuple(SweepPoint(n, p.values, p.sets) for n, p in zip(names, points, strict=True))
 
 
