@@ -1503,6 +1503,24 @@ def batch(
             show_default=False,
         ),
     ] = None,
+    shard: Annotated[
+        str | None,
+        typer.Option(
+            "--shard",
+            help="Run shard I of N (I/N, I from 0): the inputs of index i with i % N == I. N alone: I from "
+            "JOB_COMPLETION_INDEX (Kubernetes Indexed Job) or AWS_BATCH_JOB_ARRAY_INDEX (AWS Batch array "
+            "job). Join the shard folders with --merge.",
+            show_default=False,
+        ),
+    ] = None,
+    merge: Annotated[
+        bool,
+        typer.Option(
+            "--merge",
+            help="The INPUTS are the shard folders of one batch (--shard): join them into --out, the files "
+            "of the unsharded batch. Takes only --out, --junit, --thresholds, --overwrite.",
+        ),
+    ] = False,
     goal_ahead: GoalAheadOpt = None,
     until: UntilOpt = None,
     every: EveryOpt = 1,
@@ -1549,15 +1567,27 @@ def batch(
       gndreplay batch logs/ --thresholds ci.toml --until 120
       gndreplay batch --scenarios all --seeds 1-20 --jobs 2 --no-figures
       gndreplay batch my_world.yaml --scenarios u_trap,enclosed --seeds 1,3,5 --preset xr4000
+      gndreplay batch logs/ --shard 0/2 --out out/shard-0   # and --shard 1/2 --out out/shard-1
+      gndreplay batch --merge out/shard-0 out/shard-1 --out out/batch
     """
     import os
 
     from .batch import expand_inputs, load_thresholds, parse_seeds, run_batch
     from .batch.scenarios import SimOptions
+    from .batch.shard import parse_shard, shard_indices
     from .batch.thresholds import Thresholds
     from .replay import RunOptions
     from .sim.runner import parse_latency
 
+    if merge:
+        from .batch.merge import merge_batches
+
+        _only_options("--merge", ("inputs", "merge", "out", "junit", "thresholds", "overwrite", "quiet",
+                                  "progress"))
+        given = None if thresholds is None else load_thresholds(thresholds)
+        merged = merge_batches(inputs or [], out_dir=out, junit=junit, thresholds=given, overwrite=overwrite)
+        _batch_done(out, merged, quiet=quiet)
+    part = None if shard is None else parse_shard(shard, os.environ)
     cfg = setup.config()
     sim = SimOptions(latency_s=parse_latency(latency), perfect_odometry=perfect_odometry,
                      time_limit_s=time_limit, figures=figures is not False, config=setup.path,
@@ -1568,15 +1598,42 @@ def batch(
     limits = load_thresholds(thresholds) if thresholds is not None else Thresholds()
     options = RunOptions(goal_ahead_m=5.0 if goal_ahead is None else goal_ahead, until_s=until, every=every,
                          subgoals=setup.subgoals)
+    total = len(shard_indices(len(job_list), part))
     with _Progress(_progress_style(progress, quiet=quiet)) as shown:
-        shown.start("batch", len(job_list))
-        advance = None if shown.style == "none" else _counter(shown, len(job_list), "inputs")
+        shown.start("batch", total)
+        advance = None if shown.style == "none" else _counter(shown, total, "inputs")
         result = run_batch(job_list, cfg=cfg, options=options, thresholds=limits, out_dir=out, workers=jobs,
                            dask_address=dask, progress=advance, junit=junit, read=read, timeout_s=timeout,
-                           overwrite=overwrite, sim=sim, figures=figures is True)
+                           overwrite=overwrite, sim=sim, figures=figures is True, shard=part)
+    _batch_done(out, result, quiet=quiet)
+
+
+def _batch_done(out: Path, result: object, *, quiet: bool) -> NoReturn:
+    """Say where the batch folder went if not at ``out``, print the result and exit with its code."""
+    import os
+
+    from .batch import BatchResult
+
+    assert isinstance(result, BatchResult)
     _said_moved(Path(os.path.abspath(out)), result.out_dir, "batch")
     _print_batch(result, quiet=quiet)
     raise typer.Exit(result.exit_code)
+
+
+def _only_options(flag: str, allowed: Sequence[str]) -> None:
+    """Refuse an option given on the command line (or from the environment) besides ``allowed`` (parameter
+    names) with ``flag``: one line naming it."""
+    ctx = _click.get_current_context()
+    given = [
+        p for p in ctx.command.params
+        if p.name not in allowed and ctx.get_parameter_source(p.name) is not None
+        and ctx.get_parameter_source(p.name).name in ("COMMANDLINE", "ENVIRONMENT")
+    ]
+    if given:
+        names = ", ".join(p.opts[0] for p in given)
+        kept = ", ".join(p.opts[0] for p in ctx.command.params
+                         if p.name in allowed and p.opts[0].startswith("-"))
+        raise ConfigError(f"{flag}: not with {names} (it takes only {kept})")
 
 
 def _print_batch(result: object, *, quiet: bool) -> None:

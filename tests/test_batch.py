@@ -192,7 +192,7 @@ def test_dot_named_inputs_run_under_safe_names(tmp_path: Path) -> None:
                     runner=fake_runner)
     assert [(r.name, r.status, r.ticks) for r in res.results] == [("hidden", "pass", 3), ("clf", "pass", 4)]
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
-        RUN_MARKER, "clf", "hidden", "summary.csv", "summary.md"
+        RUN_MARKER, "batch.json", "clf", "hidden", "summary.csv", "summary.md"
     ]
     assert sorted(p.name for p in (tmp_path / "in").iterdir()) == ["..clf", ".hidden.clf"]  # inputs intact
 

@@ -27,6 +27,7 @@ from .jobs import (
     special_file_kind,
     unique_names,
 )
+from .merge import merge_batches
 from .metrics import (
     AGGREGATE_METRICS,
     COUNT_METRICS,
@@ -36,9 +37,11 @@ from .metrics import (
     metrics_from_result,
     metrics_from_summary,
 )
+from .record import BATCH_FILE, BatchRecord, read_record
 from .report import CSV_COLUMNS, SCENARIO_CSV_COLUMNS, junit_xml, scenarios_csv, summary_csv, summary_md
 from .run import DASK_EXTRA_HINT, DEFAULT_TIMEOUT_S, BatchResult, make_tasks, run_batch, run_tasks
 from .scenarios import SimOptions, run_scenario
+from .shard import Shard, parse_shard, shard_indices
 from .thresholds import (
     AGGREGATE_KEYS,
     DEFAULT_LIMITS,
@@ -53,6 +56,7 @@ from .worker import InputResult, Runner, RunOutcome, Status, Task, execute, pin_
 __all__ = [
     "AGGREGATE_KEYS",
     "AGGREGATE_METRICS",
+    "BATCH_FILE",
     "COUNT_METRICS",
     "CSV_COLUMNS",
     "DASK_EXTRA_HINT",
@@ -64,6 +68,7 @@ __all__ = [
     "SCENARIO_METRICS",
     "SCENARIO_SUFFIXES",
     "THRESHOLD_KEYS",
+    "BatchRecord",
     "BatchResult",
     "InputResult",
     "InputRule",
@@ -72,6 +77,7 @@ __all__ = [
     "RunOutcome",
     "Runner",
     "ScenarioAggregate",
+    "Shard",
     "SimOptions",
     "Status",
     "Task",
@@ -85,16 +91,20 @@ __all__ = [
     "junit_xml",
     "load_thresholds",
     "make_tasks",
+    "merge_batches",
     "metrics_from_result",
     "metrics_from_summary",
     "parse_seeds",
+    "parse_shard",
     "pin_threads",
+    "read_record",
     "run_batch",
     "run_input",
     "run_scenario",
     "run_tasks",
     "safe_name",
     "scenarios_csv",
+    "shard_indices",
     "shipped_names",
     "special_file_kind",
     "summary_csv",

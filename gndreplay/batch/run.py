@@ -26,8 +26,10 @@ from ..fsutil import atomic_write_text
 from .aggregate import ScenarioAggregate, aggregate_scenarios
 from .jobs import Job, special_files
 from .pool import Emit, run_pool, timeout_result
+from .record import BATCH_FILE, BatchRecord, batch_digest, record_json, relative_runs, thresholds_ref
 from .report import is_own_junit, junit_xml, scenarios_csv, summary_csv, summary_md
 from .scenarios import SimOptions
+from .shard import Shard, shard_indices
 from .thresholds import Thresholds
 from .worker import InputResult, Runner, Task, crash_message, error_result, execute, run_input
 
@@ -36,7 +38,16 @@ if TYPE_CHECKING:
     from ..io import ReadOptions
     from ..replay import RunOptions
 
-__all__ = ["DASK_EXTRA_HINT", "DEFAULT_TIMEOUT_S", "BatchResult", "make_tasks", "run_batch", "run_tasks"]
+__all__ = [
+    "DASK_EXTRA_HINT",
+    "DEFAULT_TIMEOUT_S",
+    "BatchResult",
+    "build_batch",
+    "make_tasks",
+    "run_batch",
+    "run_tasks",
+    "write_outputs",
+]
 
 log = logging.getLogger(__name__)
 
@@ -304,10 +315,13 @@ def run_batch(
     overwrite: bool = False,
     sim: SimOptions | None = None,
     figures: bool = False,
+    shard: Shard | None = None,
 ) -> BatchResult:
     """Run every job in its own worker process and write the batch folder: one run directory per input,
-    ``summary.csv``, ``summary.md`` (and ``junit``); with scenario jobs also ``scenarios.csv``, the
-    per-scenario aggregates over seeds, checked against the aggregate thresholds.
+    ``summary.csv``, ``summary.md`` (and ``junit``), ``batch.json`` (``record``); with scenario jobs also
+    ``scenarios.csv``, the per-scenario aggregates over seeds, checked against the aggregate thresholds.
+    With ``shard``, only that shard's jobs run (``shard.shard_indices``; ``merge_batches`` joins the
+    shard folders).
 
     The batch folder gets the protections of a run directory (``gndreplay.fsutil``), checked before any
     work: never a file, the current folder, a folder holding an input, or a non-empty folder gndreplay did
@@ -334,6 +348,7 @@ def run_batch(
             scenario's own preset).
         figures: draw each log's figures, maps.npz and report.md in its run directory (a scenario run's
             figures: ``sim.figures``).
+        shard: run only the jobs of this shard (None: all of them).
 
     Raises:
         ConfigError: no jobs, bad names, FIFO / device inputs, ``workers`` < 1, bad timeout, dask missing
@@ -349,48 +364,99 @@ def run_batch(
         figures=figures,
     )
     _check_run_args(workers, timeout_s)
-    inputs = [t.job.path for t in tasks]
+    th_path, th_sha = thresholds_ref(thresholds)
+    record = BatchRecord(
+        digest=batch_digest(tasks, out_dir, thresholds_sha256=th_sha, timeout_s=timeout_s),
+        total=len(tasks), shard=shard, indices=tuple(shard_indices(len(tasks), shard)),
+        thresholds_path=th_path, thresholds_sha256=th_sha,
+    )
+
+    def produce(tmp: Path, final: Path) -> tuple[InputResult, ...]:
+        """Run this shard's tasks into the staging folder ``tmp``; results as they will be at ``final``."""
+        staged = [replace(tasks[i], run_dir=tmp / tasks[i].run_dir.name) for i in record.indices]
+        shown = None if progress is None else (lambda r: progress(_moved(r, tmp, final)))
+        results = run_tasks(
+            staged, workers=workers, dask_address=dask_address, runner=runner, progress=shown,
+            timeout_s=timeout_s,
+        )
+        fsutil.remove_stale_staging(tmp)  # left by an input whose worker was killed
+        return tuple(_moved(r, tmp, final) for r in results)
+
+    return build_batch(
+        out_dir, inputs=[t.job.path for t in tasks], junit=junit, overwrite=overwrite, thresholds=thresholds,
+        record=record, produce=produce, t0=t0,
+    )
+
+
+def build_batch(
+    out_dir: Path,
+    *,
+    inputs: Sequence[Path],
+    junit: Path | None,
+    overwrite: bool,
+    thresholds: Thresholds,
+    record: BatchRecord,
+    produce: Callable[[Path, Path], tuple[InputResult, ...]],
+    t0: float,
+) -> BatchResult:
+    """Build the batch folder ``out_dir`` as every gndreplay output is built (checked before any work,
+    staged, published under the first free name): ``produce(tmp, final)`` writes the run directories into
+    the staging folder ``tmp`` and returns the results as they will be at ``final``; then
+    ``write_outputs``. Used by ``run_batch`` and ``merge_batches``.
+
+    Raises:
+        OutputError: ``out_dir`` (or ``junit``) is unsafe to write, or the disk is full while writing.
+    """
+    out_dir = _absolute(Path(out_dir))
     fsutil.check_output_dir(out_dir, inputs=inputs, overwrite=overwrite)
     junit_rel, junit_out = _junit_place(junit, out_dir, inputs=inputs, overwrite=overwrite)
     target = fsutil.resolve_output_dir(out_dir, overwrite=overwrite)
-
-    def final(r: InputResult, tmp: Path) -> InputResult:
-        """The result with its run directory where it will be once the batch folder is published."""
-        return _moved(r, tmp, target)
-
     stage = fsutil.staging_dir(target, overwrite=overwrite, base=out_dir)
     with stage as tmp:
-        staged = [replace(t, run_dir=tmp / t.run_dir.name) for t in tasks]
-        shown = None if progress is None else (lambda r: progress(final(r, tmp)))
-        results = tuple(
-            final(r, tmp)
-            for r in run_tasks(
-                staged, workers=workers, dask_address=dask_address, runner=runner, progress=shown,
-                timeout_s=timeout_s,
-            )
+        results = produce(tmp, target)
+        aggregates, junit_text = write_outputs(
+            tmp, target, results, thresholds=thresholds, record=record, junit_rel=junit_rel
         )
-        fsutil.remove_stale_staging(tmp)  # left by an input whose worker was killed
-        aggregates = aggregate_scenarios(results, thresholds)
-        atomic_write_text(tmp / "summary.csv", summary_csv(results))
-        atomic_write_text(tmp / "summary.md", summary_md(results, aggregates))
-        if aggregates:
-            atomic_write_text(tmp / "scenarios.csv", scenarios_csv(aggregates))
-        if junit_rel is not None:
-            _mkdirs_marked(tmp, junit_rel.parent)
-            atomic_write_text(tmp / junit_rel, junit_xml(results, aggregates))
-            fsutil.add_to_marker((tmp / junit_rel).parent, [junit_rel.name])
     if stage.out != target:  # a concurrent batch took the name first: the folder is at the next free one
         results = tuple(_moved(r, target, stage.out) for r in results)
         target = stage.out
     if junit_out is not None:
         with fsutil.write_errors(junit_out):
             junit_out.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(junit_out, junit_xml(results, aggregates))
+            atomic_write_text(junit_out, junit_text)
     junit_path = target / junit_rel if junit_rel is not None else junit_out
     return BatchResult(
         results, target, target / "summary.csv", target / "summary.md", junit_path, time.perf_counter() - t0,
         aggregates,
     )
+
+
+def write_outputs(
+    tmp: Path,
+    final: Path,
+    results: Sequence[InputResult],
+    *,
+    thresholds: Thresholds,
+    record: BatchRecord,
+    junit_rel: Path | None,
+) -> tuple[tuple[ScenarioAggregate, ...], str]:
+    """Write the files of a finished batch into its staging folder ``tmp`` (published at ``final``): the
+    per-scenario aggregates over seeds, summary.csv, summary.md, scenarios.csv (with scenarios), the JUnit
+    file at ``junit_rel`` inside it (if given) and batch.json (``record`` with ``results``). Run
+    directories are written relative to the batch folder. Returns the aggregates and the JUnit text."""
+    shown = relative_runs(results, final)
+    aggregates = aggregate_scenarios(results, thresholds)
+    junit_text = junit_xml(shown, aggregates)
+    atomic_write_text(tmp / "summary.csv", summary_csv(shown))
+    atomic_write_text(tmp / "summary.md", summary_md(shown, aggregates))
+    if aggregates:
+        atomic_write_text(tmp / "scenarios.csv", scenarios_csv(aggregates))
+    if junit_rel is not None:
+        _mkdirs_marked(tmp, junit_rel.parent)
+        atomic_write_text(tmp / junit_rel, junit_text)
+        fsutil.add_to_marker((tmp / junit_rel).parent, [junit_rel.name])
+    atomic_write_text(tmp / BATCH_FILE, record_json(replace(record, results=shown)))
+    return aggregates, junit_text
 
 
 def _moved(r: InputResult, old: Path, new: Path) -> InputResult:
