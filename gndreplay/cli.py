@@ -1436,6 +1436,7 @@ def _list_scenarios(*, given: bool) -> None:
 @log_options
 @navigation_options
 def batch(
+    ctx: typer.Context,
     inputs: Annotated[
         list[Path] | None,
         typer.Argument(
@@ -1582,8 +1583,8 @@ def batch(
     if merge:
         from .batch.merge import merge_batches
 
-        _only_options("--merge", ("inputs", "merge", "out", "junit", "thresholds", "overwrite", "quiet",
-                                  "progress"))
+        _only_options(ctx, "--merge", ("inputs", "merge", "out", "junit", "thresholds", "overwrite", "quiet",
+                                       "progress"))
         given = None if thresholds is None else load_thresholds(thresholds)
         merged = merge_batches(inputs or [], out_dir=out, junit=junit, thresholds=given, overwrite=overwrite)
         _batch_done(out, merged, quiet=quiet)
@@ -1620,14 +1621,13 @@ def _batch_done(out: Path, result: object, *, quiet: bool) -> NoReturn:
     raise typer.Exit(result.exit_code)
 
 
-def _only_options(flag: str, allowed: Sequence[str]) -> None:
+def _only_options(ctx: typer.Context, flag: str, allowed: Sequence[str]) -> None:
     """Refuse an option given on the command line (or from the environment) besides ``allowed`` (parameter
     names) with ``flag``: one line naming it."""
-    ctx = _click.get_current_context()
     given = [
         p for p in ctx.command.params
-        if p.name not in allowed and ctx.get_parameter_source(p.name) is not None
-        and ctx.get_parameter_source(p.name).name in ("COMMANDLINE", "ENVIRONMENT")
+        if p.name not in allowed and p.name is not None
+        and getattr(ctx.get_parameter_source(p.name), "name", None) in ("COMMANDLINE", "ENVIRONMENT")
     ]
     if given:
         names = ", ".join(p.opts[0] for p in given)

@@ -197,8 +197,8 @@ def _run_dir(value: Any, where: str) -> Path:
 
 
 def _typed(tp: Any, value: Any, where: str) -> Any:
-    """``value`` read back as the type ``tp`` of an ``InputResult`` field (floats: null is nan); a type not
-    known here passes the value as it is."""
+    """``value`` read back as the type ``tp`` of an ``InputResult`` field (a float: null is nan, an integer
+    stays one, as it was written); a type not known here passes the value as it is."""
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if origin in (typing.Union, types.UnionType):
         if value is None and type(None) in args:
@@ -222,7 +222,7 @@ def _typed(tp: Any, value: Any, where: str) -> Any:
             return math.nan
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise _bad(where, "a number or null", value)
-        return float(value)
+        return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise _bad(where, "an integer", value)
