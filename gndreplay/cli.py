@@ -1508,9 +1508,7 @@ def batch(
         str | None,
         typer.Option(
             "--shard",
-            help="Run shard I of N (I/N, I from 0): the inputs of index i with i % N == I. N alone: I from "
-            "JOB_COMPLETION_INDEX (Kubernetes Indexed Job) or AWS_BATCH_JOB_ARRAY_INDEX (AWS Batch array "
-            "job). Join the shard folders with --merge.",
+            help="I/N: run only the inputs i % N == I. N: I from the job's index.",
             show_default=False,
         ),
     ] = None,
@@ -1518,8 +1516,7 @@ def batch(
         bool,
         typer.Option(
             "--merge",
-            help="The INPUTS are the shard folders of one batch (--shard): join them into --out, the files "
-            "of the unsharded batch. Takes only --out, --junit, --thresholds, --overwrite.",
+            help="INPUTS are shard folders of one batch: merge them into --out.",
         ),
     ] = False,
     goal_ahead: GoalAheadOpt = None,
@@ -1568,8 +1565,6 @@ def batch(
       gndreplay batch logs/ --thresholds ci.toml --until 120
       gndreplay batch --scenarios all --seeds 1-20 --jobs 2 --no-figures
       gndreplay batch my_world.yaml --scenarios u_trap,enclosed --seeds 1,3,5 --preset xr4000
-      gndreplay batch logs/ --shard 0/2 --out out/shard-0   # and --shard 1/2 --out out/shard-1
-      gndreplay batch --merge out/shard-0 out/shard-1 --out out/batch
     """
     import os
 
