@@ -363,6 +363,27 @@ def test_merge_refuses_what_is_not_one_whole_batch(tmp_path: Path) -> None:
     assert {p.name: tree_digest(p) for p in (s0, s1)} == before
 
 
+def test_shards_run_from_checkouts_at_different_places_merge(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Inputs given relative to the current folder: two checkouts (CI runners) agree on the batch."""
+    shards = []
+    for i, place in enumerate(("runner-a/project", "runner-b/project")):
+        checkout = tmp_path / place
+        for name in ("a", "b"):
+            write_input(checkout / "in", f"{name}.clf", FAKE[name])
+        write_input(checkout, "ci.toml", LIMITS)
+        monkeypatch.chdir(checkout)
+        jobs = [Job(n, Path("in") / f"{n}.clf") for n in ("a", "b")]
+        shards.append(run_batch(jobs, cfg=None, options=FakeOptions(),  # type: ignore[arg-type]
+                                thresholds=load_thresholds("ci.toml"), out_dir=Path("out"), runner=fake_runner,
+                                shard=Shard(i, 2)).out_dir)
+    merged = merge_batches(shards, out_dir=tmp_path / "merged")
+    assert [(r.name, r.status, r.path) for r in merged.results] == [
+        ("a", "pass", str(tmp_path / "runner-a/project/in/a.clf")),
+        ("b", "fail", str(tmp_path / "runner-b/project/in/b.clf"))]
+
+
 def test_cli_merge_takes_only_its_options(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 

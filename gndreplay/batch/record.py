@@ -10,8 +10,8 @@ The digest is the sha256 of the batch's definition: the gndreplay version, every
 path, kind, seed, scenario, limits, the resolved stack configuration, the run, read and scenario options,
 the run directory relative to the batch folder), the content of the scenarios' ``--config`` file, the
 thresholds file's sha256 and the per-input timeout. Two folders are shards of one batch when their
-digests are equal; the inputs' paths are absolute, so the shards of one batch run with the same paths
-(one container image, one checkout location).
+digests are equal. A path inside the current folder enters the digest relative to it (shards run from
+checkouts at different places agree), any other path absolute.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import math
 import os
 import types
 import typing
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path, PurePath, PurePosixPath
 from typing import Any
@@ -87,17 +87,17 @@ class BatchRecord:
     results: tuple[InputResult, ...] = ()
 
 
-def plain(x: Any) -> Any:
+def plain(x: Any, path_text: Callable[[PurePath], str] = PurePath.as_posix) -> Any:
     """JSON-ready data of ``x``: a dataclass field by field, mappings (string keys), sequences as lists,
-    paths as POSIX strings, non-finite floats as None."""
+    paths through ``path_text`` (default: as POSIX strings), non-finite floats as None."""
     if dataclasses.is_dataclass(x) and not isinstance(x, type):
-        return {f.name: plain(getattr(x, f.name)) for f in dataclasses.fields(x)}
+        return {f.name: plain(getattr(x, f.name), path_text) for f in dataclasses.fields(x)}
     if isinstance(x, Mapping):
-        return {str(k): plain(v) for k, v in x.items()}
+        return {str(k): plain(v, path_text) for k, v in x.items()}
     if isinstance(x, list | tuple):
-        return [plain(v) for v in x]
+        return [plain(v, path_text) for v in x]
     if isinstance(x, PurePath):
-        return x.as_posix()
+        return path_text(x)
     if isinstance(x, float) and not math.isfinite(x):
         return None
     return x
@@ -107,8 +107,18 @@ def _sha256(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def _canonical(x: Any) -> bytes:
-    return json.dumps(plain(x), sort_keys=True, separators=(",", ":"), default=repr).encode()
+def _canonical(x: Any, path_text: Callable[[PurePath], str] = PurePath.as_posix) -> bytes:
+    return json.dumps(plain(x, path_text), sort_keys=True, separators=(",", ":"), default=repr).encode()
+
+
+def _portable(base: Path) -> Callable[[PurePath], str]:
+    """A path as the digest takes it: relative to ``base`` (the current folder) when inside it, so shards
+    run from checkouts at different places agree; else absolute."""
+
+    def text(p: PurePath) -> str:
+        return p.relative_to(base).as_posix() if p.is_absolute() and p.is_relative_to(base) else p.as_posix()
+
+    return text
 
 
 def thresholds_digest(thresholds: Thresholds) -> str:
@@ -140,15 +150,16 @@ def batch_digest(
 ) -> str:
     """sha256 (hex) of what defines a batch (see the module docstring): equal for its shards, whatever the
     batch folder each writes."""
+    path_text = _portable(Path.cwd())
     defined = {
         "gndreplay": __version__,
         "tasks": [replace(t, run_dir=t.run_dir.relative_to(out_dir)) for t in tasks],
-        "config_files": sorted({str(t.sim.config): _file_digest(t.sim.config)
+        "config_files": sorted({path_text(t.sim.config): _file_digest(t.sim.config)
                                 for t in tasks if t.sim is not None and t.sim.config is not None}.items()),
         "thresholds": thresholds_sha256,
         "timeout_s": timeout_s,
     }
-    return _sha256(_canonical(defined))
+    return _sha256(_canonical(defined, path_text))
 
 
 def _relative(r: InputResult, folder: Path) -> InputResult:
