@@ -375,9 +375,10 @@ def test_shards_run_from_checkouts_at_different_places_merge(
         write_input(checkout, "ci.toml", LIMITS)
         monkeypatch.chdir(checkout)
         jobs = [Job(n, Path("in") / f"{n}.clf") for n in ("a", "b")]
-        shards.append(run_batch(jobs, cfg=None, options=FakeOptions(),  # type: ignore[arg-type]
-                                thresholds=load_thresholds("ci.toml"), out_dir=Path("out"), runner=fake_runner,
-                                shard=Shard(i, 2)).out_dir)
+        res = run_batch(jobs, cfg=None, options=FakeOptions(),  # type: ignore[arg-type]
+                        thresholds=load_thresholds("ci.toml"), out_dir=Path("out"), runner=fake_runner,
+                        shard=Shard(i, 2))
+        shards.append(res.out_dir)
     merged = merge_batches(shards, out_dir=tmp_path / "merged")
     assert [(r.name, r.status, r.path) for r in merged.results] == [
         ("a", "pass", str(tmp_path / "runner-a/project/in/a.clf")),

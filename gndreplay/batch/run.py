@@ -318,7 +318,7 @@ def run_batch(
     shard: Shard | None = None,
 ) -> BatchResult:
     """Run every job in its own worker process and write the batch folder: one run directory per input,
-    ``summary.csv``, ``summary.md`` (and ``junit``), ``batch.json`` (``record``); with scenario jobs also
+    ``summary.csv``, ``summary.md`` (and ``junit``), ``batch.json`` (:mod:`.record`); with scenario jobs also
     ``scenarios.csv``, the per-scenario aggregates over seeds, checked against the aggregate thresholds.
     With ``shard``, only that shard's jobs run (``shard.shard_indices``; ``merge_batches`` joins the
     shard folders).
