@@ -1437,6 +1437,7 @@ def _list_scenarios(*, given: bool) -> None:
 @log_options
 @navigation_options
 def batch(
+    ctx: typer.Context,
     inputs: Annotated[
         list[Path] | None,
         typer.Argument(
@@ -1502,6 +1503,21 @@ def batch(
             show_default=False,
         ),
     ] = None,
+    shard: Annotated[
+        str | None,
+        typer.Option(
+            "--shard",
+            help="I/N: run only the inputs i % N == I. N: I from the job's index.",
+            show_default=False,
+        ),
+    ] = None,
+    merge: Annotated[
+        bool,
+        typer.Option(
+            "--merge",
+            help="INPUTS are shard folders of one batch: merge them into --out.",
+        ),
+    ] = False,
     goal_ahead: GoalAheadOpt = None,
     until: UntilOpt = None,
     every: EveryOpt = 1,
@@ -1561,15 +1577,14 @@ def batch(
     """Replay many logs and run closed-loop scenarios in parallel worker processes; check thresholds,
     compare with a baseline, sweep configuration keys; write summary.csv, summary.md and JUnit XML.
 
-    A scenario runs once per seed and passes when the robot reaches the goal. --baseline compares each run
-    with the same run of an earlier batch (first divergent tick and stage, outcome, latency per module); a
-    --set listing several values is a sweep over their combinations. Exit 0: all passed; 1: a threshold
-    failed or a run changed against the baseline; 2: an input could not be read.
+    A scenario runs once per seed and passes if the robot reaches the goal. --baseline compares each run
+    with its run in an earlier batch (first divergent tick, stage, outcome, latency); a --set listing
+    values sweeps their combinations; --shard and --merge split a batch across machines. Exit 0: all
+    passed, 1: a threshold failed or a run changed, 2: an input could not be read.
 
     [bold]Examples[/]
 
-      gndreplay batch ../shared/datasets/carmen --jobs 2 --junit out/junit.xml
-      gndreplay batch --scenarios all --seeds 1-20 --jobs 2 --thresholds ci.toml
+      gndreplay batch ../shared/datasets/carmen --jobs 2 --junit out/junit.xml --thresholds ci.toml
       gndreplay batch logs/ --until 120 --baseline ci/baseline   # --update-baseline accepts changes
       gndreplay batch --scenarios u_trap --set reactor.security_m=0.3,0.5 --set robot.vmax_mps=1,2
     """
@@ -1577,13 +1592,20 @@ def batch(
 
     from .batch import expand_inputs, load_thresholds, parse_seeds, run_batch
     from .batch.scenarios import SimOptions
+    from .batch.shard import parse_shard, shard_indices
     from .batch.thresholds import Thresholds
     from .replay import RunOptions
     from .sim.runner import parse_latency
 
     against = _baseline(baseline, update=update_baseline, tolerance=tolerance, ratio=latency_ratio)
     if against is not None and against.update:
+        if getattr(ctx.get_parameter_source("out"), "name", None) == "COMMANDLINE":
+            raise ConfigError("--update-baseline writes the batch to the --baseline folder: not with --out")
         out, overwrite = against.folder, True
+    if merge:
+        _merge(ctx, inputs or [], out=out, junit=junit, thresholds=thresholds, overwrite=overwrite,
+               baseline=against, quiet=quiet)
+    part = None if shard is None else parse_shard(shard, os.environ)
     sim = SimOptions(latency_s=parse_latency(latency), perfect_odometry=perfect_odometry,
                      time_limit_s=time_limit, figures=figures is not False, config=setup.path,
                      preset=setup.preset, overrides=setup.overrides, subgoals=setup.subgoals)
@@ -1594,14 +1616,40 @@ def batch(
     limits = load_thresholds(thresholds) if thresholds is not None else Thresholds()
     options = RunOptions(goal_ahead_m=5.0 if goal_ahead is None else goal_ahead, until_s=until, every=every,
                          subgoals=setup.subgoals)
+    total = len(shard_indices(len(job_list) * len(settings), part))
     with _Progress(_progress_style(progress, quiet=quiet)) as shown:
-        shown.start("batch", len(job_list))
-        advance = None if shown.style == "none" else _counter(shown, len(job_list), "inputs")
+        shown.start("batch", total)
+        advance = None if shown.style == "none" else _counter(shown, total, "inputs")
         result = run_batch(job_list, cfg=settings[0].cfg, options=options, thresholds=limits, out_dir=out,
                            workers=jobs, dask_address=dask, progress=advance, junit=junit, read=read,
                            timeout_s=timeout, overwrite=overwrite, sim=settings[0].sim,
-                           figures=figures is True, sweep=settings if settings[0].point.name else (),
-                           baseline=against)
+                           figures=figures is True, shard=part,
+                           sweep=settings if settings[0].point.name else (), baseline=against)
+    _batch_done(out, result, quiet=quiet)
+
+
+def _merge(ctx: typer.Context, folders: list[Path], *, out: Path, junit: Path | None, thresholds: Path | None,
+           overwrite: bool, baseline: Any, quiet: bool) -> NoReturn:
+    """``batch --merge``: join the shard folders into ``out`` (only the output and baseline options go with
+    it), print the result and exit with its code."""
+    from .batch import load_thresholds
+    from .batch.merge import merge_batches
+
+    _only_options(ctx, "--merge", ("inputs", "merge", "out", "junit", "thresholds", "overwrite", "quiet",
+                                   "progress", "baseline", "update_baseline", "tolerance", "latency_ratio"))
+    given = None if thresholds is None else load_thresholds(thresholds)
+    merged = merge_batches(folders, out_dir=out, junit=junit, thresholds=given, overwrite=overwrite,
+                           baseline=baseline)
+    _batch_done(out, merged, quiet=quiet)
+
+
+def _batch_done(out: Path, result: object, *, quiet: bool) -> NoReturn:
+    """Say where the batch folder went if not at ``out``, print the result and exit with its code."""
+    import os
+
+    from .batch import BatchResult
+
+    assert isinstance(result, BatchResult)
     _said_moved(Path(os.path.abspath(out)), result.out_dir, "batch")
     _print_batch(result, quiet=quiet)
     raise typer.Exit(result.exit_code)
@@ -1633,6 +1681,21 @@ def _sweep_settings(setup: Setup, sim: Any) -> list[Any]:
     return [Setting(p, setup.config(sets=p.sets),
                     dataclasses.replace(sim, overrides=dataclasses.replace(setup.overrides, sets=p.sets)))
             for p in sweep_points(setup.overrides.sets)]
+
+
+def _only_options(ctx: typer.Context, flag: str, allowed: Sequence[str]) -> None:
+    """Refuse an option given on the command line (or from the environment) besides ``allowed`` (parameter
+    names) with ``flag``: one line naming it."""
+    given = [
+        p for p in ctx.command.params
+        if p.name not in allowed and p.name is not None
+        and getattr(ctx.get_parameter_source(p.name), "name", None) in ("COMMANDLINE", "ENVIRONMENT")
+    ]
+    if given:
+        names = ", ".join(p.opts[0] for p in given)
+        kept = ", ".join(p.opts[0] for p in ctx.command.params
+                         if p.name in allowed and p.opts[0].startswith("-"))
+        raise ConfigError(f"{flag}: not with {names} (it takes only {kept})")
 
 
 def _print_batch(result: object, *, quiet: bool) -> None:

@@ -192,7 +192,7 @@ def test_dot_named_inputs_run_under_safe_names(tmp_path: Path) -> None:
                     runner=fake_runner)
     assert [(r.name, r.status, r.ticks) for r in res.results] == [("hidden", "pass", 3), ("clf", "pass", 4)]
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
-        RUN_MARKER, "clf", "hidden", "summary.csv", "summary.md"
+        RUN_MARKER, "batch.json", "clf", "hidden", "summary.csv", "summary.md"
     ]
     assert sorted(p.name for p in (tmp_path / "in").iterdir()) == ["..clf", ".hidden.clf"]  # inputs intact
 
@@ -631,7 +631,7 @@ def test_a_hung_input_times_out_its_worker_is_killed_and_the_batch_goes_on(
         os.kill(pid, 0)
     # what the killed worker was writing is gone; the batch folder holds only complete results
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
-        RUN_MARKER, "good1", "good2", "good3", "summary.csv", "summary.md"
+        RUN_MARKER, "batch.json", "good1", "good2", "good3", "summary.csv", "summary.md"
     ]
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(TMP_PREFIX)]
 

@@ -445,7 +445,7 @@ def test_cli_batch_runs_scenarios_beside_a_log_and_a_bad_scenario_file(tmp_path:
             "fail", "timeout at 2.00 s: goal not reached", "1")
         assert row["failures"] == "success 0 < 1 (timeout at 2.00 s: goal not reached)"
         assert float(row["clearance_m"]) > 0 and float(row["stack_p99_ms"]) > 0 and int(row["ticks"]) > 0
-        run_dir = Path(row["run_dir"])
+        run_dir = out / row["run_dir"]  # relative to the batch folder
         res = json.loads((run_dir / "result.json").read_text())
         assert (res["seed"], res["time_limit_s"], res["latency_s"], res["perfect_odometry"]) == (
             int(row["seed"]), 2.0, 0.05, True)

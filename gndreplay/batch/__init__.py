@@ -32,6 +32,7 @@ from .jobs import (
     special_file_kind,
     unique_names,
 )
+from .merge import merge_batches
 from .metrics import (
     AGGREGATE_METRICS,
     COUNT_METRICS,
@@ -41,6 +42,7 @@ from .metrics import (
     metrics_from_result,
     metrics_from_summary,
 )
+from .record import BATCH_FILE, BatchRecord, read_record
 from .report import CSV_COLUMNS, SCENARIO_CSV_COLUMNS, junit_xml, scenarios_csv, summary_csv, summary_md
 from .run import (
     DASK_EXTRA_HINT,
@@ -53,6 +55,7 @@ from .run import (
     run_tasks,
 )
 from .scenarios import SimOptions, run_scenario
+from .shard import Shard, parse_shard, shard_indices
 from .sweep import SweepPoint, sweep_points
 from .thresholds import (
     AGGREGATE_KEYS,
@@ -68,6 +71,7 @@ from .worker import InputResult, Runner, RunOutcome, Status, Task, execute, pin_
 __all__ = [
     "AGGREGATE_KEYS",
     "AGGREGATE_METRICS",
+    "BATCH_FILE",
     "COUNT_METRICS",
     "CSV_COLUMNS",
     "DASK_EXTRA_HINT",
@@ -82,6 +86,7 @@ __all__ = [
     "THRESHOLD_KEYS",
     "Baseline",
     "BaselineCheck",
+    "BatchRecord",
     "BatchResult",
     "InputResult",
     "InputRule",
@@ -91,6 +96,7 @@ __all__ = [
     "Runner",
     "ScenarioAggregate",
     "Setting",
+    "Shard",
     "SimOptions",
     "Status",
     "SweepPoint",
@@ -106,16 +112,20 @@ __all__ = [
     "junit_xml",
     "load_thresholds",
     "make_tasks",
+    "merge_batches",
     "metrics_from_result",
     "metrics_from_summary",
     "parse_seeds",
+    "parse_shard",
     "pin_threads",
+    "read_record",
     "run_batch",
     "run_input",
     "run_scenario",
     "run_tasks",
     "safe_name",
     "scenarios_csv",
+    "shard_indices",
     "shipped_names",
     "special_file_kind",
     "summary_csv",

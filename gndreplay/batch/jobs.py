@@ -47,7 +47,7 @@ JobKind = Literal["log", "scenario"]
 SCENARIO_SUFFIXES: tuple[str, ...] = (".yaml", ".yml")
 _UNSAFE = re.compile(r"[^A-Za-z0-9._+-]+")
 #: Names of the batch folder's own files, never given to an input's run directory.
-RESERVED_NAMES: tuple[str, ...] = ("summary.csv", "summary.md", "scenarios.csv", "junit.xml")
+RESERVED_NAMES: tuple[str, ...] = ("summary.csv", "summary.md", "scenarios.csv", "junit.xml", "batch.json")
 #: Most seeds one ``--seeds`` may expand to (a typo like ``1-100000`` is refused, not queued).
 MAX_SEEDS = 10_000
 _SEED_RANGE = re.compile(r"([0-9]{1,18})(?:-([0-9]{1,18}))?")

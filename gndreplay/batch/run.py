@@ -33,8 +33,10 @@ from .baseline import (
 )
 from .jobs import Job, special_files
 from .pool import Emit, run_pool, timeout_result
+from .record import BATCH_FILE, BatchRecord, batch_digest, record_json, relative_runs, thresholds_ref
 from .report import is_own_junit, junit_xml, scenarios_csv, summary_csv, summary_md, sweep_csv
 from .scenarios import SimOptions
+from .shard import Shard, shard_indices
 from .sweep import SweepPoint
 from .thresholds import Thresholds
 from .worker import InputResult, Runner, Task, crash_message, error_result, execute, run_input
@@ -51,9 +53,11 @@ __all__ = [
     "Baseline",
     "BatchResult",
     "Setting",
+    "build_batch",
     "make_tasks",
     "run_batch",
     "run_tasks",
+    "write_outputs",
 ]
 
 log = logging.getLogger(__name__)
@@ -91,6 +95,17 @@ class Baseline:
     tolerance: Tolerance
     max_latency_ratio: float = DEFAULT_LATENCY_RATIO
     update: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class _Outputs:
+    """What ``write_outputs`` computed beside the files: the aggregates over seeds, the JUnit text, the
+    checks against the baseline and the baseline's inputs this batch did not run."""
+
+    aggregates: tuple[ScenarioAggregate, ...]
+    junit: str
+    checks: tuple[BaselineCheck, ...] = ()
+    missing: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -364,12 +379,15 @@ def run_batch(
     overwrite: bool = False,
     sim: SimOptions | None = None,
     figures: bool = False,
+    shard: Shard | None = None,
     sweep: Sequence[Setting] = (),
     baseline: Baseline | None = None,
 ) -> BatchResult:
     """Run every job in its own worker process and write the batch folder: one run directory per input,
-    ``summary.csv``, ``summary.md`` (and ``junit``); with scenario jobs also ``scenarios.csv``, the
-    per-scenario aggregates over seeds, checked against the aggregate thresholds.
+    ``summary.csv``, ``summary.md`` (and ``junit``), ``batch.json`` (:mod:`.record`); with scenario jobs also
+    ``scenarios.csv``, the per-scenario aggregates over seeds, checked against the aggregate thresholds.
+    With ``shard``, only that shard's jobs run (``shard.shard_indices``; ``merge_batches`` joins the
+    shard folders).
 
     The batch folder gets the protections of a run directory (``gndreplay.fsutil``), checked before any
     work: never a file, the current folder, a folder holding an input, or a non-empty folder gndreplay did
@@ -396,6 +414,7 @@ def run_batch(
             scenario's own preset).
         figures: draw each log's figures, maps.npz and report.md in its run directory (a scenario run's
             figures: ``sim.figures``).
+        shard: run only the jobs of this shard (None: all of them).
         sweep: run every job under each of these settings (a sweep's combinations, each in its folder
             ``out_dir / point.name``) instead of ``cfg`` and ``sim``; sweep.csv gives a row per setting.
         baseline: compare every run with the same run in this baseline batch folder (two checks per input,
@@ -418,68 +437,86 @@ def run_batch(
                                read=read, sim=s.sim, figures=figures, variant=s.point.name)
     ]
     _check_run_args(workers, timeout_s)
+    th_path, th_sha = thresholds_ref(thresholds)
+    record = BatchRecord(
+        digest=batch_digest(tasks, out_dir, thresholds_sha256=th_sha, timeout_s=timeout_s),
+        total=len(tasks), shard=shard, indices=tuple(shard_indices(len(tasks), shard)),
+        thresholds_path=th_path, thresholds_sha256=th_sha, points=tuple(s.point for s in settings),
+    )
+
+    def produce(tmp: Path, final: Path) -> tuple[InputResult, ...]:
+        """Run this shard's tasks into the staging folder ``tmp`` (a sweep's in a marked folder per
+        combination); results as they will be at ``final``."""
+        mine = [tasks[i] for i in record.indices]
+        combos = sorted({t.variant for t in mine if t.variant})
+        for name in combos:
+            _mkdirs_marked(tmp, Path(name))
+        staged = [replace(t, run_dir=tmp / t.run_dir.relative_to(out_dir)) for t in mine]
+        shown = None if progress is None else (lambda r: progress(_moved(r, tmp, final)))
+        results = run_tasks(
+            staged, workers=workers, dask_address=dask_address, runner=runner, progress=shown,
+            timeout_s=timeout_s,
+        )
+        for folder in (tmp, *(tmp / name for name in combos)):
+            fsutil.remove_stale_staging(folder)  # left by an input whose worker was killed
+        for name in combos:
+            fsutil.write_marker(tmp / name)
+        return tuple(_moved(replace(r, variant=t.variant), tmp, final)
+                     for t, r in zip(mine, results, strict=True))
+
+    return build_batch(
+        out_dir, inputs=[t.job.path for t in tasks], junit=junit, overwrite=overwrite, thresholds=thresholds,
+        record=record, produce=produce, t0=t0, baseline=baseline,
+    )
+
+
+def build_batch(
+    out_dir: Path,
+    *,
+    inputs: Sequence[Path],
+    junit: Path | None,
+    overwrite: bool,
+    thresholds: Thresholds,
+    record: BatchRecord,
+    produce: Callable[[Path, Path], tuple[InputResult, ...]],
+    t0: float,
+    baseline: Baseline | None = None,
+) -> BatchResult:
+    """Build the batch folder ``out_dir`` as every gndreplay output is built (checked before any work,
+    staged, published under the first free name): ``produce(tmp, final)`` writes the run directories into
+    the staging folder ``tmp`` and returns the results as they will be at ``final``; then
+    ``write_outputs`` (with the checks against ``baseline``). Used by ``run_batch`` and ``merge_batches``.
+
+    Raises:
+        ConfigError: ``baseline`` is not a batch folder (checked before any work).
+        OutputError: ``out_dir`` (or ``junit``) is unsafe to write, or the disk is full while writing.
+    """
+    out_dir = _absolute(Path(out_dir))
     old_baseline = _baseline_folder(baseline)
-    inputs = [t.job.path for t in tasks]
     fsutil.check_output_dir(out_dir, inputs=inputs, overwrite=overwrite)
     junit_rel, junit_out = _junit_place(junit, out_dir, inputs=inputs, overwrite=overwrite)
     target = fsutil.resolve_output_dir(out_dir, overwrite=overwrite)
-
-    def final(r: InputResult, tmp: Path) -> InputResult:
-        """The result with its run directory where it will be once the batch folder is published."""
-        return _moved(r, tmp, target)
-
     stage = fsutil.staging_dir(target, overwrite=overwrite, base=out_dir)
-    points = tuple(s.point for s in settings)
-    checks: tuple[BaselineCheck, ...] = ()
-    missing: tuple[str, ...] = ()
     with stage as tmp:
-        for point in points:
-            if point.name:
-                _mkdirs_marked(tmp, Path(point.name))
-        staged = [replace(t, run_dir=tmp / t.run_dir.relative_to(out_dir)) for t in tasks]
-        shown = None if progress is None else (lambda r: progress(final(r, tmp)))
-        results = tuple(
-            final(replace(r, variant=t.variant), tmp)
-            for t, r in zip(tasks, run_tasks(
-                staged, workers=workers, dask_address=dask_address, runner=runner, progress=shown,
-                timeout_s=timeout_s,
-            ), strict=True)
+        results = produce(tmp, target)
+        outputs = write_outputs(
+            tmp, target, results, thresholds=thresholds, record=record, junit_rel=junit_rel,
+            baseline=None if baseline is None or old_baseline is None
+            else replace(baseline, folder=old_baseline),
+            updated=baseline is not None and baseline.update,
         )
-        fsutil.remove_stale_staging(tmp)  # left by an input whose worker was killed
-        for point in points:
-            if point.name:
-                fsutil.remove_stale_staging(tmp / point.name)
-                fsutil.write_marker(tmp / point.name)
-        aggregates = aggregate_scenarios(results, thresholds)
-        if baseline is not None and old_baseline is not None:
-            checks = check_baseline(results, batch_dir=target, runs_dir=tmp, baseline=old_baseline,
-                                    tolerance=baseline.tolerance, max_ratio=baseline.max_latency_ratio)
-            missing = missing_from_batch(results, old_baseline)
-        updated = baseline is not None and baseline.update
-        atomic_write_text(tmp / "summary.csv", summary_csv(results))
-        atomic_write_text(tmp / "summary.md", summary_md(results, aggregates, checks=checks, missing=missing,
-                                                         points=points, baseline_updated=updated))
-        if aggregates:
-            atomic_write_text(tmp / "scenarios.csv", scenarios_csv(aggregates))
-        if any(p.name for p in points):
-            atomic_write_text(tmp / "sweep.csv", sweep_csv(points, results))
-        if junit_rel is not None:
-            _mkdirs_marked(tmp, junit_rel.parent)
-            atomic_write_text(tmp / junit_rel, junit_xml(results, aggregates, checks=checks,
-                                                         baseline_updated=updated))
-            fsutil.add_to_marker((tmp / junit_rel).parent, [junit_rel.name])
     if stage.out != target:  # a concurrent batch took the name first: the folder is at the next free one
         results = tuple(_moved(r, target, stage.out) for r in results)
         target = stage.out
     if junit_out is not None:
         with fsutil.write_errors(junit_out):
             junit_out.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(junit_out,
-                              junit_xml(results, aggregates, checks=checks, baseline_updated=updated))
+            atomic_write_text(junit_out, outputs.junit)
     junit_path = target / junit_rel if junit_rel is not None else junit_out
     return BatchResult(
         results, target, target / "summary.csv", target / "summary.md", junit_path, time.perf_counter() - t0,
-        aggregates, checks=checks, missing=missing, baseline_updated=updated, points=points,
+        outputs.aggregates, checks=outputs.checks, missing=outputs.missing,
+        baseline_updated=baseline is not None and baseline.update, points=record.points,
     )
 
 
@@ -492,6 +529,47 @@ def _baseline_folder(baseline: Baseline | None) -> Path | None:
     if baseline.update and not folder.exists():
         return None
     return check_baseline_dir(folder)
+
+
+def write_outputs(
+    tmp: Path,
+    final: Path,
+    results: Sequence[InputResult],
+    *,
+    thresholds: Thresholds,
+    record: BatchRecord,
+    junit_rel: Path | None,
+    baseline: Baseline | None = None,
+    updated: bool = False,
+) -> _Outputs:
+    """Write the files of a finished batch into its staging folder ``tmp`` (published at ``final``): the
+    per-scenario aggregates over seeds, the checks of every run against ``baseline`` (its folder checked;
+    ``updated``: the batch becomes the new baseline, the changes are accepted), summary.csv, summary.md,
+    scenarios.csv (with scenarios), sweep.csv (in a sweep: ``record.points``), the JUnit file at
+    ``junit_rel`` inside it (if given) and batch.json (``record`` with ``results``). Run directories are
+    written relative to the batch folder."""
+    shown = relative_runs(results, final)
+    aggregates = aggregate_scenarios(results, thresholds)
+    checks: tuple[BaselineCheck, ...] = ()
+    missing: tuple[str, ...] = ()
+    if baseline is not None:
+        checks = check_baseline(results, batch_dir=final, runs_dir=tmp, baseline=baseline.folder,
+                                tolerance=baseline.tolerance, max_ratio=baseline.max_latency_ratio)
+        missing = missing_from_batch(results, baseline.folder)
+    junit_text = junit_xml(shown, aggregates, checks=checks, baseline_updated=updated)
+    atomic_write_text(tmp / "summary.csv", summary_csv(shown))
+    atomic_write_text(tmp / "summary.md", summary_md(shown, aggregates, checks=checks, missing=missing,
+                                                     points=record.points, baseline_updated=updated))
+    if aggregates:
+        atomic_write_text(tmp / "scenarios.csv", scenarios_csv(aggregates))
+    if any(p.name for p in record.points):
+        atomic_write_text(tmp / "sweep.csv", sweep_csv(record.points, results))
+    if junit_rel is not None:
+        _mkdirs_marked(tmp, junit_rel.parent)
+        atomic_write_text(tmp / junit_rel, junit_text)
+        fsutil.add_to_marker((tmp / junit_rel).parent, [junit_rel.name])
+    atomic_write_text(tmp / BATCH_FILE, record_json(replace(record, results=shown)))
+    return _Outputs(aggregates, junit_text, checks, missing)
 
 
 def _moved(r: InputResult, old: Path, new: Path) -> InputResult:
