@@ -345,3 +345,24 @@ def test_a_20_run_sweep_on_a_dask_cluster_gives_the_process_pools_bytes(
     rows_a, rows_b = rows(tmp_path / "pool" / "summary.csv"), rows(tmp_path / "dask" / "summary.csv")
     assert [{k: v for k, v in r.items() if not k.endswith(drop)} for r in rows_a] == [
         {k: v for k, v in r.items() if not k.endswith(drop)} for r in rows_b]
+
+
+def test_a_sharded_sweep_merged_against_the_unsharded_one_as_baseline(tmp_path: Path) -> None:
+    sweep = [str(SAMPLE_LOG), "--until", "4", "--progress", "none", "--quiet",
+             "--set", "reactor.security_m=0.3,0.5", "--set", "robot.vmax_mps=0.3,0.4"]
+    whole, merged = tmp_path / "whole", tmp_path / "merged"
+    assert cli("batch", *sweep, "--out", str(whole)).exit_code == 0
+    for i in (0, 1):
+        assert cli("batch", *sweep, "--shard", f"{i}/2", "--out", str(tmp_path / f"shard-{i}")).exit_code == 0
+    result = cli("batch", "--merge", str(tmp_path / "shard-0"), str(tmp_path / "shard-1"),
+                 "--out", str(merged), "--baseline", str(whole), "--latency-ratio", "0",
+                 "--junit", str(merged / "j.xml"))
+    assert result.exit_code == 0, result.output
+    assert "4 inputs against the baseline: 0 behaviour changed" in (merged / "summary.md").read_text()
+    validate_junit((merged / "j.xml").read_text())
+    timing = "stack p99 ms (worst)"
+    assert [{k: v for k, v in r.items() if k != timing} for r in rows(merged / "sweep.csv")] == [
+        {k: v for k, v in r.items() if k != timing} for r in rows(whole / "sweep.csv")]
+    for r in rows(whole / "summary.csv"):
+        run = Path(r["run_dir"])
+        assert (merged / run / "commands.csv").read_bytes() == (whole / run / "commands.csv").read_bytes()
