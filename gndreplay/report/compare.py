@@ -650,12 +650,14 @@ class SnapshotPanel:
 
 
 def _panel_headline(p: SnapshotPanel) -> str:
-    """Run label, command, mode / situation: the top line of a panel's title (the time leads it)."""
+    """Run label, command, mode / situation and ND+'s direction: the top line of a panel's title (the time
+    leads it)."""
     assert p.decision is not None
     d = p.decision
     c = d.command
     vy = f" vy {c.vy_mps:+.3f}" if c.vy_mps else ""
-    return f"{p.label}: v {c.v_mps:+.3f} w {c.w_radps:+.3f}{vy}, {d.mode} / {d.situation}"
+    direction = f", ND+ {d.direction_rad:+.4f} rad" if math.isfinite(d.direction_rad) else ""
+    return f"{p.label}: v {c.v_mps:+.3f} w {c.w_radps:+.3f}{vy}, {d.mode} / {d.situation}{direction}"
 
 
 def figure_compare_snapshot(panels: Sequence[SnapshotPanel], c: Comparison, *, radius_m: float = 5.0) -> Any:
@@ -682,7 +684,8 @@ def figure_compare_snapshot(panels: Sequence[SnapshotPanel], c: Comparison, *, r
                     color="tab:red", wrap=True)
     d = c.divergence
     head = "B against A" if d is None else (f"B against A: first divergence at t={d.t_s:.6f} "
-                                            f"(+{d.elapsed_s:.3f} s; {', '.join(d.fields)} differ)")
+                                            f"(+{d.elapsed_s:.3f} s; {', '.join(d.fields)} "
+                                            f"{'differs' if len(d.fields) == 1 else 'differ'})")
     if c.stage is not None:
         st = c.stage
         head += f"\nfirst stage that differs: {st.stage} at +{st.elapsed_s:.3f} s ({st.evidence})"
