@@ -1255,7 +1255,17 @@ def compare(
     out: Annotated[
         Path | None,
         typer.Option(
-            "--out", help="Write compare.json and fig_compare.png into this new folder.", show_default=False
+            "--out", help="Write compare.json, fig_compare.png and fig_compare_snapshot.png into this new "
+            "folder.", show_default=False
+        ),
+    ] = None,
+    snapshot: Annotated[
+        bool | None,
+        typer.Option(
+            "--snapshot/--no-snapshot",
+            help="Draw both runs' decisions at the first divergent tick (fig_compare_snapshot.png), "
+            "re-running each run's input up to it (default: with --out).",
+            show_default=False,
         ),
     ] = None,
     overwrite: OverwriteOpt = False,
@@ -1265,32 +1275,22 @@ def compare(
     first stage that differed at or before it, ticks differing per field, latency per module and the
     outcome of closed-loop runs.
 
-    The command (commands.csv) is compared tick by tick on the ticks' stamps; the stages are the corrected
-    pose, the planner's work (timing.csv), the reactor's situation and the supervisor's mode and flags.
-    Module times are wall clock: they are reported, never a difference. Exit 0: the same within tolerance;
-    1: different; 2: a run directory or the tolerance file cannot be read.
+    The command (commands.csv) is compared tick by tick on the ticks' stamps; the stages (stages.csv) are
+    the corrected pose, the grid, the planner's result, ND+'s situation, region, direction and proposal, and
+    the supervisor's mode, flags and command. Module times are wall clock: they are reported, never a
+    difference. Exit 0: the same within tolerance; 1: different; 2: a run directory or the tolerance file
+    cannot be read.
 
     [bold]Examples[/]
 
       gndreplay compare out/aces out/aces-2
       gndreplay compare out/aces out/aces-2 --tolerance tol.toml --out out/aces-compare
     """
-    from .report.compare import (
-        Tolerance,
-        compare_runs,
-        comparison_lines,
-        comparison_to_dict,
-        load_compare_run,
-        read_tolerance,
-        write_comparison,
-    )
+    from .report.compare import comparison_lines, comparison_to_dict
+    from .rerun import compare_dirs
 
-    tol = read_tolerance(tolerance) if tolerance is not None else Tolerance()
-    a, b = load_compare_run(run_a), load_compare_run(run_b)
-    result = compare_runs(a, b, tol)
-    written = None
-    if out is not None:
-        written = write_comparison(out, a, b, result, overwrite=overwrite, inputs=[run_a, run_b])
+    result, written = compare_dirs(run_a, run_b, tolerance=tolerance, out=out, overwrite=overwrite,
+                                   snapshot=snapshot)
     if json_out:
         import json
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 from functools import partial
@@ -29,7 +29,7 @@ from .config import Config
 from .errors import FOLLOW_NEEDS_SUBGOALS, ConfigError, LogFormatError
 from .fsutil import check_output_dir, resolve_output_dir, staging_dir
 from .io import DEFAULT_READ, ReadOptions
-from .pipeline.model import GridParams
+from .pipeline.model import GridParams, RobotCentredGrid
 from .pipeline.stack import MatchInfo, NavigationStack, TickResult, warm_up
 from .report.rundir import RunSink, StagedSink, TrajectoryWriter, tick_tables, write_config, write_summary
 from .report.summary import SummaryRecorder, summarise
@@ -47,8 +47,10 @@ __all__ = [
     "check_navigation",
     "corrected_stream",
     "far_goal_warning",
+    "log_source",
     "matcher_factory",
     "mounting_for",
+    "replay_steps",
     "run_replay",
     "warm_up_all",
 ]
@@ -183,6 +185,25 @@ def assign_goals(
                 yield head, (prev.pose.x, prev.pose.y)
 
 
+def replay_steps(
+    ticks: Iterable[Tick], cfg: Config, options: RunOptions, ahead: MatchAhead | None = None
+) -> Iterator[tuple[Matched, TickResult | None, RobotCentredGrid]]:
+    """The replay itself, lazily: every tick within ``until_s`` scan-matched (``corrected_stream``), given its
+    goal (``assign_goals``) and, every ``options.every``-th, stepped through a new ``NavigationStack``;
+    yields (the matched tick, the stack's result or None for a tick skipped by ``every``, the stack's grid
+    after it). The next tick is pulled only after the consumer is done with this one (a closed loop hears
+    each command before the world moves on)."""
+    stack = NavigationStack(cfg.stack_params(), options.subgoals)
+    pairs = assign_goals(corrected_stream(ticks, cfg, options, ahead), options)
+    for k, (m, goal) in enumerate(pairs):
+        if k % options.every:
+            yield m, None, stack.grid
+            continue
+        r = stack.step(m.tick.scan, m.pose, goal, odom=m.tick.odom, cmd=m.tick.cmd,
+                       match=MatchInfo(m.match_ms, m.failed))
+        yield m, r, stack.grid
+
+
 @dataclass(frozen=True, slots=True)
 class RunSummary:
     """What a finished run reports (also written as summary.json)."""
@@ -251,8 +272,12 @@ def run_replay(
     overwrite: bool = False,
     on_stage: Callable[[str], None] | None = None,
     on_compile: Callable[[str], None] | None = None,
+    source: Mapping[str, Any] | None = None,
 ) -> RunSummary:
     """Replay ``ticks`` through the stack and write the run directory ``out_dir``.
+
+    ``source`` says how to read ``ticks`` again (summary.json's ``source``: ``gndreplay.rerun`` re-runs
+    the input from it; None: the run cannot be re-run).
 
     ``ticks`` is consumed lazily, one tick per stack step: with a fixed goal (``options.goal_xy``) tick
     k+1 is pulled only after ``on_tick`` was called for tick k (with a goal ahead the lookahead reads up
@@ -291,25 +316,21 @@ def run_replay(
                 stage("replay")
                 rec = SummaryRecorder(enforce_budgets=enforce)
                 traj = TrajectoryWriter()
-                stack = NavigationStack(cfg.stack_params(), options.subgoals)
-                pairs = assign_goals(corrected_stream(ticks, cfg, options, ahead), options)
-                for k, (m, goal) in enumerate(pairs):
+                for m, r, grid in replay_steps(ticks, cfg, options, ahead):
                     traj.add(m.tick.t_ns, m.tick.odom, m.pose, m.tick.truth)
                     rec.add_match(not m.failed, m.reason)
                     for sink in sinks:
                         sink.add_scan(m.tick, m.pose)
-                    if k % options.every:
+                    if r is None:
                         continue
-                    r = stack.step(m.tick.scan, m.pose, goal, odom=m.tick.odom, cmd=m.tick.cmd,
-                                   match=MatchInfo(m.match_ms, m.failed))
                     for sink in sinks:
-                        sink.add_result(m.tick, r, stack.grid)
+                        sink.add_result(m.tick, r, grid)
                     write_tick(r, m.tick.cmd)
                     rec.add(r)
                     if on_tick is not None:
                         on_tick(r)
             stage("write")
-            summary = summarise(rec, cfg, log_path, options, read_report(), traj.write(tmp))
+            summary = summarise(rec, cfg, log_path, options, read_report(), traj.write(tmp), source)
             write_summary(tmp, summary)
             write_config(tmp, cfg)
             for sink in sinks:
@@ -370,7 +391,13 @@ def run_log(
             overwrite=overwrite,
             on_stage=on_stage,
             on_compile=on_compile,
+            source=log_source(Path(log), read),
         )
+
+
+def log_source(log: Path, read: ReadOptions) -> dict[str, Any]:
+    """summary.json's ``source`` of a replayed log: its absolute path and how it was read."""
+    return {"kind": "log", "path": str(log.resolve()), "read": read.to_dict()}
 
 
 def far_goal_warning(goal_xy: tuple[float, float], trajectory_xy: Any, grid: GridParams) -> str | None:

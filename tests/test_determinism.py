@@ -3,9 +3,9 @@
 - Wall-clock budget flags never reach commands.csv (they go to timing.csv) unless ``enforce_budgets`` let
   them change a command: with budgets so small that every tick is over them, commands.csv is still
   byte-identical to a run with generous budgets.
-- Two runs beside a CPU hog give byte-identical commands.csv.
+- Two runs beside a CPU hog give byte-identical commands.csv and stages.csv.
 - ``--until`` does not change earlier ticks (the goal lookahead reads past it).
-- One timestamp string per tick in commands.csv, timing.csv and the TUM trajectories.
+- One timestamp string per tick in commands.csv, timing.csv, stages.csv and the TUM trajectories.
 """
 
 from __future__ import annotations
@@ -55,7 +55,8 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 def test_budget_flags_live_in_timing_csv_not_in_commands_csv(runs: dict[str, Path]) -> None:
     g, t = runs["generous"], runs["tiny"]
-    assert (g / "commands.csv").read_bytes() == (t / "commands.csv").read_bytes()
+    for name in ("commands.csv", "stages.csv"):
+        assert (g / name).read_bytes() == (t / name).read_bytes(), name
     assert "OVER_BUDGET" not in (t / "commands.csv").read_text()
     timing = rows(t / "timing.csv")
     assert timing[0][-1] == "flags"
@@ -75,7 +76,7 @@ def test_enforced_budgets_are_recorded_where_they_change_commands(runs: dict[str
 
 def test_until_does_not_change_earlier_ticks(runs: dict[str, Path]) -> None:
     short, long = runs["short"], runs["long"]
-    for name in ("commands.csv", "trajectory_corrected.tum", "trajectory_odom.tum"):
+    for name in ("commands.csv", "stages.csv", "trajectory_corrected.tum", "trajectory_odom.tum"):
         a = (short / name).read_text().splitlines()
         b = (long / name).read_text().splitlines()
         assert len(b) > len(a) > 50
@@ -86,8 +87,9 @@ def test_one_timestamp_string_per_tick_in_every_file(runs: dict[str, Path]) -> N
     d = runs["long"]
     cmd = [r[0] for r in rows(d / "commands.csv")[1:]]
     tim = [r[0] for r in rows(d / "timing.csv")[1:]]
+    stg = [r[0] for r in rows(d / "stages.csv")[1:]]
     tum = [line.split()[0] for line in (d / "trajectory_corrected.tum").read_text().splitlines()[1:]]
-    assert cmd == tim == tum  # every = 1: one tick per scan, joinable on the time string
+    assert cmd == tim == stg == tum  # every = 1: one tick per scan, joinable on the time string
     assert all(len(s.split(".")[1]) == 9 for s in cmd)
 
 
@@ -106,5 +108,5 @@ def test_two_runs_under_cpu_load_give_identical_commands(tmp_path: Path, cpu_hog
     cfg = PRESETS["wheelchair"]
     a = run_log(SAMPLE, cfg, tmp_path / "a", options=RunOptions(until_s=30.0)).out_dir
     b = run_log(SAMPLE, cfg, tmp_path / "b", options=RunOptions(until_s=30.0)).out_dir
-    for name in ("commands.csv", "trajectory_corrected.tum", "trajectory_odom.tum"):
+    for name in ("commands.csv", "stages.csv", "trajectory_corrected.tum", "trajectory_odom.tum"):
         assert (a / name).read_bytes() == (b / name).read_bytes(), name

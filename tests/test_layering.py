@@ -2,7 +2,8 @@
 
 Layers (docs/architecture.md): the foundation (types, geometry, detmath, errors, robot, fsutil, compiling), io
 (readers, with evaluation and info beside them), scanmatch, pipeline (which sees only the foundation: no
-log format, no report, no replay loop, no simulator), config, report, replay, sim, batch, cli. Every
+log format, no report, no replay loop, no simulator), config, report, replay, sim, rerun (a run re-run up
+to one tick, above both the replay and the simulator it re-runs), batch, cli. Every
 ``import`` in gndreplay/ is read from the source, the lazy ones inside functions included, so a layer
 cannot be crossed by importing late. Only cli.py imports typer.
 """
@@ -28,9 +29,10 @@ ALLOWED: dict[str, set[str]] = {
     "report": {"io", "evaluation", "scanmatch", "pipeline", "config"},
     "replay": {"io", "evaluation", "scanmatch", "pipeline", "config", "report"},
     "sim": {"io", "evaluation", "scanmatch", "pipeline", "config", "report", "replay"},
+    "rerun": {"io", "evaluation", "scanmatch", "pipeline", "config", "report", "replay", "sim"},
     "batch": {"io", "evaluation", "info", "scanmatch", "pipeline", "config", "report", "replay", "sim"},
     "cli": {"io", "evaluation", "info", "scanmatch", "pipeline", "config", "report", "replay", "sim",
-            "batch"},
+            "rerun", "batch"},
 }
 
 

@@ -21,7 +21,8 @@ from gndreplay.report.summary import motion_agreement
 from gndreplay.types import Pose2D, Scan, Tick
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_logs" / "office.clf.bz2"
-DETERMINISTIC = ("commands.csv", "trajectory_odom.tum", "trajectory_corrected.tum", "config.toml")
+DETERMINISTIC = ("commands.csv", "stages.csv", "trajectory_odom.tum", "trajectory_corrected.tum",
+                 "config.toml")
 
 
 def _matched(xs: list[float], ys: list[float]) -> list[Matched]:

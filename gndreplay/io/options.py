@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, fields
+from typing import Any
 
 from ..errors import ConfigError
 from ..types import Pose2D
@@ -43,6 +44,42 @@ class ReadOptions:
 
     def __post_init__(self) -> None:
         self.sensor_pose_fallback()
+
+    def to_dict(self) -> dict[str, Any]:
+        """The options as JSON-ready data (summary.json's ``source``); :meth:`from_dict` reads it back."""
+        return asdict(self) | {"default_sensor_pose": None if self.default_sensor_pose is None
+                               else list(self.default_sensor_pose)}
+
+    @classmethod
+    def from_dict(cls, data: Any, where: str = "read options") -> ReadOptions:
+        """Options from :meth:`to_dict`'s data.
+
+        Raises:
+            ConfigError: not a table of the fields (one line naming ``where`` and the field).
+        """
+        if not isinstance(data, dict):
+            raise ConfigError(f"{where}: expected a table, got {brief(data)}")
+        known = {f.name for f in fields(cls)}
+        if unknown := [k for k in data if k not in known]:
+            raise ConfigError(f"{where}: unknown field {unknown[0]!r}")
+        given = dict(data)
+        for name in ("fmt", "scan_topic", "odom_topic", "cmd_topic", "truth_topic"):
+            if not (given.get(name) is None or isinstance(given[name], str)):
+                raise ConfigError(f"{where}: {name} must be text or null, got {brief(given[name])}")
+        if not isinstance(given.get("strict", False), bool):
+            raise ConfigError(f"{where}: strict must be true or false, got {brief(given['strict'])}")
+        pose = given.get("default_sensor_pose")
+        if pose is not None:
+            if not (isinstance(pose, list) and len(pose) == 3):
+                raise ConfigError(f"{where}: default_sensor_pose must be [x, y, theta], got {brief(pose)}")
+            given["default_sensor_pose"] = tuple(pose)
+        sync = given.get("sync", {})
+        bounds = {f.name for f in fields(SyncOptions)}
+        if not (isinstance(sync, dict) and all(k in bounds and isinstance(v, int) and not isinstance(v, bool)
+                                               for k, v in sync.items())):
+            raise ConfigError(f"{where}: sync must be a table of integers, got {brief(sync)}")
+        given["sync"] = SyncOptions(**sync)
+        return cls(**given)
 
     def sensor_pose_fallback(self) -> Pose2D | None:
         """``default_sensor_pose`` as a Pose2D (theta wrapped to (-pi, pi]), or None.

@@ -112,11 +112,14 @@ class IntegrateStats:
         shifted_cells: (d_row, d_col) the grid moved by before tracing; (0, 0) without re-centring.
         beams_traced: beams that changed the grid (hits and clearing no-return beams inside the grid).
         hits: beams whose hit fell inside the grid and was marked OCCUPIED.
+        changed_cells: cells whose code (UNKNOWN / FREE / OCCUPIED) the scan changed (after the shift: cells
+            entering the grid start UNKNOWN and count only when the scan sets them).
     """
 
     shifted_cells: tuple[int, int]
     beams_traced: int
     hits: int
+    changed_cells: int = 0
 
 
 def shift_cells(cells: NDArray[_T], d_row: int, d_col: int, fill: int = int(UNKNOWN)) -> NDArray[_T]:
@@ -353,6 +356,9 @@ class RobotCentredGrid:
         self.cells: NDArray[np.uint8] = np.full((n, n), UNKNOWN, dtype=np.uint8)
         self.seen_ns: NDArray[np.int64] = np.full((n, n), NEVER_SEEN, dtype=np.int64)
         self._off_row, self._off_col = self._centred_offset(centre_xy[0], centre_xy[1])
+        # the cells before a scan and where it changed them (``integrate``'s changed_cells), reused
+        self._before: NDArray[np.uint8] = np.empty((n, n), dtype=np.uint8)
+        self._changed: NDArray[np.bool_] = np.empty((n, n), dtype=np.bool_)
 
     # ---- geometry -------------------------------------------------------------------------------
 
@@ -462,6 +468,7 @@ class RobotCentredGrid:
         max_range = float(scan.max_range_m) if scan.max_range_m > 0.0 else math.inf  # nan/0: no limit
         ranges = np.ascontiguousarray(scan.ranges_m, dtype=np.float64)
         angles = np.ascontiguousarray(scan.angles_rad, dtype=np.float64)
+        np.copyto(self._before, self.cells)
         # equal 1-D shapes: checked when the Scan was built
         traced, hits = _integrate_kernel(
             self.cells,
@@ -478,7 +485,9 @@ class RobotCentredGrid:
             min(max_range, p.free_clip_m),
             p.invalid_clears,
         )
-        return IntegrateStats(shifted_cells=shift, beams_traced=int(traced), hits=int(hits))
+        changed = int(np.count_nonzero(np.not_equal(self.cells, self._before, out=self._changed)))
+        return IntegrateStats(shifted_cells=shift, beams_traced=int(traced), hits=int(hits),
+                              changed_cells=changed)
 
     # ---- views ----------------------------------------------------------------------------------
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import partial
@@ -39,7 +40,7 @@ from .supervision import GndGoal, Proposal, Supervisor
 from .supervisor import SupervisorParams, budget_flags, gnd_mode
 
 __all__ = [
-    "MODULES", "NAV_MODES", "MatchInfo", "NavMode", "NavigationStack", "StackParams",
+    "MODULES", "NAV_MODES", "GridDigest", "MatchInfo", "NavMode", "NavigationStack", "StackParams",
     "TickResult", "make_planner", "warm_up",
 ]
 
@@ -86,6 +87,22 @@ class MatchInfo:
     failed: bool = False
 
 
+@dataclass(frozen=True, slots=True)
+class GridDigest:
+    """The model's grid after a tick's scan, in a few numbers (a run directory's stages.csv), so two runs'
+    grids can be told apart without storing them.
+
+    Attributes:
+        crc32: ``zlib.crc32`` of the cell codes (``RobotCentredGrid.cells``, row-major uint8).
+        changed_cells: cells whose code the tick's scan changed (``IntegrateStats.changed_cells``).
+        offset_cells: the grid's world offset (``RobotCentredGrid.offset_cells``: row, col).
+    """
+
+    crc32: int = 0
+    changed_cells: int = 0
+    offset_cells: tuple[int, int] = (0, 0)
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class TickResult:
     """What the stack decided at one tick, and why, and how long each part took.
@@ -116,6 +133,11 @@ class TickResult:
             GND), for drawing the decision (``nd.nd_diagram``).
         nd_target_xy: where GND's reactor steered to (robot frame: the planner's direction point, or the
             goal itself in mND); None outside GND.
+        grid: the grid after this tick's scan (``GridDigest``).
+        planner_direction_rad: the planned path's instantaneous direction (world frame, ``PlanResult``;
+            nan when the planner failed or did not run).
+        proposal: what the modules proposed to the supervisor (mode and command before the reflexive loop
+            and GND's rules); None only for a result not made by ``NavigationStack.step``.
     """
 
     t_ns: int
@@ -137,6 +159,9 @@ class TickResult:
     subgoal_index: int = -1
     nd_region: tuple[int, int] | None = None
     nd_target_xy: tuple[float, float] | None = None
+    grid: GridDigest = GridDigest()
+    planner_direction_rad: float = math.nan
+    proposal: Proposal | None = None
 
 
 def make_planner(params: StackParams) -> Planner:
@@ -158,6 +183,11 @@ def _make_follower(params: StackParams, subgoals: Sequence[Subgoal]) -> PathFoll
         inflate_m=params.robot.inner_radius_m + params.cspace_margin_m,
         unknown_is_free=params.unknown_is_free, escape_m=params.planner.nf1.escape_m,
     )
+
+
+def _crc32(cells: NDArray[np.uint8]) -> int:
+    """``zlib.crc32`` of the cell codes, row-major (``GridDigest.crc32``)."""
+    return zlib.crc32(np.ascontiguousarray(cells).data)
 
 
 def _ms(t0: int) -> float:
@@ -228,6 +258,7 @@ class NavigationStack:
         self._v_out = 0.0  # forward speed of the last command out (path following's at-rest test)
         self._w_out = 0.0  # ... and its turn rate (the start curvature of a regenerated trajectory)
         self._follow_overridden = False  # the last command out was not the path follower's own
+        self._grid_crc = _crc32(self.grid.cells)  # of the cells as they are (kept while unchanged)
 
     def step(self, scan: Scan, pose: Pose2D, goal: tuple[float, float], *, odom: Pose2D | None = None,
              cmd: Command | None = None, match: MatchInfo = MatchInfo()) -> TickResult:
@@ -242,22 +273,26 @@ class NavigationStack:
         return self._multi_loop_step(scan, pose, goal, odom, cmd, match)
 
     def _model(self, scan: Scan, pose: Pose2D, odom: Pose2D,
-               match: MatchInfo) -> tuple[Flag, dict[str, float]]:
-        """The start of every cycle: the matcher's flag and time, the scan into the grid and the tick to the
+               match: MatchInfo) -> tuple[Flag, dict[str, float], GridDigest]:
+        """The start of every cycle: the matcher's flag and time, the scan into the grid (and its digest:
+        the checksum is computed again only when the scan changed or moved the grid) and the tick to the
         supervisor (timed "model")."""
         flags = Flag.MATCH_FAILED if match.failed else Flag.NONE
         timings = {"match": match.ms}
         t0 = time.perf_counter_ns()
-        self.grid.integrate(scan, pose)
+        stats = self.grid.integrate(scan, pose)
+        if stats.changed_cells or stats.shifted_cells != (0, 0):
+            self._grid_crc = _crc32(self.grid.cells)
+        digest = GridDigest(self._grid_crc, stats.changed_cells, self.grid.offset_cells)
         self.supervisor.observe(scan, pose, odom)
         timings["model"] = _ms(t0)
-        return flags, timings
+        return flags, timings, digest
 
     def _gnd_step(self, scan: Scan, pose: Pose2D, goal_xy: tuple[float, float], odom: Pose2D,
                   match: MatchInfo) -> TickResult:
         """GND: model -> planner -> reactor -> supervisor."""
         p = self.params
-        flags, timings = self._model(scan, pose, odom, match)
+        flags, timings, digest = self._model(scan, pose, odom, match)
 
         t0 = time.perf_counter_ns()
         goal = np.asarray(goal_xy, dtype=np.float64)
@@ -291,10 +326,11 @@ class NavigationStack:
         # ND+ to the goal itself (the planner failed) chose the goal's own region: a way to it in view
         no_way = self._no_way(planned, pose, nd.region is not None and nd.memory is None)
         t0 = time.perf_counter_ns()
-        verdict = self.supervisor.supervise(Proposal(
+        proposal = Proposal(
             mode, Command(scan.t_ns, nd.v_mps, nd.w_radps, nd.vy_mps), flags,
             want_rad=dm.atan2(target[1], target[0]), gnd=GndGoal(goal_rel, no_way),
-        ))
+        )
+        verdict = self.supervisor.supervise(proposal)
         timings["supervisor"] = _ms(t0)
         path = planned.waypoints_cells
         path_xy = self.grid.cells_to_world(path) if path.shape[0] else np.zeros((0, 2))
@@ -304,7 +340,8 @@ class NavigationStack:
             goal=(float(goal[0]), float(goal[1])), path_xy=path_xy, timings_ms=timings,
             planner_nodes=planned.nodes_expanded, planner_length_m=planned.length_m,
             tunnel_width_m=planned.width_m if planned.ok else math.nan, nd_region=nd.region,
-            nd_target_xy=(float(target[0]), float(target[1])),
+            nd_target_xy=(float(target[0]), float(target[1])), grid=digest,
+            planner_direction_rad=planned.direction_rad if planned.ok else math.nan, proposal=proposal,
         )
 
     def _multi_loop_step(self, scan: Scan, pose: Pose2D, goal_xy: tuple[float, float], odom: Pose2D,
@@ -314,7 +351,7 @@ class NavigationStack:
         Timings: "planner" is the desired module (the path follower, reading the teleop command),
         "reactor" the mode selector and local navigation."""
         p = self.params
-        flags, timings = self._model(scan, pose, odom, match)
+        flags, timings, digest = self._model(scan, pose, odom, match)
 
         t0 = time.perf_counter_ns()
         desired: str = p.nav_mode
@@ -366,10 +403,9 @@ class NavigationStack:
         # under local navigation ends when the driver has the robot again)
         want = math.nan if intention is None else dm.atan2(intention[1], intention[0])
         t0 = time.perf_counter_ns()
-        verdict = self.supervisor.supervise(Proposal(
-            mode, Command(scan.t_ns, v, w, vy), flags, want_rad=want, trap=active != "teleop",
-            reflexive=points is not None,
-        ), points)
+        proposal = Proposal(mode, Command(scan.t_ns, v, w, vy), flags, want_rad=want, trap=active != "teleop",
+                            reflexive=points is not None)
+        verdict = self.supervisor.supervise(proposal, points)
         timings["supervisor"] = _ms(t0)
         self._selector.settle(active, verdict.looking, (pose.x, pose.y), scan.t_ns)
         self._v_out, self._w_out = verdict.command.v_mps, verdict.command.w_radps
@@ -378,7 +414,8 @@ class NavigationStack:
             t_ns=scan.t_ns, pose_corrected=pose, command=verdict.command, mode=verdict.mode,
             situation=situation, flags=verdict.flags, direction_rad=direction,
             goal=(float(goal[0]), float(goal[1])), path_xy=path_xy, timings_ms=timings, desired_mode=desired,
-            active_mode=active, takeover_reason=reason, subgoal_index=subgoal_index
+            active_mode=active, takeover_reason=reason, subgoal_index=subgoal_index, grid=digest,
+            proposal=proposal,
         )
 
     def _local(

@@ -1,12 +1,15 @@
 """Compare two run directories: where the behaviour first differs, which stage differed first, how often
 each field differs, the latency per module and, for closed-loop runs, the outcome.
 
-Ticks are joined on their stamps (commands.csv, timing.csv and the TUM files print them alike). The
-behaviour is commands.csv: ``v``, ``vy``, ``w`` within an absolute tolerance (default 0: exact), the other
-fields exactly. The stages are what the run directory records before the command, in pipeline order: the
-corrected pose (trajectory_corrected.tum), the planner's work (timing.csv ``planner_nodes``, ``path_m``),
-the reactor (``situation``) and the supervisor (``mode``, ``flags``). Wall-clock files (timing.csv's
-milliseconds, sim_timing.json) only feed the latency table; summary.json is not compared.
+Ticks are joined on their stamps (commands.csv, timing.csv, stages.csv and the TUM files print them alike).
+The behaviour is commands.csv: ``v``, ``vy``, ``w`` within an absolute tolerance (default 0: exact), the
+other fields exactly. The stages are what the run directory records of each tick, in pipeline order
+(``STAGES``): the corrected pose (trajectory_corrected.tum), the grid (stages.csv's digest), the planner
+(its result), the reactor (commands.csv's ``situation``; ND+'s region and direction and the proposal to the
+supervisor) and the supervisor (``mode``, ``flags`` and the command itself where the proposal was the same).
+A run written without stages.csv is compared on what it has: the planner from timing.csv, the reactor from
+the situation. Wall-clock files (timing.csv's milliseconds, sim_timing.json) only feed the latency table;
+summary.json is not compared.
 """
 
 from __future__ import annotations
@@ -21,17 +24,22 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..config import Config
 from ..errors import ConfigError, did_you_mean
 from ..io.userfile import brief, check_number, load_json, load_toml
 from ..types import REFLEXIVE_MODES
+from .decision import DecisionInput
 from .rundir import (
     COMMANDS_FILE,
     CORRECTED_TRAJECTORY_FILE,
+    STAGES_FILE,
     TIMING_FILE,
     Commands,
     RunDirError,
+    Stages,
     Timing,
     read_commands,
+    read_stages,
     read_timing,
     read_tum,
 )
@@ -40,15 +48,19 @@ __all__ = [
     "BEHAVIOUR_FIELDS",
     "COMPARE_FIGURE",
     "COMPARE_JSON",
+    "COMPARE_SNAPSHOT",
+    "STAGES",
     "CompareRun",
     "Comparison",
     "Divergence",
     "ModuleLatency",
     "OutcomeChange",
+    "SnapshotPanel",
     "StageDivergence",
     "Tolerance",
     "compare_runs",
     "comparison_to_dict",
+    "figure_compare_snapshot",
     "load_compare_run",
     "read_tolerance",
 ]
@@ -58,13 +70,14 @@ F64 = NDArray[np.float64]
 RESULT_FILE = "result.json"
 COMPARE_JSON = "compare.json"
 COMPARE_FIGURE = "fig_compare.png"
+COMPARE_SNAPSHOT = "fig_compare_snapshot.png"
 MAX_TOLERANCE_BYTES = 64 * 1024
 MAX_RESULT_BYTES = 16 * 1024 * 1024
 
 #: commands.csv's behaviour fields, in the order they are reported.
 BEHAVIOUR_FIELDS = ("v", "vy", "w", "mode", "situation", "flags", "desired", "active", "takeover", "subgoal")
-#: The stages before the command, in pipeline order.
-STAGES = ("pose", "planner", "reactor", "supervisor")
+#: The stages of a tick, in pipeline order.
+STAGES = ("pose", "grid", "planner", "reactor", "supervisor")
 #: result.json's scores compared between two closed-loop runs.
 OUTCOME_KEYS = ("outcome", "collision", "end_time_s", "time_to_goal_s", "min_clearance_m", "longest_stall_s",
                 "path_length_m", "time_inside_security_pct", "trap_count")
@@ -78,6 +91,8 @@ class Tolerance:
         v_mps, vy_mps, w_radps: the command's forward, lateral speed and turn rate.
         pose_m, pose_rad: the corrected pose's position (distance) and heading.
         path_m: the planned path's length.
+        direction_rad: the planned path's direction and ND+'s motion direction (stages.csv). The proposal
+            to the supervisor (stages.csv's ``proposed_*``) is held to ``v_mps``, ``vy_mps``, ``w_radps``.
     """
 
     v_mps: float = 0.0
@@ -86,11 +101,12 @@ class Tolerance:
     pose_m: float = 0.0
     pose_rad: float = 0.0
     path_m: float = 0.0
+    direction_rad: float = 0.0
 
 
 #: The upper bound of each tolerance key (a tolerance beyond it is a typo, not a tolerance).
 _TOLERANCE_LIMITS = {"v_mps": 100.0, "vy_mps": 100.0, "w_radps": 100.0, "pose_m": 1e6, "pose_rad": math.pi,
-                     "path_m": 1e6}
+                     "path_m": 1e6, "direction_rad": math.pi}
 
 
 def read_tolerance(path: Path) -> Tolerance:
@@ -127,6 +143,7 @@ class CompareRun:
         commands, timing: commands.csv and timing.csv.
         corrected: (M, 4) t [s], x, y [m], yaw [rad] of trajectory_corrected.tum.
         result: result.json of a closed-loop run, None for a replay.
+        stages: stages.csv, None for a run directory without it.
     """
 
     run_dir: Path
@@ -134,6 +151,7 @@ class CompareRun:
     timing: Timing
     corrected: F64
     result: Mapping[str, Any] | None = None
+    stages: Stages | None = None
 
 
 def load_compare_run(run_dir: Path) -> CompareRun:
@@ -141,8 +159,8 @@ def load_compare_run(run_dir: Path) -> CompareRun:
 
     Raises:
         RunDirError: not a directory, or a required file (commands.csv, timing.csv,
-            trajectory_corrected.tum) or result.json, when present, missing or malformed (the message names
-            the file).
+            trajectory_corrected.tum) missing or malformed, or result.json or stages.csv, when present,
+            malformed or (stages.csv) not of the ticks of commands.csv (the message names the file).
     """
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
@@ -157,10 +175,12 @@ def load_compare_run(run_dir: Path) -> CompareRun:
             raise RunDirError(f"{path}: expected a JSON object, got {brief(result)}")
     commands = read_commands(run_dir / COMMANDS_FILE)
     timing = read_timing(run_dir / TIMING_FILE)
-    if len(timing.t_s) != len(commands) or not np.array_equal(timing.t_s, commands.t_s):
-        raise RunDirError(f"{run_dir / TIMING_FILE}: its ticks are not those of {COMMANDS_FILE}")
+    stages = read_stages(path) if (path := run_dir / STAGES_FILE).is_file() else None
+    for name, t in ((TIMING_FILE, timing.t_s), (STAGES_FILE, None if stages is None else stages.t_s)):
+        if t is not None and (len(t) != len(commands) or not np.array_equal(t, commands.t_s)):
+            raise RunDirError(f"{run_dir / name}: its ticks are not those of {COMMANDS_FILE}")
     return CompareRun(run_dir=run_dir, commands=commands, timing=timing,
-                      corrected=read_tum(run_dir / CORRECTED_TRAJECTORY_FILE), result=result)
+                      corrected=read_tum(run_dir / CORRECTED_TRAJECTORY_FILE), result=result, stages=stages)
 
 
 @dataclass(frozen=True, slots=True)
@@ -221,11 +241,13 @@ class Comparison:
         only_a, only_b: stamps [s] of ticks only one run has (the first of each; counts in ``only_*_count``).
         counts: ticks (of the common ones) that differ, per behaviour field.
         divergence: the first common tick that differs, or None.
-        stage: the first stage (in pipeline order) that differs at or before ``divergence``, or None.
-        stages: every stage's first difference at or before ``divergence``.
+        stage: the first stage that differs at or before ``divergence`` (the earliest tick; at one tick the
+            first in pipeline order), or None.
+        stages: every stage's first difference at or before ``divergence``, in that order.
         latency: per module present in both timing.csv.
         outcome: for two closed-loop runs (result.json in both), else None.
-        notes: what could not be compared (e.g. result.json in one run only).
+        notes: what could not be compared (e.g. result.json in one run only, stages.csv missing) or drawn.
+        snapshot: the file of both runs' decisions at the divergent tick, when one was drawn.
     """
 
     run_a: str
@@ -246,6 +268,7 @@ class Comparison:
     latency: tuple[ModuleLatency, ...]
     outcome: OutcomeChange | None
     notes: tuple[str, ...] = field(default=())
+    snapshot: str | None = None
 
 
 def _flag_strings(c: Commands) -> NDArray[np.str_]:
@@ -283,13 +306,19 @@ def _join(ta: F64, tb: F64) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     return ia, ib
 
 
+def _angle_differs(a: F64, b: F64, tol: float) -> NDArray[np.bool_]:
+    """Angles [rad] further apart than ``tol`` on the circle (NaN equals only NaN)."""
+    both_nan = np.isnan(a) & np.isnan(b)
+    with np.errstate(invalid="ignore"):
+        return ~both_nan & ~(np.abs(np.angle(np.exp(1j * (a - b)))) <= tol)
+
+
 def _pose_stage(a: F64, b: F64, t_end: float, tol: Tolerance, t0: float) -> StageDivergence | None:
     ia, ib = _join(a[:, 0], b[:, 0])
     keep = a[ia, 0] <= t_end
     ia, ib = ia[keep], ib[keep]
     dist = np.hypot(a[ia, 1] - b[ib, 1], a[ia, 2] - b[ib, 2])
-    dyaw = np.abs(np.angle(np.exp(1j * (a[ia, 3] - b[ib, 3]))))
-    bad = ~(dist <= tol.pose_m) | ~(dyaw <= tol.pose_rad)
+    bad = ~(dist <= tol.pose_m) | _angle_differs(a[ia, 3], b[ib, 3], tol.pose_rad)
     if not np.any(bad):
         return None
     k = int(np.argmax(bad))
@@ -303,41 +332,93 @@ def _first(bad: NDArray[np.bool_]) -> int | None:
     return int(np.argmax(bad)) if np.any(bad) else None
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class _Check:
+    """One recorded column of a stage over the joined ticks: where A and B differ and both values."""
+
+    file: str
+    column: str
+    differs: NDArray[np.bool_]
+    a: NDArray[Any]
+    b: NDArray[Any]
+
+
+def _exact(file: str, column: str, a: NDArray[Any], b: NDArray[Any]) -> _Check:
+    return _Check(file, column, np.asarray(a != b), a, b)
+
+
+def _within(file: str, column: str, a: F64, b: F64, tol: float, *, angle: bool = False) -> _Check:
+    return _Check(file, column, _angle_differs(a, b, tol) if angle else _num_differs(a, b, tol), a, b)
+
+
+def _stage(stage: str, checks: Sequence[_Check], t: F64, t0: float) -> StageDivergence | None:
+    """The stage's first tick where any of its ``checks`` differs: every checked value of both runs there,
+    the evidence naming the files and the columns that differ."""
+    if not checks:
+        return None
+    bad = np.logical_or.reduce([c.differs for c in checks])
+    if (k := _first(bad)) is None:
+        return None
+    files: dict[str, list[str]] = {}
+    for c in checks:
+        if c.differs[k]:
+            files.setdefault(c.file, []).append(c.column)
+    return StageDivergence(stage, float(t[k]), float(t[k]) - t0, {c.column: _value(c.a[k]) for c in checks},
+                           {c.column: _value(c.b[k]) for c in checks},
+                           "; ".join(f"{f} {', '.join(cols)}" for f, cols in files.items()))
+
+
 def _tick_stages(a: CompareRun, b: CompareRun, ia: NDArray[np.intp], ib: NDArray[np.intp], tol: Tolerance,
                  t0: float) -> list[StageDivergence]:
-    """The planner's, reactor's and supervisor's first difference over the joined ticks ``ia``, ``ib``."""
-    out: list[StageDivergence] = []
-    pa, pb = a.timing.planner, b.timing.planner
-    if "nodes" in pa and "nodes" in pb and "path_m" in pa and "path_m" in pb:
-        bad = (_num_differs(pa["nodes"][ia], pb["nodes"][ib], 0.0)
-               | _num_differs(pa["path_m"][ia], pb["path_m"][ib], tol.path_m))
-        if (k := _first(bad)) is not None:
-            t = float(a.commands.t_s[ia[k]])
-            out.append(StageDivergence(
-                "planner", t, t - t0,
-                {"nodes": _value(pa["nodes"][ia[k]]), "path_m": _value(pa["path_m"][ia[k]])},
-                {"nodes": _value(pb["nodes"][ib[k]]), "path_m": _value(pb["path_m"][ib[k]])},
-                f"{TIMING_FILE} planner_nodes, path_m"))
+    """The grid's, planner's, reactor's and supervisor's first difference over the joined ticks ``ia``,
+    ``ib``: from stages.csv when both runs have it, else (no grid) from timing.csv and commands.csv."""
     ca, cb = a.commands, b.commands
-    if (k := _first(ca.situations[ia] != cb.situations[ib])) is not None:
-        t = float(ca.t_s[ia[k]])
-        out.append(StageDivergence("reactor", t, t - t0, {"situation": str(ca.situations[ia[k]])},
-                                   {"situation": str(cb.situations[ib[k]])}, f"{COMMANDS_FILE} situation"))
+    t = ca.t_s[ia]
+    sa, sb = a.stages, b.stages
+    grid: list[_Check] = []
+    planner: list[_Check] = []
+    reactor = [_exact(COMMANDS_FILE, "situation", ca.situations[ia], cb.situations[ib])]
     fa, fb = _flag_strings(ca), _flag_strings(cb)
-    if (k := _first((ca.modes[ia] != cb.modes[ib]) | (fa[ia] != fb[ib]))) is not None:
-        t = float(ca.t_s[ia[k]])
-        out.append(StageDivergence("supervisor", t, t - t0,
-                                   {"mode": str(ca.modes[ia[k]]), "flags": str(fa[ia[k]])},
-                                   {"mode": str(cb.modes[ib[k]]), "flags": str(fb[ib[k]])},
-                                   f"{COMMANDS_FILE} mode, flags"))
-    return out
+    supervisor = [_exact(COMMANDS_FILE, "mode", ca.modes[ia], cb.modes[ib]),
+                  _exact(COMMANDS_FILE, "flags", fa[ia], fb[ib])]
+    if sa is not None and sb is not None:
+        f = STAGES_FILE
+        grid = [_exact(f, "grid_crc32", sa.grid_crc32[ia], sb.grid_crc32[ib]),
+                _exact(f, "grid_changed", sa.grid_changed[ia], sb.grid_changed[ib]),
+                _exact(f, "grid_row", sa.grid_offset[ia, 0], sb.grid_offset[ib, 0]),
+                _exact(f, "grid_col", sa.grid_offset[ia, 1], sb.grid_offset[ib, 1])]
+        planner = [_exact(f, "planner_ok", sa.planner_ok[ia], sb.planner_ok[ib]),
+                   _exact(f, "planner_nodes", sa.planner_nodes[ia], sb.planner_nodes[ib]),
+                   _within(f, "path_m", sa.path_m[ia], sb.path_m[ib], tol.path_m),
+                   _within(f, "path_dir_rad", sa.path_dir_rad[ia], sb.path_dir_rad[ib], tol.direction_rad,
+                           angle=True)]
+        reactor += [_exact(f, "nd_first", sa.nd_region[ia, 0], sb.nd_region[ib, 0]),
+                    _exact(f, "nd_last", sa.nd_region[ia, 1], sb.nd_region[ib, 1]),
+                    _within(f, "nd_direction_rad", sa.nd_direction_rad[ia], sb.nd_direction_rad[ib],
+                            tol.direction_rad, angle=True),
+                    _exact(f, "proposed_mode", sa.proposed_mode[ia], sb.proposed_mode[ib])]
+        limits = (("v", tol.v_mps), ("vy", tol.vy_mps), ("w", tol.w_radps))
+        reactor += [_within(f, f"proposed_{n}", sa.proposed[ia, j], sb.proposed[ib, j], limit)
+                    for j, (n, limit) in enumerate(limits)]
+        # the proposal the same, a command out that differs is the supervisor's
+        supervisor += [_within(COMMANDS_FILE, n, x[ia], y[ib], limit) for n, x, y, limit in (
+            ("v", ca.v_mps, cb.v_mps, tol.v_mps), ("vy", ca.vy_mps, cb.vy_mps, tol.vy_mps),
+            ("w", ca.w_radps, cb.w_radps, tol.w_radps))]
+    else:
+        pa, pb = a.timing.planner, b.timing.planner
+        if all(k in p for p in (pa, pb) for k in ("nodes", "path_m")):
+            planner = [_exact(TIMING_FILE, "planner_nodes", pa["nodes"][ia], pb["nodes"][ib]),
+                       _within(TIMING_FILE, "path_m", pa["path_m"][ia], pb["path_m"][ib], tol.path_m)]
+    found = (_stage(name, checks, t, t0) for name, checks in (
+        ("grid", grid), ("planner", planner), ("reactor", reactor), ("supervisor", supervisor)))
+    return [s for s in found if s is not None]
 
 
 def _command_stage(d: Divergence, mode_a: str, mode_b: str) -> StageDivergence:
     """The stage behind a command (or navigation-mode fields) that differs while every recorded stage
-    before it agrees: the supervisor when a reflexive rule produced it in either run, else the reactor
-    (ND+, or in the multi-loop modes the selector and local navigation: what timing.csv's reactor column
-    times)."""
+    before it agrees, in a run directory without stages.csv: the supervisor when a reflexive rule produced
+    it in either run, else the reactor (ND+, or in the multi-loop modes the selector and local navigation:
+    what timing.csv's reactor column times)."""
     stage = "supervisor" if mode_a in REFLEXIVE_MODES or mode_b in REFLEXIVE_MODES else "reactor"
     keys = list(d.fields)
     return StageDivergence(stage, d.t_s, d.elapsed_s, {n: d.fields[n][0] for n in keys} | {"mode": mode_a},
@@ -400,9 +481,15 @@ def compare_runs(a: CompareRun, b: CompareRun, tolerance: Tolerance = Tolerance(
         pose = _pose_stage(a.corrected, b.corrected, t, tolerance, t0)
         stages = ([pose] if pose is not None else []) + _tick_stages(a, b, ia[: k + 1], ib[: k + 1],
                                                                      tolerance, t0)
+        stages.sort(key=lambda s: (s.t_s, STAGES.index(s.stage)))
         if not stages:
             stages = [_command_stage(divergence, str(ca.modes[ia[k]]), str(cb.modes[ib[k]]))]
     notes: list[str] = []
+    missing = [label for label, run in (("A", a), ("B", b)) if run.stages is None]
+    if missing:
+        notes.append(f"{STAGES_FILE} missing in run {' and '.join(missing)}: the grid, the planner's "
+                     f"direction, ND+'s region and direction and the proposal not compared (planner from "
+                     f"{TIMING_FILE})")
     outcome = None
     if a.result is not None and b.result is not None:
         outcome = _outcome(a.result, b.result)
@@ -471,7 +558,7 @@ def comparison_lines(c: Comparison) -> list[str]:
     if c.stage is not None:
         s = c.stage
         lines.append(f"first stage that differs: {s.stage} at t={s.t_s:.6f} (+{s.elapsed_s:.3f} s): "
-                     f"{_fmt(s.a)} -> {_fmt(s.b)} ({s.evidence})")
+                     f"{_fmt(_differing(s.a, s.b))} -> {_fmt(_differing(s.b, s.a))} ({s.evidence})")
         lines += [f"  then {s.stage} at +{s.elapsed_s:.3f} s" for s in c.stages[1:]]
     differing = [f"{n} {k}" for n, k in c.counts.items() if k]
     lines.append("ticks differing: " + (", ".join(differing) if differing else "none"))
@@ -490,6 +577,13 @@ def comparison_lines(c: Comparison) -> list[str]:
             lines.append("scores: the same")
     lines += [f"note: {n}" for n in c.notes]
     return lines
+
+
+def _differing(x: Any, other: Any) -> Any:
+    """A stage's values ``x`` shown on the terminal: of a table, only those that differ from ``other``'s."""
+    if isinstance(x, Mapping) and isinstance(other, Mapping):
+        return {k: v for k, v in x.items() if other.get(k) != v}
+    return x
 
 
 def _ratio_text(r: float | None) -> str:
@@ -525,7 +619,10 @@ def figure_compare(a: CompareRun, b: CompareRun, c: Comparison) -> Any:
     d = c.divergence
     if d is not None:
         for ax in (ax_v, ax_w):
-            ax.axvline(d.elapsed_s, color="tab:red", lw=1.0)
+            ax.axvline(d.elapsed_s, color="tab:red", lw=1.0, label="first divergence" if ax is ax_v else None)
+            if c.stage is not None and c.stage.t_s < d.t_s:
+                ax.axvline(c.stage.elapsed_s, color="tab:red", lw=1.0, ls=":",
+                           label=f"first stage ({c.stage.stage})" if ax is ax_v else None)
         for run, marker in ((a, "o"), (b, "s")):
             k = int(np.searchsorted(run.corrected[:, 0], d.t_s))
             if k < run.corrected.shape[0]:
@@ -541,11 +638,66 @@ def figure_compare(a: CompareRun, b: CompareRun, c: Comparison) -> Any:
     return fig
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class SnapshotPanel:
+    """One run's side of the snapshot at the first divergent tick: its label, its decision there and its
+    configuration (None when it could not be had), and a note (why not, or a caveat; "" for none)."""
+
+    label: str
+    decision: DecisionInput | None
+    config: Config | None
+    note: str = ""
+
+
+def _panel_headline(p: SnapshotPanel) -> str:
+    """Run label, command, mode / situation and ND+'s direction: the top line of a panel's title (the time
+    leads it)."""
+    assert p.decision is not None
+    d = p.decision
+    c = d.command
+    vy = f" vy {c.vy_mps:+.3f}" if c.vy_mps else ""
+    direction = f", ND+ {d.direction_rad:+.4f} rad" if math.isfinite(d.direction_rad) else ""
+    return f"{p.label}: v {c.v_mps:+.3f} w {c.w_radps:+.3f}{vy}, {d.mode} / {d.situation}{direction}"
+
+
+def figure_compare_snapshot(panels: Sequence[SnapshotPanel], c: Comparison, *, radius_m: float = 5.0) -> Any:
+    """Both runs' decisions at the first divergent tick side by side (``decision.draw_decision``), each
+    titled with its run, time, command and mode / situation; a run without a decision shows why."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from .decision import decision_view, draw_decision
+
+    n = max(len(panels), 1)
+    fig = Figure(figsize=(7.0 * n, 8.6))
+    FigureCanvasAgg(fig)
+    for k, p in enumerate(panels):
+        ax = fig.add_axes((k / n + 0.1 / n, 0.16, 0.86 / n, 0.7))
+        if p.decision is None or p.config is None:
+            ax.set_axis_off()
+            ax.text(0.5, 0.5, f"{p.label}\n{p.note}", ha="center", va="center", wrap=True, fontsize=9,
+                    transform=ax.transAxes)
+            continue
+        draw_decision(ax, decision_view(p.decision, p.config, headline=_panel_headline(p), radius_m=radius_m))
+        if p.note:
+            ax.text(0.99, 0.01, p.note, transform=ax.transAxes, ha="right", va="bottom", fontsize=7,
+                    color="tab:red", wrap=True)
+    d = c.divergence
+    head = "B against A" if d is None else (f"B against A: first divergence at t={d.t_s:.6f} "
+                                            f"(+{d.elapsed_s:.3f} s; {', '.join(d.fields)} "
+                                            f"{'differs' if len(d.fields) == 1 else 'differ'})")
+    if c.stage is not None:
+        st = c.stage
+        head += f"\nfirst stage that differs: {st.stage} at +{st.elapsed_s:.3f} s ({st.evidence})"
+    fig.suptitle(head, fontsize=10)
+    return fig
+
+
 def write_comparison(out: Path, a: CompareRun, b: CompareRun, c: Comparison, *, overwrite: bool = False,
-                     inputs: Sequence[Path] = ()) -> Path:
-    """Write compare.json and fig_compare.png into a new output folder ``out`` (checked, staged and
-    published as every output of gndreplay; beside an earlier one unless ``overwrite``). Returns where it
-    went.
+                     inputs: Sequence[Path] = (), snapshot: Sequence[SnapshotPanel] = ()) -> Path:
+    """Write compare.json, fig_compare.png and, given ``snapshot`` panels, fig_compare_snapshot.png into a
+    new output folder ``out`` (checked, staged and published as every output of gndreplay; beside an
+    earlier one unless ``overwrite``). Returns where it went.
 
     Raises:
         OutputError: ``out`` is unsafe to write.
@@ -556,8 +708,11 @@ def write_comparison(out: Path, a: CompareRun, b: CompareRun, c: Comparison, *, 
     check_output_dir(out, inputs=inputs, overwrite=overwrite)
     target = resolve_output_dir(out, overwrite=overwrite)
     stage = staging_dir(target, overwrite=overwrite, base=out)
+    files = [COMPARE_JSON, COMPARE_FIGURE] + ([COMPARE_SNAPSHOT] if snapshot else [])
     with stage as tmp:
         atomic_write_text(tmp / COMPARE_JSON, comparison_json(c))
         save_figure(figure_compare(a, b, c), tmp / COMPARE_FIGURE)
-        write_marker(tmp, [COMPARE_JSON, COMPARE_FIGURE])
+        if snapshot:
+            save_figure(figure_compare_snapshot(snapshot, c), tmp / COMPARE_SNAPSHOT)
+        write_marker(tmp, files)
     return stage.out

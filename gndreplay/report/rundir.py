@@ -3,8 +3,10 @@ that read them back, each file's writer beside its reader.
 
 - commands.csv (``COMMAND_COLUMNS``): each tick's command, what produced it, the assisted-navigation
   audit and the command the log recorded at the tick; timing.csv: milliseconds per module, the planner's
-  work and the wall-clock ``*_OVER_BUDGET`` flags. Written a row per tick by :func:`tick_tables`, read by
-  :func:`read_commands` and :func:`read_timing`.
+  work and the wall-clock ``*_OVER_BUDGET`` flags; stages.csv (``STAGE_COLUMNS``): what each stage handed
+  on, exactly (the grid's digest, the planner's result, ND+'s region and direction, the proposal to the
+  supervisor), so that ``gndreplay compare`` can name the first stage two runs differ in. Written a row per
+  tick by :func:`tick_tables`, read by :func:`read_commands`, :func:`read_timing` and :func:`read_stages`.
 - trajectory_odom.tum, trajectory_corrected.tum: the raw-odometry and the corrected pose of every scan (TUM,
   as evo reads it); trajectory_truth.tum, only when the log carries ground truth (CARMEN TRUEPOS, a truth
   topic, the simulator's world pose): the true pose of every scan that has one. Written by
@@ -33,6 +35,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 from array import array
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -61,6 +64,8 @@ __all__ = [
     "CONFIG_FILE",
     "CORRECTED_TRAJECTORY_FILE",
     "ODOM_TRAJECTORY_FILE",
+    "STAGES_FILE",
+    "STAGE_COLUMNS",
     "SUMMARY_FILE",
     "TIMING_FILE",
     "TIMING_HEADER",
@@ -70,6 +75,7 @@ __all__ = [
     "RunDirError",
     "RunSink",
     "StagedSink",
+    "Stages",
     "TimeWindow",
     "Timing",
     "TrajectoryWriter",
@@ -80,11 +86,13 @@ __all__ = [
     "episodes",
     "load_run",
     "read_commands",
+    "read_stages",
     "read_summary",
     "read_timing",
     "read_tum",
     "recorded_flags",
     "runs",
+    "stage_row",
     "tick_edges",
     "tick_tables",
     "time_origin",
@@ -98,6 +106,7 @@ F64 = NDArray[np.float64]
 
 COMMANDS_FILE = "commands.csv"
 TIMING_FILE = "timing.csv"
+STAGES_FILE = "stages.csv"
 ODOM_TRAJECTORY_FILE = "trajectory_odom.tum"
 CORRECTED_TRAJECTORY_FILE = "trajectory_corrected.tum"
 TRUTH_TRAJECTORY_FILE = "trajectory_truth.tum"
@@ -115,6 +124,18 @@ COMMAND_COLUMNS = (
 )  # fmt: skip
 COMMAND_HEADER = ",".join(COMMAND_COLUMNS) + "\n"
 TIMING_HEADER = "t," + ",".join(f"{m}_ms" for m in MODULES) + ",total_ms,planner_nodes,path_m,flags\n"
+#: stages.csv's columns: the tick's stamp; the grid after the scan (``GridDigest``: crc32 of the cell codes
+#: in 8 hex digits, cells the scan changed, the world offset's row and col); the planner (1 / 0: a path or
+#: none; empty outside GND), its search effort, the path's length [m] and instantaneous direction [rad,
+#: world]; ND+'s chosen region (first, last sector; empty without one) and motion direction [rad, robot
+#: frame]; the proposal to the supervisor (mode, v, vy, w). Floats in Python's shortest exact form (``repr``),
+#: empty when NaN.
+STAGE_COLUMNS = (
+    "t", "grid_crc32", "grid_changed", "grid_row", "grid_col", "planner_ok", "planner_nodes", "path_m",
+    "path_dir_rad", "nd_first", "nd_last", "nd_direction_rad", "proposed_mode", "proposed_v", "proposed_vy",
+    "proposed_w",
+)  # fmt: skip
+STAGES_HEADER = ",".join(STAGE_COLUMNS) + "\n"
 TIMING_MODULES = MODULES
 """The modules timing.csv has a ``<module>_ms`` column for."""
 MAX_TABLE_BYTES = MAX_TUM_BYTES
@@ -190,22 +211,43 @@ def timing_row(r: TickResult) -> str:
     return f"{format_stamp(r.t_ns)}," + ",".join(f"{x:.4f}" for x in ms) + f",{sum(ms):.4f},{stats},{over}\n"
 
 
+def _exact(x: float) -> str:
+    """A float as stages.csv prints it: the shortest text that reads back to the same float; NaN empty."""
+    return "" if math.isnan(x) else repr(float(x))
+
+
+def stage_row(r: TickResult) -> str:
+    """A tick's stages.csv row (``STAGE_COLUMNS``)."""
+    g = r.grid
+    planner = ("0" if math.isnan(r.planner_length_m) else "1") if r.desired_mode == "gnd" else ""
+    region = ("", "") if r.nd_region is None else r.nd_region
+    p = r.proposal
+    proposed = ",,," if p is None else (f"{p.mode.value},{_exact(p.command.v_mps)},"
+                                        f"{_exact(p.command.vy_mps)},{_exact(p.command.w_radps)}")
+    return (f"{format_stamp(r.t_ns)},{g.crc32:08x},{g.changed_cells},{g.offset_cells[0]},{g.offset_cells[1]},"
+            f"{planner},{r.planner_nodes},{_exact(r.planner_length_m)},{_exact(r.planner_direction_rad)},"
+            f"{region[0]},{region[1]},{_exact(r.direction_rad)},{proposed}\n")
+
+
 @contextmanager
 def tick_tables(run_dir: Path, *, enforce_budgets: bool
                 ) -> Iterator[Callable[[TickResult, Command | None], None]]:
-    """Open commands.csv and timing.csv in ``run_dir``, write their headers and give the function that
-    appends a tick's row to each, from the stack's result and the log's recorded command at the tick
+    """Open commands.csv, timing.csv and stages.csv in ``run_dir``, write their headers and give the function
+    that appends a tick's row to each, from the stack's result and the log's recorded command at the tick
     (``Tick.cmd``): the tables stream, one row per tick, and close with the ``with``."""
     with (
         open(run_dir / COMMANDS_FILE, "w", newline="") as f_cmd,
         open(run_dir / TIMING_FILE, "w", newline="") as f_tim,
+        open(run_dir / STAGES_FILE, "w", newline="") as f_stg,
     ):
         f_cmd.write(COMMAND_HEADER)
         f_tim.write(TIMING_HEADER)
+        f_stg.write(STAGES_HEADER)
 
         def write_tick(r: TickResult, logged: Command | None) -> None:
             f_cmd.write(command_row(r, enforce_budgets, logged))
             f_tim.write(timing_row(r))
+            f_stg.write(stage_row(r))
 
         yield write_tick
 
@@ -339,6 +381,36 @@ class Timing:
     ms: Mapping[str, F64]
     over_budget: Mapping[str, NDArray[np.bool_]] = field(default_factory=dict)
     planner: Mapping[str, F64] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Stages:
+    """stages.csv as arrays (``STAGE_COLUMNS``), each (K,).
+
+    Attributes:
+        t_s: tick times [s].
+        grid_crc32: the grid digest's checksum (8 hex digits); grid_changed: cells the scan changed;
+            grid_offset: (K, 2) the grid's world offset (row, col).
+        planner_ok: "1", "0" or "" (outside GND); planner_nodes; path_m, path_dir_rad: NaN without a path.
+        nd_region: (K, 2) ND+'s first and last sector, -1 without a region; nd_direction_rad: NaN without one.
+        proposed_mode: the proposal's mode; proposed: (K, 3) its v, vy, w (NaN when not recorded).
+    """
+
+    t_s: F64
+    grid_crc32: NDArray[np.str_]
+    grid_changed: NDArray[np.int64]
+    grid_offset: NDArray[np.int64]
+    planner_ok: NDArray[np.str_]
+    planner_nodes: NDArray[np.int64]
+    path_m: F64
+    path_dir_rad: F64
+    nd_region: NDArray[np.int64]
+    nd_direction_rad: F64
+    proposed_mode: NDArray[np.str_]
+    proposed: F64
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -587,6 +659,43 @@ def read_timing(path: Path) -> Timing:
     return Timing(t_s=data[:, 0], ms=ms, over_budget=over, planner=planner)
 
 
+def _int_or(x: str, missing: int) -> int:
+    return int(x) if x else missing
+
+
+def read_stages(path: Path) -> Stages:
+    """Parse stages.csv (header ``STAGE_COLUMNS``).
+
+    Raises:
+        RunDirError: missing file, another header or a malformed row (named by line).
+    """
+    rows = _rows(path)
+    if not rows or rows[0] != list(STAGE_COLUMNS):
+        raise RunDirError(f"{path}: expected header {','.join(STAGE_COLUMNS)}")
+    body = rows[1:]
+    n = len(body)
+    ints = np.empty((n, 6), dtype=np.int64)  # changed, row, col, nodes, nd_first, nd_last
+    floats = np.empty((n, 7), dtype=np.float64)  # t, path_m, path_dir, nd_direction, v, vy, w
+    for k, r in enumerate(body):
+        try:
+            if len(r) != len(STAGE_COLUMNS):
+                raise ValueError(f"{len(r)} fields")
+            int(r[1], 16)
+            ints[k] = [int(r[2]), int(r[3]), int(r[4]), int(r[6]), _int_or(r[9], -1), _int_or(r[10], -1)]
+            floats[k] = [float(r[0]), *(_number_or_nan(r[j]) for j in (7, 8, 11, 13, 14, 15))]
+        except ValueError as err:
+            raise RunDirError(f"{path} line {k + 2}: expected {len(STAGE_COLUMNS)} fields "
+                              f"{','.join(STAGE_COLUMNS)} (numbers, a hex checksum, empty where none) "
+                              f"({err})") from None
+    return Stages(
+        t_s=floats[:, 0], grid_crc32=np.array([r[1] for r in body], dtype=np.str_), grid_changed=ints[:, 0],
+        grid_offset=ints[:, 1:3], planner_ok=np.array([r[5] for r in body], dtype=np.str_),
+        planner_nodes=ints[:, 3], path_m=floats[:, 1], path_dir_rad=floats[:, 2], nd_region=ints[:, 4:6],
+        nd_direction_rad=floats[:, 3], proposed_mode=np.array([r[12] for r in body], dtype=np.str_),
+        proposed=floats[:, 4:7],
+    )
+
+
 def read_tum(path: Path) -> F64:
     """A planar TUM trajectory as (M, 4) t [s], x, y [m], yaw [rad] (see ``evaluation.read_tum``).
 
@@ -667,6 +776,7 @@ _SUMMARY_FIELDS: Mapping[str, tuple[str, Any]] = {
     "matcher_health": ("a table of the scan matcher's health", _opt(_health_ok)),
     "config": ("a table", lambda x: isinstance(x, dict)
                and all(isinstance(x.get(k), dict | None) for k in ("supervisor", "scanmatch"))),
+    "source": ("a table or null", lambda x: x is None or isinstance(x, dict)),
     "options": ("a table", lambda x: isinstance(x, dict)
                 and all(_opt(_is_num)(x.get(k)) for k in ("goal_ahead_m", "until_s", "every"))
                 and (x.get("goal") is None or (isinstance(x["goal"], list) and len(x["goal"]) == 2

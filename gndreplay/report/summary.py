@@ -316,9 +316,11 @@ def matcher_warning(summary: Mapping[str, Any]) -> str | None:
 def summarise(
     rec: SummaryRecorder, cfg: Config, log: Path, options: SummaryOptions, read_report: Any,
     trajectories: Mapping[str, tuple[NDArray[np.int64], NDArray[np.float64]]] | None = None,
+    source: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """summary.json: counts, histograms, agreement, the errors against ground truth (``trajectories``, see
-    :func:`truth_section`), the matcher's health (:func:`health_section`) and (last, the only
+    :func:`truth_section`), the matcher's health (:func:`health_section`), how to read the input again
+    (``source``, as the replay's caller gives it: ``gndreplay.rerun`` reads it) and (last, the only
     non-deterministic part) latency and the ticks over each module's time budget. ``flags`` counts what
     commands.csv records."""
     n = len(rec.t_s)
@@ -353,6 +355,7 @@ def summarise(
             "every": options.every,
             "subgoals": [[g.x, g.y, g.theta, g.kind] for g in options.subgoals],
         },
+        "source": dict(source) if source is not None else None,
         "config": config_to_dict(cfg),
         "planner": _planner_stats(rec, cfg),
         "latency_ms": latency,

@@ -29,7 +29,7 @@ from ..io.userfile import brief
 from .closedloop import ClosedLoop, SimParams
 from .figure import draw_world
 from .geometry import warm_up as warm_up_geometry
-from .scenario_file import ScenarioSpec, resolve_scenario
+from .scenario_file import ScenarioSpec, resolve_scenario, scenario_ref
 
 if TYPE_CHECKING:
     from ..report.mcap_export import GridEvery
@@ -263,7 +263,10 @@ def simulate_scenario(
 
     sinks = default_sinks(figures=figures, extra=[SimSink(loop, figure=figures)], snapshots=snapshots,
                           mcap=mcap, config=loop.cfg, mcap_grid=mcap_grid)
+    source = {"kind": "scenario", "scenario": scenario_ref(spec), "seed": seed, "latency_s": latency_s,
+              "perfect_odometry": perfect_odometry, "time_limit_s": time_limit_s,
+              "default_sim_params": params is None or params == SimParams()}
     summary = run_replay(loop.ticks(), loop.cfg, Path(out_dir), log=Path(spec.source),
                          options=RunOptions(goal_xy=spec.goal, subgoals=spec.subgoals), on_tick=tick_done,
-                         sinks=sinks, overwrite=overwrite, **(run_kwargs or {}))
+                         sinks=sinks, overwrite=overwrite, source=source, **(run_kwargs or {}))
     return _outcome(loop.result(), summary.out_dir, timings(loop))

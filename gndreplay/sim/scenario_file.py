@@ -99,6 +99,7 @@ __all__ = [
     "load_scenario",
     "parse_scenario",
     "resolve_scenario",
+    "scenario_ref",
     "shipped_scenarios",
 ]
 
@@ -647,6 +648,17 @@ def resolve_scenario(name_or_path: str | Path) -> ScenarioSpec:
         raise ConfigError(f"{_label(name)}: no such scenario file or shipped scenario (shipped: {known})"
                           f"{did_you_mean(name, _shipped_names())}")
     return _shipped(name)
+
+
+def scenario_ref(spec: ScenarioSpec) -> str | None:
+    """What ``resolve_scenario`` reads ``spec`` again from: the absolute path of its file, or a shipped
+    scenario's name; None for a scenario not read from a file."""
+    if _is_file(Path(spec.source)):
+        return str(Path(spec.source).resolve())
+    shipped = Path(spec.source)
+    if shipped.parent == Path("scenarios") and shipped.suffix == ".yaml" and shipped.stem in _shipped_names():
+        return shipped.stem
+    return None
 
 
 def _is_file(p: Path) -> bool:
