@@ -6,7 +6,6 @@ import csv
 import dataclasses
 import json
 import shutil
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -267,12 +266,12 @@ def test_first_stage_in_pipeline_order(runs: dict[str, Path], tmp_path: Path) ->
     assert c.stage is not None and c.stage.stage == "pose" and c.stage.t_s == a_run.corrected[3, 0]
     assert c.stage.b[0] == pytest.approx(c.stage.a[0] + 0.5)
     # an earlier tick's grid comes first; at the pose's own tick the pose comes before the grid
-    crc = _cell(b / "stages.csv", 2, "grid_crc32")
-    _edit_csv(b / "stages.csv", 2, "grid_crc32", f"{int(crc, 16) ^ 1:08x}")
+    crc = _cell(b / "stages.csv", 2, "grid_digest")
+    _edit_csv(b / "stages.csv", 2, "grid_digest", f"{int(crc, 16) ^ 1:016x}")
     c = compare_runs(a_run, load_compare_run(b))
     assert [s.stage for s in c.stages][:2] == ["grid", "pose"] and c.stage is not None and c.stage.t_s == t[2]
-    assert c.stage.evidence == "stages.csv grid_crc32"
-    _edit_csv(b / "stages.csv", 2, "grid_crc32", crc)
+    assert c.stage.evidence == "stages.csv grid_digest"
+    _edit_csv(b / "stages.csv", 2, "grid_digest", crc)
     _edit_csv(b / "stages.csv", 3, "grid_changed", "123456")
     assert [s.stage for s in compare_runs(a_run, load_compare_run(b)).stages][:2] == ["pose", "grid"]
     wide = Tolerance(pose_m=1.0, path_m=100.0)
@@ -317,7 +316,7 @@ def test_stages_file_written_and_reproducible(runs: dict[str, Path]) -> None:
     a = (runs["a"] / "stages.csv").read_bytes()
     assert a == (runs["a2"] / "stages.csv").read_bytes()
     header, rows = _table(runs["a"] / "stages.csv")
-    assert header[:3] == ["t", "grid_crc32", "grid_changed"]
+    assert header[:3] == ["t", "grid_digest", "grid_changed"]
     commands, timing = _rows(runs["a"]), _table(runs["a"] / "timing.csv")
     assert [r[0] for r in rows] == [r[0] for r in commands] == [r[0] for r in timing[1]]
     col = {name: header.index(name) for name in header}
@@ -332,7 +331,7 @@ def test_stages_file_written_and_reproducible(runs: dict[str, Path]) -> None:
 
 #: stages.csv's columns of the grid, the planner and the reactor (the test's own reading)
 _STAGE_COLUMNS = {
-    "grid": ("grid_crc32", "grid_changed", "grid_row", "grid_col"),
+    "grid": ("grid_digest", "grid_changed", "grid_row", "grid_col"),
     "planner": ("planner_ok", "planner_nodes", "path_m", "path_dir_rad"),
     "reactor": ("nd_first", "nd_last", "nd_direction_rad", "proposed_mode", "proposed_v", "proposed_vy",
                 "proposed_w"),
@@ -374,9 +373,23 @@ def test_security_change_stage_read_from_the_stage_files(runs: dict[str, Path]) 
     assert not any("stages.csv" in n for n in doc["notes"])
 
 
+def _digest(cells: np.ndarray) -> int:
+    """The grid digest as documented, computed here with numpy (not the kernel): the cell codes row-major,
+    zero-padded to whole 8-byte words, read as little-endian uint64, times the splitmix64 keys, summed
+    modulo 2**64."""
+    flat = np.zeros(-(-cells.size // 8) * 8, dtype=np.uint8)
+    flat[: cells.size] = cells.reshape(-1)
+    words = flat.view("<u8").astype(np.uint64)
+    z = np.arange(1, words.size + 1, dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    keys = (z ^ (z >> np.uint64(31))) | np.uint64(1)
+    return int(np.sum(words * keys, dtype=np.uint64))
+
+
 def test_snapshot_of_a_replay(runs: dict[str, Path], tmp_path: Path) -> None:
     """compare --out re-runs both logs up to the first divergent tick and draws both decisions; the re-run's
-    grid is the one stages.csv digested (its crc32, the cells changed since the tick before)."""
+    grid is the one stages.csv digested (its digest, the cells changed since the tick before)."""
     code, out, err = _invoke(runs["a"], runs["b"], "--json", "--out", tmp_path / "cmp")
     assert code == 1, err
     doc = json.loads(out)
@@ -391,7 +404,7 @@ def test_snapshot_of_a_replay(runs: dict[str, Path], tmp_path: Path) -> None:
     before = decision_at(runs["a"], float(rows[k - 1][0]))
     assert not now.notes and now.decision.mode == _rows(runs["a"])[k][4]
     assert f"{now.decision.command.v_mps:.6f}" == _rows(runs["a"])[k][1]
-    assert zlib.crc32(now.decision.cells.tobytes()) == int(rows[k][header.index("grid_crc32")], 16)
+    assert _digest(now.decision.cells) == int(rows[k][header.index("grid_digest")], 16)
     assert now.decision.origin_xy == before.decision.origin_xy  # no shift between: cells compare 1:1
     changed = int(np.count_nonzero(now.decision.cells != before.decision.cells))
     assert changed == int(rows[k][header.index("grid_changed")])

@@ -413,3 +413,26 @@ def test_an_obstacle_that_left_is_still_cleared_by_rays_through_it() -> None:
     assert (grid.cells[person_cells[:, 0], person_cells[:, 1]] == OCCUPIED).all()
     grid.integrate(scan_of(pose, wall), pose)
     assert (grid.cells[person_cells[:, 0], person_cells[:, 1]] == FREE).all()
+
+
+@pytest.mark.parametrize("n", [1, 7, 9, 40, 401])
+def test_grid_digest_counts_changed_cells_and_tells_grids_apart(n: int) -> None:
+    """grid_digest's count is the number of differing cells, for any size (a tail shorter than a word
+    included); its digest changes when any one cell changes and is a function of the cells alone."""
+    from gndreplay.pipeline.model import digest_keys, grid_digest
+
+    rng = np.random.default_rng(n)
+    keys = digest_keys(n * n)
+    a = rng.integers(0, 3, size=(n, n)).astype(np.uint8)
+    b = a.copy()
+    flip = rng.choice(n * n, size=min(5, n * n), replace=False)
+    b.reshape(-1)[flip] = (b.reshape(-1)[flip] + 1) % 3
+    count, digest_b = grid_digest(b, a, keys)
+    assert int(count) == int(np.count_nonzero(a != b))
+    assert grid_digest(a, b, keys)[1] == grid_digest(a, a.copy(), keys)[1] != digest_b
+    for k in range(n * n):  # every single-cell change moves the digest
+        c = a.copy()
+        c.reshape(-1)[k] = (c.reshape(-1)[k] + 1) % 3
+        assert grid_digest(c, a, keys)[0] == 1 and grid_digest(c, a, keys)[1] != grid_digest(a, a, keys)[1]
+        if k > 50:
+            break

@@ -114,12 +114,54 @@ class IntegrateStats:
         hits: beams whose hit fell inside the grid and was marked OCCUPIED.
         changed_cells: cells whose code (UNKNOWN / FREE / OCCUPIED) the scan changed (after the shift: cells
             entering the grid start UNKNOWN and count only when the scan sets them).
+        digest: ``grid_digest`` of the cells after the scan.
     """
 
     shifted_cells: tuple[int, int]
     beams_traced: int
     hits: int
     changed_cells: int = 0
+    digest: int = 0
+
+
+def digest_keys(n_bytes: int) -> NDArray[np.uint64]:
+    """The per-word keys of ``grid_digest`` for a grid of ``n_bytes`` cells: splitmix64 of the word index,
+    made odd (integer arithmetic modulo 2**64: the same on every machine)."""
+    z = np.arange(1, (n_bytes + 7) // 8 + 1, dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return (z ^ (z >> np.uint64(31))) | np.uint64(1)
+
+
+@njit(cache=True)
+def grid_digest(cells: NDArray[np.uint8], before: NDArray[np.uint8],
+                keys: NDArray[np.uint64]) -> tuple[np.uint64, np.uint64]:
+    """(cells that differ from ``before``, the digest of ``cells``) in one pass over 8-byte words: the
+    digest is sum(word_k * keys[k]) modulo 2**64 over the row-major cell codes read as little-endian
+    64-bit words (the last one zero-padded), with ``keys = digest_keys(cells.size)``. Two grids with the
+    same digest are the same grid but for a 2**-64 chance; a few microseconds for a 400 x 400 grid."""
+    new = cells.reshape(-1)
+    old = before.reshape(-1)
+    n_words = new.size // 8
+    wn = new[: n_words * 8].view(np.uint64)
+    wo = old[: n_words * 8].view(np.uint64)
+    lows = np.uint64(0x0101010101010101)
+    count = np.uint64(0)
+    digest = np.uint64(0)
+    for k in range(n_words):
+        x = wn[k] ^ wo[k]  # a byte of x is non-zero where a cell differs: fold each byte onto its low bit
+        x = x | (x >> np.uint64(4))
+        x = x | (x >> np.uint64(2))
+        x = x | (x >> np.uint64(1))
+        count += ((x & lows) * lows) >> np.uint64(56)
+        digest += wn[k] * keys[k]
+    if new.size > n_words * 8:
+        tail = np.uint64(0)
+        for j in range(n_words * 8, new.size):
+            count += np.uint64(new[j] != old[j])
+            tail |= np.uint64(new[j]) << np.uint64(8 * (j - n_words * 8))
+        digest += tail * keys[n_words]
+    return count, digest
 
 
 def shift_cells(cells: NDArray[_T], d_row: int, d_col: int, fill: int = int(UNKNOWN)) -> NDArray[_T]:
@@ -356,9 +398,9 @@ class RobotCentredGrid:
         self.cells: NDArray[np.uint8] = np.full((n, n), UNKNOWN, dtype=np.uint8)
         self.seen_ns: NDArray[np.int64] = np.full((n, n), NEVER_SEEN, dtype=np.int64)
         self._off_row, self._off_col = self._centred_offset(centre_xy[0], centre_xy[1])
-        # the cells before a scan and where it changed them (``integrate``'s changed_cells), reused
+        # the cells before a scan (``integrate``'s changed_cells), reused, and the digest's keys
         self._before: NDArray[np.uint8] = np.empty((n, n), dtype=np.uint8)
-        self._changed: NDArray[np.bool_] = np.empty((n, n), dtype=np.bool_)
+        self._digest_keys = digest_keys(n * n)
 
     # ---- geometry -------------------------------------------------------------------------------
 
@@ -485,9 +527,9 @@ class RobotCentredGrid:
             min(max_range, p.free_clip_m),
             p.invalid_clears,
         )
-        changed = int(np.count_nonzero(np.not_equal(self.cells, self._before, out=self._changed)))
+        changed, digest = grid_digest(self.cells, self._before, self._digest_keys)
         return IntegrateStats(shifted_cells=shift, beams_traced=int(traced), hits=int(hits),
-                              changed_cells=changed)
+                              changed_cells=int(changed), digest=int(digest))
 
     # ---- views ----------------------------------------------------------------------------------
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import partial
@@ -93,12 +92,12 @@ class GridDigest:
     grids can be told apart without storing them.
 
     Attributes:
-        crc32: ``zlib.crc32`` of the cell codes (``RobotCentredGrid.cells``, row-major uint8).
+        digest: ``model.grid_digest`` of the cell codes (``RobotCentredGrid.cells``, row-major uint8).
         changed_cells: cells whose code the tick's scan changed (``IntegrateStats.changed_cells``).
         offset_cells: the grid's world offset (``RobotCentredGrid.offset_cells``: row, col).
     """
 
-    crc32: int = 0
+    digest: int = 0
     changed_cells: int = 0
     offset_cells: tuple[int, int] = (0, 0)
 
@@ -185,11 +184,6 @@ def _make_follower(params: StackParams, subgoals: Sequence[Subgoal]) -> PathFoll
     )
 
 
-def _crc32(cells: NDArray[np.uint8]) -> int:
-    """``zlib.crc32`` of the cell codes, row-major (``GridDigest.crc32``)."""
-    return zlib.crc32(np.ascontiguousarray(cells).data)
-
-
 def _ms(t0: int) -> float:
     return (time.perf_counter_ns() - t0) / 1e6
 
@@ -258,7 +252,6 @@ class NavigationStack:
         self._v_out = 0.0  # forward speed of the last command out (path following's at-rest test)
         self._w_out = 0.0  # ... and its turn rate (the start curvature of a regenerated trajectory)
         self._follow_overridden = False  # the last command out was not the path follower's own
-        self._grid_crc = _crc32(self.grid.cells)  # of the cells as they are (kept while unchanged)
 
     def step(self, scan: Scan, pose: Pose2D, goal: tuple[float, float], *, odom: Pose2D | None = None,
              cmd: Command | None = None, match: MatchInfo = MatchInfo()) -> TickResult:
@@ -274,16 +267,13 @@ class NavigationStack:
 
     def _model(self, scan: Scan, pose: Pose2D, odom: Pose2D,
                match: MatchInfo) -> tuple[Flag, dict[str, float], GridDigest]:
-        """The start of every cycle: the matcher's flag and time, the scan into the grid (and its digest:
-        the checksum is computed again only when the scan changed or moved the grid) and the tick to the
-        supervisor (timed "model")."""
+        """The start of every cycle: the matcher's flag and time, the scan into the grid (and its digest)
+        and the tick to the supervisor (timed "model")."""
         flags = Flag.MATCH_FAILED if match.failed else Flag.NONE
         timings = {"match": match.ms}
         t0 = time.perf_counter_ns()
         stats = self.grid.integrate(scan, pose)
-        if stats.changed_cells or stats.shifted_cells != (0, 0):
-            self._grid_crc = _crc32(self.grid.cells)
-        digest = GridDigest(self._grid_crc, stats.changed_cells, self.grid.offset_cells)
+        digest = GridDigest(stats.digest, stats.changed_cells, self.grid.offset_cells)
         self.supervisor.observe(scan, pose, odom)
         timings["model"] = _ms(t0)
         return flags, timings, digest

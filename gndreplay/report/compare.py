@@ -383,7 +383,7 @@ def _tick_stages(a: CompareRun, b: CompareRun, ia: NDArray[np.intp], ib: NDArray
                   _exact(COMMANDS_FILE, "flags", fa[ia], fb[ib])]
     if sa is not None and sb is not None:
         f = STAGES_FILE
-        grid = [_exact(f, "grid_crc32", sa.grid_crc32[ia], sb.grid_crc32[ib]),
+        grid = [_exact(f, "grid_digest", sa.grid_digest[ia], sb.grid_digest[ib]),
                 _exact(f, "grid_changed", sa.grid_changed[ia], sb.grid_changed[ib]),
                 _exact(f, "grid_row", sa.grid_offset[ia, 0], sb.grid_offset[ib, 0]),
                 _exact(f, "grid_col", sa.grid_offset[ia, 1], sb.grid_offset[ib, 1])]

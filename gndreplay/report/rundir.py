@@ -124,14 +124,14 @@ COMMAND_COLUMNS = (
 )  # fmt: skip
 COMMAND_HEADER = ",".join(COMMAND_COLUMNS) + "\n"
 TIMING_HEADER = "t," + ",".join(f"{m}_ms" for m in MODULES) + ",total_ms,planner_nodes,path_m,flags\n"
-#: stages.csv's columns: the tick's stamp; the grid after the scan (``GridDigest``: crc32 of the cell codes
-#: in 8 hex digits, cells the scan changed, the world offset's row and col); the planner (1 / 0: a path or
-#: none; empty outside GND), its search effort, the path's length [m] and instantaneous direction [rad,
-#: world]; ND+'s chosen region (first, last sector; empty without one) and motion direction [rad, robot
-#: frame]; the proposal to the supervisor (mode, v, vy, w). Floats in Python's shortest exact form (``repr``),
-#: empty when NaN.
+#: stages.csv's columns: the tick's stamp; the grid after the scan (``GridDigest``: the digest of the cell
+#: codes in 16 hex digits, cells the scan changed, the world offset's row and col); the planner (1 / 0: a
+#: path or none; empty outside GND), its search effort, the path's length [m] and instantaneous direction
+#: [rad, world]; ND+'s chosen region (first, last sector; empty without one) and motion direction [rad,
+#: robot frame]; the proposal to the supervisor (mode, v, vy, w). Floats in Python's shortest exact form
+#: (``repr``), empty when NaN.
 STAGE_COLUMNS = (
-    "t", "grid_crc32", "grid_changed", "grid_row", "grid_col", "planner_ok", "planner_nodes", "path_m",
+    "t", "grid_digest", "grid_changed", "grid_row", "grid_col", "planner_ok", "planner_nodes", "path_m",
     "path_dir_rad", "nd_first", "nd_last", "nd_direction_rad", "proposed_mode", "proposed_v", "proposed_vy",
     "proposed_w",
 )  # fmt: skip
@@ -224,7 +224,8 @@ def stage_row(r: TickResult) -> str:
     p = r.proposal
     proposed = ",,," if p is None else (f"{p.mode.value},{_exact(p.command.v_mps)},"
                                         f"{_exact(p.command.vy_mps)},{_exact(p.command.w_radps)}")
-    return (f"{format_stamp(r.t_ns)},{g.crc32:08x},{g.changed_cells},{g.offset_cells[0]},{g.offset_cells[1]},"
+    return (f"{format_stamp(r.t_ns)},{g.digest:016x},{g.changed_cells},"
+            f"{g.offset_cells[0]},{g.offset_cells[1]},"
             f"{planner},{r.planner_nodes},{_exact(r.planner_length_m)},{_exact(r.planner_direction_rad)},"
             f"{region[0]},{region[1]},{_exact(r.direction_rad)},{proposed}\n")
 
@@ -389,7 +390,7 @@ class Stages:
 
     Attributes:
         t_s: tick times [s].
-        grid_crc32: the grid digest's checksum (8 hex digits); grid_changed: cells the scan changed;
+        grid_digest: the grid's digest (16 hex digits); grid_changed: cells the scan changed;
             grid_offset: (K, 2) the grid's world offset (row, col).
         planner_ok: "1", "0" or "" (outside GND); planner_nodes; path_m, path_dir_rad: NaN without a path.
         nd_region: (K, 2) ND+'s first and last sector, -1 without a region; nd_direction_rad: NaN without one.
@@ -397,7 +398,7 @@ class Stages:
     """
 
     t_s: F64
-    grid_crc32: NDArray[np.str_]
+    grid_digest: NDArray[np.str_]
     grid_changed: NDArray[np.int64]
     grid_offset: NDArray[np.int64]
     planner_ok: NDArray[np.str_]
@@ -688,7 +689,7 @@ def read_stages(path: Path) -> Stages:
                               f"{','.join(STAGE_COLUMNS)} (numbers, a hex checksum, empty where none) "
                               f"({err})") from None
     return Stages(
-        t_s=floats[:, 0], grid_crc32=np.array([r[1] for r in body], dtype=np.str_), grid_changed=ints[:, 0],
+        t_s=floats[:, 0], grid_digest=np.array([r[1] for r in body], dtype=np.str_), grid_changed=ints[:, 0],
         grid_offset=ints[:, 1:3], planner_ok=np.array([r[5] for r in body], dtype=np.str_),
         planner_nodes=ints[:, 3], path_m=floats[:, 1], path_dir_rad=floats[:, 2], nd_region=ints[:, 4:6],
         nd_direction_rad=floats[:, 3], proposed_mode=np.array([r[12] for r in body], dtype=np.str_),
