@@ -345,6 +345,7 @@ class ClosedLoop:
         self.laser_rng = np.random.default_rng(laser_seq)
         self.odom_rng = np.random.default_rng(odom_seq)
         self.world = _World(spec)
+        spec.check_endpoints(self.world, self.local, self.radius, params.contact_m)
         self.goal = spec.goal
         self.goal_tol = cfg.supervisor.goal_tolerance_m
         self.driver = None if spec.teleop is None or self.nav_mode != "teleop" else TeleopDriver(

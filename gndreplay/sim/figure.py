@@ -1,4 +1,5 @@
-"""fig_world.png: the true world of a closed-loop run, the trajectory with the footprint every second,
+"""fig_world.png: the true world of a closed-loop run (a map's occupied cells as an image under their
+boundary, drawn as one line collection however many edges), the trajectory with the footprint every second,
 events (elements that appear, vanish or move drawn dashed), movers' paths and positions, the contact; in
 the multi-loop modes the subgoals (arrows), the operator's track (dashed) and, thick, the stretches driven
 by local navigation (as the multi-loop paper's Fig. 7)."""
@@ -16,6 +17,27 @@ from ..robot import footprint_outline
 
 if TYPE_CHECKING:
     from .closedloop import ClosedLoop
+    from .scenario_file import Element
+
+
+def _draw_map(ax: Any, e: Element, style: dict[str, Any]) -> None:
+    """A map element: its occupied cells as an image (free cells transparent) and their boundary."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import ListedColormap
+    from matplotlib.transforms import Affine2D
+
+    grid, groups = e.grid, e.groups
+    if grid is None or groups is None:
+        return
+    ox, oy, yaw = grid.origin
+    h, w = grid.occupied.shape
+    place = Affine2D().scale(grid.resolution_m).rotate(yaw).translate(ox, oy) + ax.transData
+    ax.imshow(grid.occupied.astype(np.uint8), origin="lower", extent=(0, w, 0, h), interpolation="nearest",
+              cmap=ListedColormap([(1.0, 1.0, 1.0, 0.0), style["facecolor"]]), vmin=0, vmax=1,
+              transform=place, zorder=0.5)
+    segs = list(groups.edges.reshape(-1, 2, 2))
+    ax.add_collection(LineCollection(segs, colors=style["edgecolor"], linewidths=0.5,
+                                     linestyles=style.get("ls", "-")), autolim=True)
 
 
 def _draw_modes(ax: Any, loop: ClosedLoop, truth: np.ndarray, tt: np.ndarray) -> None:
@@ -57,13 +79,15 @@ def draw_world(path: Path, loop: ClosedLoop, result: dict[str, Any]) -> Path:
         style: dict[str, Any] = {"facecolor": "#bbbbbb", "edgecolor": "#333333", "lw": 0.8}
         if changes:
             style = {"facecolor": "none", "edgecolor": "#984ea3", "lw": 1.0, "ls": "--"}
-        if e.circle is not None:
+        if e.grid is not None:
+            _draw_map(ax, e, style)
+        elif e.circle is not None:
             ax.add_patch(Circle(e.circle[:2], e.circle[2], **style))
         elif e.vertices is not None:
             if e.door:  # the leaf open and closed
                 for t in (0.0, t_end):
                     v = e.outline_at(t)
-                    if v is not None and len(v) >= 2:
+                    if isinstance(v, np.ndarray) and len(v) >= 2:
                         ax.add_patch(Polygon(v, closed=True, **style))
                 for a in e.door:
                     ax.annotate(f"{'close' if a.closed else 'open'} {a.t0_s:g}s", e.vertices[0],

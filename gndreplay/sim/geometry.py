@@ -177,6 +177,17 @@ class Shapes:
         return Shapes(self.edges, self.poly_off, self.poly_elem, np.vstack([self.circles, circles]),
                       np.concatenate([self.circle_elem, circle_elem]), self.index)
 
+    def of_elements(self, elements: Sequence[int]) -> Shapes:
+        """The polygons and circles of these element indices only."""
+        keep = np.isin(self.poly_elem, np.asarray(elements, dtype=np.int64))
+        sizes = np.diff(self.poly_off)[keep]
+        rows = np.repeat(keep, np.diff(self.poly_off))
+        off = np.zeros(len(sizes) + 1, dtype=np.int64)
+        off[1:] = np.cumsum(sizes)
+        ck = np.isin(self.circle_elem, np.asarray(elements, dtype=np.int64))
+        return Shapes(np.ascontiguousarray(self.edges[rows]), off, self.poly_elem[keep],
+                      np.ascontiguousarray(self.circles[ck]), self.circle_elem[ck])
+
     def ray_grid(self) -> RayGrid:
         """The edges' bucket grid for ray casting (:func:`ray_grid`), built once per set of polygons."""
         hit = self.index.get("rays")

@@ -9,7 +9,12 @@ Schema (unknown keys are errors; every error is one line naming the file and the
     start: [x, y, theta]                        # m, m, rad
     goal: [x, y]
     time_limit: 120                             # s
+    expect: reachable                           # optional: unreachable lets the start touch / the goal sit
+                                                #   in an obstacle (a test of an impossible task)
     world:
+      map: office.yaml                          # optional: a ROS map (or a BeeSoft .dat[.gz]), element "map";
+                                                #   or {file: f, unknown: occupied|free, occupied_thresh: p}
+      sdf: office.world                         # optional: a Gazebo world's static boxes, cylinders, spheres
       walls:    {id: [x1, y1, x2, y2], ...}     # or [x1, y1, x2, y2, thickness]; default 0.1 m
       boxes:    {id: [cx, cy, length, width, theta], ...}
       circles:  {id: [cx, cy, r], ...}
@@ -43,6 +48,12 @@ A scenario file is read like every user file (:mod:`gndreplay.io.userfile`): a r
 at most ``MAX_ELEMENTS`` / ``MAX_MOVERS`` / ``MAX_EVENTS`` / ``MAX_POINTS`` / ``MAX_TELEOP_ROWS`` items, and
 a value quoted in an error is cut short (``userfile.brief``).
 
+World files (``map``, ``sdf``; :mod:`.maps`, :mod:`.sdf`, docs/worlds.md) are named relative to the
+scenario file's folder and mix with the elements above: the map is the element ``map`` (events may remove
+it), an SDF shape the element ``model/link/collision``. What a world file held but the simulator skips is
+logged as one warning per file and kept in ``ScenarioSpec.world_warnings``. The start and the goal are
+checked against the world at t = 0 when a run starts (:func:`.worldstate.check_endpoints`).
+
 Navigation mode: ``mode`` (when given) overrides the configuration's ``navigation.mode`` and
 ``local`` its ``navigation.local.strategy``. Poses (start, goal, subgoals, track) are in the scenario's
 world frame; the simulated odometry starts at ``start`` with that frame, so they are the robot's odometry
@@ -56,7 +67,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any, Literal, get_args
@@ -71,11 +82,15 @@ from ..io.userfile import brief, check_number, load_yaml, parse_yaml
 from ..pipeline.local import LOCAL_STRATEGIES
 from ..pipeline.stack import NAV_MODES
 from ..types import Subgoal, SubgoalKind
-from .geometry import box_vertices, wall_vertices
+from .geometry import EdgeGroups, Shapes, box_vertices, wall_vertices
+from .maps import OccupancyMap, load_map
+from .sdf import read_sdf_world
 from .teleop import DEFAULT_LOOKAHEAD_M, TeleopSpec
+from .worldstate import WorldSnapshots, check_endpoints
 
 __all__ = [
     "DEFAULT_WALL_THICKNESS_M",
+    "MAP_ELEMENT_ID",
     "MAX_ELEMENTS",
     "MAX_EVENTS",
     "MAX_ID_CHARS",
@@ -133,6 +148,9 @@ MAX_ID_CHARS = 100
 MIN_TRACK_SEGMENT_M = 1e-3
 DEFAULT_YIELD_M = 0.3
 _KINDS = ("walls", "boxes", "circles", "polygons")
+_FILES = ("map", "sdf")
+_EXPECT = ("reachable", "unreachable")
+MAP_ELEMENT_ID = "map"
 _PRESETS = ("wheelchair", "xr4000")
 _NAME = re.compile(rf"[A-Za-z0-9][A-Za-z0-9_.-]{{0,{MAX_ID_CHARS - 1}}}")
 _Bounds = tuple[float, float]
@@ -168,17 +186,18 @@ class Element:
 
     Attributes:
         id: the scenario's name for it (reported on contact).
-        kind: "wall", "box", "circle" or "polygon".
-        vertices: outline ``(K, 2)`` (closed position for a door leaf); None for a circle.
+        kind: "wall", "box", "circle", "polygon" or "map".
+        vertices: outline ``(K, 2)`` (closed position for a door leaf); None for a circle and a map.
         circle: ``(cx, cy, r)`` for a circle.
         segment: ``(x1, y1, x2, y2, thickness)`` for a wall (a door leaf is drawn from it).
         appear_s, remove_s: present from ``appear_s`` (None: from the start) until ``remove_s`` (None: ever).
         door: leaf motions in time order (empty: a fixed element).
         swing_rad: 0 for a sliding leaf, else the open angle of a swinging one (about (x1, y1)).
+        grid: a map's occupancy grid, and ``groups`` its occupied cells' boundary.
     """
 
     id: str
-    kind: Literal["wall", "box", "circle", "polygon"]
+    kind: Literal["wall", "box", "circle", "polygon", "map"]
     vertices: F64 | None
     circle: tuple[float, float, float] | None = None
     segment: tuple[float, float, float, float, float] | None = None
@@ -186,6 +205,8 @@ class Element:
     remove_s: float | None = None
     door: tuple[DoorAction, ...] = ()
     swing_rad: float = 0.0
+    grid: OccupancyMap | None = None
+    groups: EdgeGroups | None = None
 
     def present(self, t_s: float) -> bool:
         """Whether the element exists at ``t_s``."""
@@ -225,9 +246,12 @@ class Element:
                 return rate * reach
         return 0.0
 
-    def outline_at(self, t_s: float, door_t_s: float | None = None) -> F64 | None:
-        """The polygon at ``t_s`` (None when absent, a circle, or a fully open sliding leaf); a door leaf
-        is drawn as it is at ``door_t_s`` (default ``t_s``; later when the person moving it waited)."""
+    def outline_at(self, t_s: float, door_t_s: float | None = None) -> F64 | EdgeGroups | None:
+        """The polygon at ``t_s`` (a map's edge groups; None when absent, a circle, or a fully open sliding
+        leaf); a door leaf is drawn as it is at ``door_t_s`` (default ``t_s``; later when the person moving
+        it waited)."""
+        if self.groups is not None and self.present(t_s):
+            return self.groups
         if self.vertices is None or not self.present(t_s):
             return None
         if not self.door or self.segment is None:
@@ -291,10 +315,18 @@ class ScenarioSpec:
     local: str | None = None
     subgoals: tuple[Subgoal, ...] = ()
     teleop: TeleopSpec | None = None
+    expect: str = "reachable"
+    world_warnings: tuple[str, ...] = ()
 
     def element_ids(self) -> list[str]:
         """Names of the elements then of the movers, in index order (a contact names one of them)."""
         return [e.id for e in self.elements] + [m.id for m in self.movers]
+
+    def check_endpoints(self, world: WorldSnapshots | Shapes, local: F64 | None, radius_m: float,
+                        contact_m: float) -> None:
+        """The start and goal checks of a run against ``world`` at t = 0
+        (:func:`.worldstate.check_endpoints`)."""
+        check_endpoints(self, world, local, radius_m, contact_m)
 
 
 # --------------------------------------------------------------------------------------------- parsing
@@ -440,11 +472,53 @@ def _movers(raw: Any, err: _Err) -> list[Mover]:
     return out
 
 
-def parse_scenario(doc: Any, source: str) -> ScenarioSpec:
-    """Validate a loaded YAML document; ``source`` names it in errors."""
+def _file_entry(raw: Any, key: str, err: _Err, base: Path, allowed: tuple[str, ...]
+                ) -> tuple[Path, dict[str, Any]]:
+    """A world file key: ``name`` or ``{file: name, ...options}``; the path relative to ``base``."""
+    opts = _table(raw, key, err, allowed, ("file",)) if isinstance(raw, dict) else {"file": raw}
+    name = opts["file"]
+    if not isinstance(name, str) or not name or "\0" in name or len(name) > 4096:
+        raise err(f"{key}.file" if isinstance(raw, dict) else key, f"expected a file name, got {brief(name)}")
+    return base / name, opts
+
+
+def _world_files(world: dict[str, Any], err: _Err, base: Path) -> tuple[list[Element], list[str]]:
+    """The elements of the world's ``map`` and ``sdf`` files, and their warnings (one line per file)."""
+    out: list[Element] = []
+    notes: list[str] = []
+    if "map" in world:
+        path, opts = _file_entry(world["map"], "world.map", err, base, ("file", "unknown", "occupied_thresh"))
+        unknown = _choice(opts.get("unknown", "occupied"), "world.map.unknown", err, ("occupied", "free"))
+        thresh = (_num(opts["occupied_thresh"], "world.map.occupied_thresh", err, (0.0, 1.0))
+                  if "occupied_thresh" in opts else None)
+        try:
+            grid = load_map(path, unknown="free" if unknown == "free" else "occupied", occupied_thresh=thresh)
+        except ConfigError as e:
+            raise err("world.map", str(e)) from None
+        out.append(Element(MAP_ELEMENT_ID, "map", None, grid=grid, groups=grid.edges()))
+        notes += grid.warnings
+    if "sdf" in world:
+        path, _ = _file_entry(world["sdf"], "world.sdf", err, base, ("file",))
+        try:
+            sdf = read_sdf_world(path)
+        except ConfigError as e:
+            raise err("world.sdf", str(e)) from None
+        for sh in sdf.shapes:
+            out.append(Element(sh.id, "polygon", sh.vertices) if sh.circle is None
+                       else Element(sh.id, "circle", None, circle=sh.circle))
+        note = sdf.warning(str(path))
+        if note is not None:
+            notes.append(note)
+    return out, notes
+
+
+def parse_scenario(doc: Any, source: str, base: Path | None = None) -> ScenarioSpec:
+    """Validate a loaded YAML document; ``source`` names it in errors, ``base`` is the folder world files
+    are named from (default: ``source``'s folder)."""
     err = _Err(source)
+    base = Path(source).parent if base is None else Path(base)
     top = ("name", "description", "preset", "start", "goal", "time_limit", "world", "events", "movers",
-           "mode", "local", "subgoals", "teleop")
+           "mode", "local", "subgoals", "teleop", "expect")
     d = _table(doc, "", err, top, ("name", "start", "time_limit", "world"))
     name = d["name"]
     if not isinstance(name, str) or not _NAME.fullmatch(name):
@@ -465,7 +539,13 @@ def parse_scenario(doc: Any, source: str) -> ScenarioSpec:
     else:
         raise err("goal", "missing (only mode follow and a teleop track imply one)")
     time_limit = _num(d["time_limit"], "time_limit", err, _TIME_LIMIT)
-    elements = _elements(d["world"], "world", err, None, MAX_ELEMENTS)
+    expect = _choice(d.get("expect", "reachable"), "expect", err, _EXPECT)
+    world = _table(d["world"], "world", err, _KINDS + _FILES)
+    files, world_warnings = _world_files(world, err, base)
+    if len(files) > MAX_ELEMENTS:
+        raise err("world", f"more than the {MAX_ELEMENTS:,} elements a scenario may have")
+    elements = files + _elements({k: v for k, v in world.items() if k not in _FILES}, "world", err, None,
+                                 MAX_ELEMENTS - len(files))
     by_id: dict[str, Element] = {}
     actions: dict[str, list[tuple[str, DoorAction, float | None]]] = {}
     removes: dict[str, float] = {}
@@ -475,8 +555,9 @@ def parse_scenario(doc: Any, source: str) -> ScenarioSpec:
             raise err(key, f"duplicate id {brief(e.id)}")
         by_id[e.id] = e
 
-    for e in elements:
-        register(e, f"world.{e.kind}s.{e.id}" if e.kind != "box" else f"world.boxes.{e.id}")
+    for i, e in enumerate(elements):
+        register(e, ("world.map" if e.kind == "map" else "world.sdf") if i < len(files)
+                 else f"world.{e.kind}s.{e.id}" if e.kind != "box" else f"world.boxes.{e.id}")
     for i, ev in enumerate(_list(d.get("events") or [], "events", err, "events", 0, MAX_EVENTS)):
         key = f"events[{i}]"
         _table(ev, key, err, ("at", "add", "remove", "close", "open", "over", "swing"), ("at",))
@@ -515,10 +596,10 @@ def parse_scenario(doc: Any, source: str) -> ScenarioSpec:
         swings = {s for _, _, s in acts if s is not None}
         if len(swings) > 1:
             raise err(f"{acts[0][0]}.swing", f"door {brief(e.id)} has different swing angles")
-        final.append(Element(e.id, e.kind, e.vertices, e.circle, e.segment, e.appear_s, removes.get(e.id),
-                             tuple(a for _, a, _ in acts), swings.pop() if swings else 0.0))
+        final.append(replace(e, remove_s=removes.get(e.id), door=tuple(a for _, a, _ in acts),
+                             swing_rad=swings.pop() if swings else 0.0))
     return ScenarioSpec(name, description.strip(), preset, (sx, sy, st), (gx, gy), time_limit, tuple(final),
-                        tuple(movers), source, mode, local, subgoals, teleop)
+                        tuple(movers), source, mode, local, subgoals, teleop, expect, tuple(world_warnings))
 
 
 def _navigation(d: dict[str, Any], err: _Err) -> tuple[str | None, str | None, tuple[Subgoal, ...],
@@ -613,7 +694,7 @@ def load_scenario(path: Path) -> ScenarioSpec:
     """Read and validate a scenario file: a regular file of at most MAX_SCENARIO_BYTES, its YAML bounded
     (:func:`~gndreplay.io.userfile.load_yaml`)."""
     path = Path(path)
-    return parse_scenario(load_yaml(path, "scenario file", MAX_SCENARIO_BYTES), str(path))
+    return parse_scenario(load_yaml(path, "scenario file", MAX_SCENARIO_BYTES), str(path), path.parent)
 
 
 def _shipped(name: str) -> ScenarioSpec:
