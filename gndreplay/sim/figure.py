@@ -21,7 +21,8 @@ if TYPE_CHECKING:
 
 
 def _draw_map(ax: Any, e: Element, style: dict[str, Any]) -> None:
-    """A map element: its occupied cells as an image (free cells transparent) and their boundary."""
+    """A map element: its obstacle cells as an image (the unknown ones lighter, free cells transparent)
+    and their boundary."""
     from matplotlib.collections import LineCollection
     from matplotlib.colors import ListedColormap
     from matplotlib.transforms import Affine2D
@@ -31,9 +32,13 @@ def _draw_map(ax: Any, e: Element, style: dict[str, Any]) -> None:
         return
     ox, oy, yaw = grid.origin
     h, w = grid.occupied.shape
-    place = Affine2D().scale(grid.resolution_m).rotate(yaw).translate(ox, oy) + ax.transData
-    ax.imshow(grid.occupied.astype(np.uint8), origin="lower", extent=(0, w, 0, h), interpolation="nearest",
-              cmap=ListedColormap([(1.0, 1.0, 1.0, 0.0), style["facecolor"]]), vmin=0, vmax=1,
+    res = grid.resolution_m
+    place = Affine2D().rotate_around(ox, oy, yaw) + ax.transData
+    shade = grid.occupied.astype(np.uint8) * 2
+    if grid.unknown is not None:
+        shade[grid.occupied & grid.unknown] = 1
+    ax.imshow(shade, origin="lower", extent=(ox, ox + w * res, oy, oy + h * res), interpolation="nearest",
+              cmap=ListedColormap([(1.0, 1.0, 1.0, 0.0), "#e4e4e4", style["facecolor"]]), vmin=0, vmax=2,
               transform=place, zorder=0.5)
     segs = list(groups.edges.reshape(-1, 2, 2))
     ax.add_collection(LineCollection(segs, colors=style["edgecolor"], linewidths=0.5,

@@ -78,6 +78,7 @@ class OccupancyMap:
         origin: ``(x, y, yaw)`` of the outer corner of cell (0, 0) [m, m, rad].
         frame: a one-cell obstacle frame closes the map (the ground beyond it is unknown = occupied).
         source: the map file (for errors and reports).
+        unknown: ``(H, W)`` the cells the map does not know (drawn apart from the obstacles).
         warnings: what was read but ignored (one line each).
     """
 
@@ -86,6 +87,7 @@ class OccupancyMap:
     origin: tuple[float, float, float]
     frame: bool
     source: str
+    unknown: BoolGrid | None = None
     warnings: tuple[str, ...] = ()
 
     def edges(self) -> EdgeGroups:
@@ -250,7 +252,7 @@ def read_ros_map(path: Path, *, unknown: Unknown = "occupied") -> OccupancyMap:
     occupied = (value >= 100) | ((value == -1) & (unknown == "occupied"))
     notes = (f"{path}: ignored keys {', '.join(sorted(ignored))}",) if ignored else ()
     return OccupancyMap(np.ascontiguousarray(occupied[::-1]), res, (ox, oy, yaw), unknown == "occupied",
-                        str(path), notes)
+                        str(path), np.ascontiguousarray(value[::-1] == -1), notes)
 
 
 def _decode_image(path: Path, data: bytes) -> NDArray[np.uint8]:
@@ -269,9 +271,8 @@ def _decode_image(path: Path, data: bytes) -> NDArray[np.uint8]:
             if w == 0 or h == 0:
                 raise ConfigError(f"{path}: an empty map image ({w} x {h} pixels)")
             im.load()
-        except Image.DecompressionBombError as e:
-            raise ConfigError(f"{path}: a map image larger than {MAX_MAP_PIXELS:,} pixels "
-                              f"({one_line(e, 120)})") from None
+        except Image.DecompressionBombError:
+            raise ConfigError(f"{path}: a map image of more than {MAX_MAP_PIXELS:,} pixels") from None
         except (OSError, SyntaxError, ValueError, EOFError, MemoryError) as e:
             raise ConfigError(f"{path}: not a readable map image: {one_line(e, 200)}") from None
     if im.mode == "1":
@@ -373,7 +374,7 @@ def read_beesoft_map(path: Path, *, unknown: Unknown = "occupied", occupied_thre
     unk = grid < 0.0
     occupied = (~unk & (1.0 - grid > thresh)) | (unk & (unknown == "occupied"))
     return OccupancyMap(np.ascontiguousarray(occupied[::-1]), res, (0.0, 0.0, 0.0), unknown == "occupied",
-                        str(path))
+                        str(path), np.ascontiguousarray(unk[::-1]))
 
 
 def _gunzip(path: Path, data: bytes) -> bytes:

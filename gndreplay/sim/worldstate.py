@@ -4,7 +4,8 @@ at its start, and the goal must not lie inside an obstacle that stays, unless th
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Protocol
+from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -12,11 +13,37 @@ from numpy.typing import NDArray
 from ..errors import ConfigError
 from .geometry import Shapes, footprint_clearance
 
-if TYPE_CHECKING:
-    from .scenario_file import ScenarioSpec
-
-__all__ = ["WorldSnapshots", "check_endpoints"]
+__all__ = ["Task", "WorldSnapshots", "check_endpoints"]
 F64 = NDArray[np.float64]
+
+
+class _Element(Protocol):
+    @property
+    def remove_s(self) -> float | None: ...
+
+    @property
+    def door(self) -> tuple[object, ...]: ...
+
+
+class Task(Protocol):
+    """What the checks read of a scenario (``scenario_file.ScenarioSpec``)."""
+
+    @property
+    def source(self) -> str: ...
+
+    @property
+    def start(self) -> tuple[float, float, float]: ...
+
+    @property
+    def goal(self) -> tuple[float, float]: ...
+
+    @property
+    def expect(self) -> str: ...
+
+    @property
+    def elements(self) -> Sequence[_Element]: ...
+
+    def element_ids(self) -> list[str]: ...
 
 
 class WorldSnapshots(Protocol):
@@ -27,7 +54,7 @@ class WorldSnapshots(Protocol):
     def shapes(self, t_s: float, mover_xy: F64) -> Shapes: ...
 
 
-def check_endpoints(spec: ScenarioSpec, world: WorldSnapshots | Shapes, local: F64 | None, radius_m: float,
+def check_endpoints(spec: Task, world: WorldSnapshots | Shapes, local: F64 | None, radius_m: float,
                     contact_m: float) -> None:
     """Refuse a scenario whose start or goal is in an obstacle of ``world`` at t = 0 (movers included).
 
