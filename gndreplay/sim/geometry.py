@@ -26,7 +26,7 @@ from .. import detmath as dm
 __all__ = [
     "CULL_MIN_EDGES",
     "NEAR_CELL_M",
-    "NEAR_MARGIN_M",
+    "NEAR_MARGINS_M",
     "EdgeGroups",
     "RayGrid",
     "Shapes",
@@ -44,10 +44,11 @@ F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 _EPS = 1e-12
 #: Clearance culling (:func:`footprint_clearance`): worlds of at least CULL_MIN_EDGES polygon edges measure
-#: first the edges within NEAR_MARGIN_M of the robot's NEAR_CELL_M square cell (its reach added).
+#: first the edges within each of NEAR_MARGINS_M in turn of the robot's NEAR_CELL_M square cell (its reach
+#: added), then every edge.
 CULL_MIN_EDGES = 512
 NEAR_CELL_M = 1.0
-NEAR_MARGIN_M = 1.0
+NEAR_MARGINS_M = (1.0, 4.0)
 _NEAR_SLACK_M = 1e-6
 _NEAR_CACHE = 4096
 #: Ray casting over a bucket grid: an edge is filed in every cell its bounding box grown by _RAY_PAD_M
@@ -195,12 +196,12 @@ class Shapes:
             hit = self.index["rays"] = ray_grid(self.edges)
         return hit
 
-    def near_edges(self, x: float, y: float, reach_m: float) -> tuple[I64, F64]:
-        """Indices (ascending) of the edges that may lie within ``NEAR_MARGIN_M`` of a body of radius
+    def near_edges(self, x: float, y: float, reach_m: float, margin_m: float) -> tuple[I64, F64]:
+        """Indices (ascending) of the edges that may lie within ``margin_m`` of a body of radius
         ``reach_m`` about any point of the ``NEAR_CELL_M`` cell holding (x, y), and each polygon's
         (ymin, ymax); cached per cell (see :func:`footprint_clearance`)."""
         ix, iy = math.floor(x / NEAR_CELL_M), math.floor(y / NEAR_CELL_M)
-        key = (ix, iy, reach_m)
+        key = (ix, iy, reach_m, margin_m)
         hit = self.index.get(key)
         if hit is not None:
             return hit
@@ -220,7 +221,7 @@ class Shapes:
         cx0, cy0 = ix * NEAR_CELL_M, iy * NEAR_CELL_M
         dx = np.maximum(np.maximum(lo_x - (cx0 + NEAR_CELL_M), cx0 - hi_x), 0.0)
         dy = np.maximum(np.maximum(lo_y - (cy0 + NEAR_CELL_M), cy0 - hi_y), 0.0)
-        near = np.flatnonzero(np.hypot(dx, dy) <= reach_m + NEAR_MARGIN_M + _NEAR_SLACK_M).astype(np.int64)
+        near = np.flatnonzero(np.hypot(dx, dy) <= reach_m + margin_m + _NEAR_SLACK_M).astype(np.int64)
         if len(self.index) > _NEAR_CACHE:
             keep = {k: self.index[k] for k in ("boxes", "gy", "rays") if k in self.index}
             self.index.clear()
@@ -613,9 +614,10 @@ def footprint_clearance(pose: ArrayLike, local_vertices: F64 | None, radius_m: f
     robot's origin.
 
     ``cull`` (default: worlds of at least ``CULL_MIN_EDGES`` edges) first measures only the edges near the
-    robot's cell (:meth:`Shapes.near_edges`): an edge left out is farther than ``NEAR_MARGIN_M`` from the
-    footprint, so an answer within that margin is the whole world's, bit for bit (the same first shape at
-    the same distance); a larger one is measured again over every edge.
+    robot's cell (:meth:`Shapes.near_edges`), within each of ``NEAR_MARGINS_M`` in turn: an edge left out is
+    farther than the margin from the footprint, so an answer within the margin is the whole world's, bit for
+    bit (the same first shape at the same distance); a larger one is measured again with the next margin,
+    and at last over every edge.
     """
     p = np.asarray(pose, dtype=np.float64)
     x, y, th = float(p[0]), float(p[1]), float(p[2])
@@ -623,11 +625,12 @@ def footprint_clearance(pose: ArrayLike, local_vertices: F64 | None, radius_m: f
     out = np.empty(7)
     if cull if cull is not None else shapes.edges.shape[0] >= CULL_MIN_EDGES:
         reach = float(radius_m) if local_vertices is None else float(np.max(np.hypot(*local.T)))
-        near, gy = shapes.near_edges(x, y, reach)
-        _robot_kernel(x, y, th, local, float(radius_m), shapes.edges, shapes.poly_off, shapes.circles, near,
-                      gy, True, out)
-        if out[0] <= NEAR_MARGIN_M:
-            return _clearance(out, shapes)
+        for margin in NEAR_MARGINS_M:
+            near, gy = shapes.near_edges(x, y, reach, margin)
+            _robot_kernel(x, y, th, local, float(radius_m), shapes.edges, shapes.poly_off, shapes.circles,
+                          near, gy, True, out)
+            if out[0] <= margin:
+                return _clearance(out, shapes)
     _robot_kernel(x, y, th, local, float(radius_m), shapes.edges, shapes.poly_off, shapes.circles, _NO_NEAR,
                   _NO_GY, False, out)
     return _clearance(out, shapes)
