@@ -432,7 +432,7 @@ def test_cli_batch_runs_scenarios_beside_a_log_and_a_bad_scenario_file(tmp_path:
     errors = [line for line in result.stderr.splitlines() if line.startswith("gndreplay: error:")]
     assert errors == [
         f"gndreplay: error: bad: {bad.absolute()}: time_limt: unknown key (known: name, description, preset, "
-        "start, goal, time_limit, world, events, movers, mode, local, subgoals, teleop)",
+        "start, goal, time_limit, world, events, movers, mode, local, subgoals, teleop, expect)",
         f"gndreplay: error: missing: {(tmp_path / 'missing.yaml').absolute()}: scenario file not found",
     ]
     rows = {r["name"]: r for r in csv.DictReader((out / "summary.csv").open())}
