@@ -595,6 +595,15 @@ PerfectOdometryOpt = Annotated[
         rich_help_panel=_SIM_PANEL,
     ),
 ]
+IdealDynamicsOpt = Annotated[
+    bool,
+    typer.Option(
+        "--ideal-dynamics",
+        help="The exact motion model: the velocity follows the command at the acceleration limits, no lag "
+        "and no slip.",
+        rich_help_panel=_SIM_PANEL,
+    ),
+]
 TimeLimitOpt = Annotated[
     float | None,
     typer.Option(
@@ -1337,6 +1346,7 @@ def simulate(
     ] = None,
     latency: LatencyOpt = "0",
     perfect_odometry: PerfectOdometryOpt = False,
+    ideal_dynamics: IdealDynamicsOpt = False,
     time_limit: TimeLimitOpt = None,
     figures: FiguresOpt = True,
     snapshots: SnapshotsOpt = None,
@@ -1390,6 +1400,7 @@ def simulate(
                                         most=snapshot_max),
             mcap=mcap,
             mcap_grid=_grid_every(mcap_grid),
+            ideal_dynamics=ideal_dynamics,
         )
     _said_moved(out_dir, result.out_dir, silent=json_out)
     _warn_matcher(result.out_dir)
@@ -1412,13 +1423,16 @@ def _warn_matcher(run_dir: Path) -> None:
 
 
 def _print_simulation(result: SimOutcome, title: str) -> None:
-    """One line: how the scenario run ended, its path and clearance, and where it was written."""
+    """One line: how the scenario run ended, its path (and the optimal one), clearance, challenge metric, and
+    where it was written."""
     c = result.collision
     what = (f"collision with {c['object']} at {c['t_s']:.2f} s" if c else
             f"{result.outcome} at {result.end_time_s:.1f} s")
     typer.echo(
-        f"{title}: {what}; path {result.path_length_m:.1f} m, "
-        f"min clearance {_num(result.min_clearance_m, '{:.3f}')} m -> {result.out_dir}"
+        f"{title}: {what}; path {result.path_length_m:.1f} m (optimal "
+        f"{_num(result.optimal_path_m, '{:.1f}')} m), min clearance "
+        f"{_num(result.min_clearance_m, '{:.3f}')} m, challenge metric "
+        f"{_num(result.challenge_metric, '{:.3f}')} -> {result.out_dir}"
     )
 
 
@@ -1523,6 +1537,7 @@ def batch(
     every: EveryOpt = 1,
     latency: LatencyOpt = "0",
     perfect_odometry: PerfectOdometryOpt = False,
+    ideal_dynamics: IdealDynamicsOpt = False,
     time_limit: TimeLimitOpt = None,
     figures: Annotated[
         bool | None,
@@ -1607,8 +1622,9 @@ def batch(
                baseline=against, quiet=quiet)
     part = None if shard is None else parse_shard(shard, os.environ)
     sim = SimOptions(latency_s=parse_latency(latency), perfect_odometry=perfect_odometry,
-                     time_limit_s=time_limit, figures=figures is not False, config=setup.path,
-                     preset=setup.preset, overrides=setup.overrides, subgoals=setup.subgoals)
+                     ideal_dynamics=ideal_dynamics, time_limit_s=time_limit, figures=figures is not False,
+                     config=setup.path, preset=setup.preset, overrides=setup.overrides,
+                     subgoals=setup.subgoals)
     settings = _sweep_settings(setup, sim)
     job_list = expand_inputs(
         inputs or [], scenarios=scenarios or [], seeds=None if seeds is None else parse_seeds(seeds)
