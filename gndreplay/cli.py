@@ -599,8 +599,7 @@ IdealDynamicsOpt = Annotated[
     bool,
     typer.Option(
         "--ideal-dynamics",
-        help="The exact motion model: the velocity follows the command at the acceleration limits, no lag "
-        "and no slip.",
+        help="The exact motion model: no drive lag, no slip.",
         rich_help_panel=_SIM_PANEL,
     ),
 ]
@@ -1569,7 +1568,7 @@ def batch(
         bool,
         typer.Option(
             "--update-baseline",
-            help="Write this batch as the new --baseline (changes reported, not failed).",
+            help="Make this batch the new --baseline: changes are not failures.",
             rich_help_panel=_BASELINE_PANEL,
         ),
     ] = False,
@@ -1642,6 +1641,52 @@ def batch(
                            figures=figures is True, shard=part,
                            sweep=settings if settings[0].point.name else (), baseline=against)
     _batch_done(out, result, quiet=quiet)
+
+
+scenario_app = typer.Typer(
+    cls=_Commands,
+    no_args_is_help=True,
+    rich_markup_mode="rich",
+    help="Make scenario files.",
+)
+app.add_typer(scenario_app, name="scenario")
+
+
+@scenario_app.command(cls=_Command)
+@cli_errors
+@config_options
+def generate(
+    out: Annotated[
+        Path,
+        typer.Argument(help="Folder to write the scenario files to (field_000.yaml, ...).",
+                       show_default=False),
+    ],
+    count: Annotated[
+        int,
+        typer.Option("--count", "-n", callback=_bounded("--count", 1, 10_000), help="Fields to write."),
+    ] = 10,
+    seed: Annotated[
+        int,
+        typer.Option("--seed", callback=_seed,
+                     help="Seed of the fields (the same seed gives the same files)."),
+    ] = 0,
+    overwrite: OverwriteOpt = False,
+    *,
+    setup: Setup,
+) -> None:
+    """Write random obstacle fields (a 4.5 m corridor of clustered cylinders, the goal 10 m ahead) as
+    scenario files, each passable by the robot's inscribed circle.
+
+    The robot's footprint comes from the configuration (--preset, --config, --set); the files name its
+    preset. Run them with `gndreplay batch OUT/*.yaml` or `gndreplay simulate OUT/field_000.yaml`.
+    """
+    from .sim.fields import generate_fields
+
+    cfg = setup.config()
+    folder, files = generate_fields(out, count=count, seed=seed, robot=cfg.robot, preset_name=cfg.preset,
+                                    overwrite=overwrite)
+    _said_moved(out, folder, "set of fields")
+    typer.echo(f"{len(files)} fields -> {folder}")
 
 
 def _merge(ctx: typer.Context, folders: list[Path], *, out: Path, junit: Path | None, thresholds: Path | None,

@@ -16,7 +16,7 @@ obstacle cell's centre (within half a cell diagonal of the obstacle's outline). 
 
 **Metric.** With OT = optimal length / ``CHALLENGE_SPEED_MPS`` (the challenge's 2 m/s) and T the run's time
 to the goal: ``success * OT / clip(T, 2 OT, 8 OT)``: 0 for a failure, at most 0.5 (T at or under 2 OT),
-0.0625 at or beyond 8 OT. No optimal path (the goal unreachable on the grid): no metric.
+0.125 at or beyond 8 OT. No optimal path (the goal unreachable on the grid): no metric.
 """
 
 from __future__ import annotations
