@@ -8,7 +8,8 @@ other than the desired teleop / follow one) and the share of ticks local navigat
 split in two: the simulator (world, robot, laser, odometry) per step and the robot side (matcher + stack)
 per tick, means over all ticks. Every kernel is compiled and every stage warmed by one short run per preset
 before anything is timed; runs are sequential in this process (one core). Latency is the fixed default
-(0 s), so the outcomes are reproducible; only the ms columns vary with the machine.
+(0 s), so the outcomes are reproducible; only the ms columns vary with the machine. The simulated drive's
+lag and slip are on (``gndreplay.sim.dynamics``); ``--ideal-dynamics`` runs the exact motion model.
 
 The planner only serves GND: a scenario with another navigation mode (``mode: teleop | follow | local``)
 runs once per preset with the preset's own configuration, its planner column "-". ``--no-selector`` runs
@@ -16,7 +17,7 @@ with the mode selector disabled (the desired mode's command goes out: the driver
 ``--compare-selector`` runs every row both ways, side by side (column "selector": on / off).
 
     .venv/bin/python benchmarks/scenarios.py [--seeds 20] [--scenarios a,b] [--presets wheelchair,xr4000]
-        [--jobs 1] [--out DIR] [--jsonl FILE] [--no-selector | --compare-selector]
+        [--jobs 1] [--out DIR] [--jsonl FILE] [--no-selector | --compare-selector] [--ideal-dynamics]
     .venv/bin/python benchmarks/scenarios.py --table-from FILE      # the table of the runs so far
     .venv/bin/python benchmarks/scenarios.py --scenarios teleop_into_wall --seeds 5 --compare-selector
 """
@@ -40,8 +41,8 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 from gndreplay.config import CliOverrides, Config, configure
 from gndreplay.sim import resolve_scenario, shipped_scenarios, simulate_scenario
 
-# scenario, preset, planner ("-": not GND), selector on, seed, output folder
-Task = tuple[str, str, str, bool, int, str]
+# scenario, preset, planner ("-": not GND), selector on, seed, output folder, ideal dynamics
+Task = tuple[str, str, str, bool, int, str, bool]
 NO_PLANNER = "-"
 
 
@@ -58,12 +59,12 @@ def planners_of(name: str, planners: list[str]) -> list[str]:
 
 def one(args: Task) -> dict[str, Any]:
     """One run (in this process or a worker): the outcome and the timings."""
-    name, preset_name, planner, selector, seed, out = args
+    name, preset_name, planner, selector, seed, out, ideal = args
     t0 = time.perf_counter()
     tag = "" if selector else "-nosel"
     o = simulate_scenario(name, out_dir=Path(out) / f"{name}-{preset_name}-{planner}{tag}-{seed}",
                           cfg=config(preset_name, planner, selector), seed=seed, figures=False,
-                          overwrite=True)
+                          overwrite=True, ideal_dynamics=ideal)
     c = o.collision or {}
     miss = o.goal_missed or {}
     return {
@@ -104,6 +105,7 @@ def main() -> None:
                      help="mode selector off: the desired mode's command goes out (driver / follower alone)")
     sel.add_argument("--compare-selector", action="store_true",
                      help="run every row with the mode selector on and off, side by side")
+    ap.add_argument("--ideal-dynamics", action="store_true", help="the exact motion model (no lag, no slip)")
     a = ap.parse_args()
     selectors = [True, False] if a.compare_selector else [not a.no_selector]
     names = [s for s in a.scenarios.split(",") if s] or list(shipped_scenarios())
@@ -112,14 +114,14 @@ def main() -> None:
     out = a.out or tempfile.mkdtemp(prefix="gndreplay-bench-scenarios-")
     if a.table_from:
         rows = [json.loads(line) for line in Path(a.table_from).read_text().splitlines() if line.strip()]
-        tasks = [(r["scenario"], r["preset"], r.get("planner", "nf1"), r.get("selector", True), r["seed"], "")
-                 for r in rows]
+        tasks = [(r["scenario"], r["preset"], r.get("planner", "nf1"), r.get("selector", True), r["seed"], "",
+                  r.get("ideal_dynamics", False)) for r in rows]
         table(names, presets, [*planners, NO_PLANNER], [True, False], tasks, rows,
               f"from {a.table_from}: {len(rows)} runs")
         return
     warm(out, presets, planners, names)
     # seed-major order: stopped early, the runs so far cover every row equally
-    tasks = [(n, p, k, on, s, out) for s in range(a.seeds) for n in names for p in presets
+    tasks = [(n, p, k, on, s, out, a.ideal_dynamics) for s in range(a.seeds) for n in names for p in presets
              for k in planners_of(n, planners) for on in selectors]
     t0 = time.perf_counter()
     log = open(a.jsonl, "a") if a.jsonl else None  # noqa: SIM115
@@ -129,7 +131,8 @@ def main() -> None:
         """Keep a finished run, append it to --jsonl and show progress (in task order, with any --jobs)."""
         results.append(r)
         if log is not None:
-            row = {"scenario": t[0], "preset": t[1], "planner": t[2], "selector": t[3], "seed": t[4], **r}
+            row = {"scenario": t[0], "preset": t[1], "planner": t[2], "selector": t[3], "seed": t[4],
+                   "ideal_dynamics": t[6], **r}
             log.write(json.dumps(row) + "\n")
             log.flush()
         print(f"\r{len(results)}/{len(tasks)} {t[0]} {t[1]} {t[2]} {'' if t[3] else 'no selector '}"
@@ -145,7 +148,8 @@ def main() -> None:
     print(file=sys.stderr)
     wall = time.perf_counter() - t0
     table(names, presets, [*planners, NO_PLANNER], selectors, tasks, results,
-          f"{a.seeds} seeds per row, latency 0 s, {a.jobs} process(es), total wall {wall:.0f} s")
+          f"{a.seeds} seeds per row, latency 0 s, {'ideal dynamics' if a.ideal_dynamics else 'dynamics on'}, "
+          f"{a.jobs} process(es), total wall {wall:.0f} s")
 
 
 def table(names: list[str], presets: list[str], planners: list[str], selectors: list[bool],
@@ -159,7 +163,7 @@ def table(names: list[str], presets: list[str], planners: list[str], selectors: 
           "| traps | takeovers | local ticks | sim ms/step | stack ms/tick |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for n, p, k, on in ((n, p, k, on) for n in names for p in presets for k in planners for on in selectors):
-        rows = [r for (tn, tp, tk, ts, _, _), r in zip(tasks, results, strict=True)
+        rows = [r for (tn, tp, tk, ts, *_), r in zip(tasks, results, strict=True)
                 if (tn, tp, tk, ts) == (n, p, k, on)]
         if not rows:
             continue

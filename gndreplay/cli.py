@@ -595,6 +595,14 @@ PerfectOdometryOpt = Annotated[
         rich_help_panel=_SIM_PANEL,
     ),
 ]
+IdealDynamicsOpt = Annotated[
+    bool,
+    typer.Option(
+        "--ideal-dynamics",
+        help="The exact motion model: no drive lag, no slip.",
+        rich_help_panel=_SIM_PANEL,
+    ),
+]
 TimeLimitOpt = Annotated[
     float | None,
     typer.Option(
@@ -1337,6 +1345,7 @@ def simulate(
     ] = None,
     latency: LatencyOpt = "0",
     perfect_odometry: PerfectOdometryOpt = False,
+    ideal_dynamics: IdealDynamicsOpt = False,
     time_limit: TimeLimitOpt = None,
     figures: FiguresOpt = True,
     snapshots: SnapshotsOpt = None,
@@ -1390,6 +1399,7 @@ def simulate(
                                         most=snapshot_max),
             mcap=mcap,
             mcap_grid=_grid_every(mcap_grid),
+            ideal_dynamics=ideal_dynamics,
         )
     _said_moved(out_dir, result.out_dir, silent=json_out)
     _warn_matcher(result.out_dir)
@@ -1412,13 +1422,16 @@ def _warn_matcher(run_dir: Path) -> None:
 
 
 def _print_simulation(result: SimOutcome, title: str) -> None:
-    """One line: how the scenario run ended, its path and clearance, and where it was written."""
+    """One line: how the scenario run ended, its path (and the optimal one), clearance, challenge metric, and
+    where it was written."""
     c = result.collision
     what = (f"collision with {c['object']} at {c['t_s']:.2f} s" if c else
             f"{result.outcome} at {result.end_time_s:.1f} s")
     typer.echo(
-        f"{title}: {what}; path {result.path_length_m:.1f} m, "
-        f"min clearance {_num(result.min_clearance_m, '{:.3f}')} m -> {result.out_dir}"
+        f"{title}: {what}; path {result.path_length_m:.1f} m (optimal "
+        f"{_num(result.optimal_path_m, '{:.1f}')} m), min clearance "
+        f"{_num(result.min_clearance_m, '{:.3f}')} m, challenge metric "
+        f"{_num(result.challenge_metric, '{:.3f}')} -> {result.out_dir}"
     )
 
 
@@ -1523,6 +1536,7 @@ def batch(
     every: EveryOpt = 1,
     latency: LatencyOpt = "0",
     perfect_odometry: PerfectOdometryOpt = False,
+    ideal_dynamics: IdealDynamicsOpt = False,
     time_limit: TimeLimitOpt = None,
     figures: Annotated[
         bool | None,
@@ -1554,7 +1568,7 @@ def batch(
         bool,
         typer.Option(
             "--update-baseline",
-            help="Write this batch as the new --baseline (changes reported, not failed).",
+            help="Make this batch the new --baseline: changes are not failures.",
             rich_help_panel=_BASELINE_PANEL,
         ),
     ] = False,
@@ -1607,8 +1621,9 @@ def batch(
                baseline=against, quiet=quiet)
     part = None if shard is None else parse_shard(shard, os.environ)
     sim = SimOptions(latency_s=parse_latency(latency), perfect_odometry=perfect_odometry,
-                     time_limit_s=time_limit, figures=figures is not False, config=setup.path,
-                     preset=setup.preset, overrides=setup.overrides, subgoals=setup.subgoals)
+                     ideal_dynamics=ideal_dynamics, time_limit_s=time_limit, figures=figures is not False,
+                     config=setup.path, preset=setup.preset, overrides=setup.overrides,
+                     subgoals=setup.subgoals)
     settings = _sweep_settings(setup, sim)
     job_list = expand_inputs(
         inputs or [], scenarios=scenarios or [], seeds=None if seeds is None else parse_seeds(seeds)
@@ -1626,6 +1641,52 @@ def batch(
                            figures=figures is True, shard=part,
                            sweep=settings if settings[0].point.name else (), baseline=against)
     _batch_done(out, result, quiet=quiet)
+
+
+scenario_app = typer.Typer(
+    cls=_Commands,
+    no_args_is_help=True,
+    rich_markup_mode="rich",
+    help="Make scenario files.",
+)
+app.add_typer(scenario_app, name="scenario")
+
+
+@scenario_app.command(cls=_Command)
+@cli_errors
+@config_options
+def generate(
+    out: Annotated[
+        Path,
+        typer.Argument(help="Folder to write the scenario files to (field_000.yaml, ...).",
+                       show_default=False),
+    ],
+    count: Annotated[
+        int,
+        typer.Option("--count", "-n", callback=_bounded("--count", 1, 10_000), help="Fields to write."),
+    ] = 10,
+    seed: Annotated[
+        int,
+        typer.Option("--seed", callback=_seed,
+                     help="Seed of the fields (the same seed gives the same files)."),
+    ] = 0,
+    overwrite: OverwriteOpt = False,
+    *,
+    setup: Setup,
+) -> None:
+    """Write random obstacle fields (a 4.5 m corridor of clustered cylinders, the goal 10 m ahead) as
+    scenario files, each passable by the robot's inscribed circle.
+
+    The robot's footprint comes from the configuration (--preset, --config, --set); the files name its
+    preset. Run them with `gndreplay batch OUT/*.yaml` or `gndreplay simulate OUT/field_000.yaml`.
+    """
+    from .sim.fields import generate_fields
+
+    cfg = setup.config()
+    folder, files = generate_fields(out, count=count, seed=seed, robot=cfg.robot, preset_name=cfg.preset,
+                                    overwrite=overwrite)
+    _said_moved(out, folder, "set of fields")
+    typer.echo(f"{len(files)} fields -> {folder}")
 
 
 def _merge(ctx: typer.Context, folders: list[Path], *, out: Path, junit: Path | None, thresholds: Path | None,

@@ -255,6 +255,8 @@ RANGES: dict[tuple[type, str], Range] = {
     (RobotConfig, "wmax_radps"): _pos(20.0),
     (RobotConfig, "accel_mps2"): _pos(50.0),
     (RobotConfig, "alpha_radps2"): _pos(100.0),
+    (RobotConfig, "tau_v_s"): _nonneg(5.0),
+    (RobotConfig, "tau_w_s"): _nonneg(5.0),
     (RobotConfig, "laser_x_m"): Range(-10.0, 10.0),
     (RobotConfig, "laser_y_m"): Range(-10.0, 10.0),
     (RobotConfig, "laser_theta_rad"): _ANGLE,

@@ -31,6 +31,8 @@ class RobotConfig:
         vmax_mps, wmax_radps: velocity limits.
         accel_mps2, alpha_radps2: acceleration limits (linear, angular); they set the braking horizon and
             bound the simulated motion.
+        tau_v_s, tau_w_s: time constants of the drive's first-order velocity response (linear, angular)
+            [s]: the simulated base follows a command step by 63 % in tau (``gndreplay.sim.dynamics``).
         laser_x_m, laser_y_m, laser_theta_rad: laser pose in the robot frame: where the simulator mounts
             the laser, and, with ``mounting_fallback``, the mounting of a replayed log that records none.
         mounting_fallback: read a log that records no laser mounting (a CARMEN log without laser offset
@@ -55,6 +57,9 @@ class RobotConfig:
     # choice: the wheelchair paper gives no acceleration; a chair carrying a person accelerates gently
     accel_mps2: float = 0.5
     alpha_radps2: float = 1.0
+    # choice: a powered wheelchair's controller smooths the joystick; 0.3 s is a gentle, typical response
+    tau_v_s: float = 0.3
+    tau_w_s: float = 0.3
     laser_x_m: float = 0.72
     laser_y_m: float = 0.0
     laser_theta_rad: float = 0.0
@@ -71,6 +76,14 @@ class RobotConfig:
         return self.radius_m if self.shape == "circle" else self.width_m / 2.0
 
     @property
+    def inscribed_radius_m(self) -> float:
+        """Radius of the largest circle about the rotation centre inside the footprint, whatever its
+        dimensions (a rectangle's rear or front edge may be nearer than half its width)."""
+        if self.shape == "circle":
+            return self.radius_m
+        return min(self.width_m / 2.0, self.front_m, self.rear_m)
+
+    @property
     def outer_radius_m(self) -> float:
         """Radius of the smallest circle about the rotation centre that contains the footprint."""
         if self.shape == "circle":
@@ -80,10 +93,12 @@ class RobotConfig:
 
 
 WHEELCHAIR_ROBOT = RobotConfig()
-# GND paper: accelerations of up to 1.5 m/s^2 (the angular limit is a choice)
+# GND paper: accelerations of up to 1.5 m/s^2 (the angular limit is a choice; so are the time constants:
+# 0.2 s, a servo-controlled research base, stiffer than the chair)
 XR4000_ROBOT = RobotConfig(
     shape="circle", radius_m=0.3, drive="holonomic", vmax_mps=0.5, wmax_radps=1.57,
-    accel_mps2=1.5, alpha_radps2=3.0, laser_x_m=0.0, front_m=0.3, rear_m=0.3, width_m=0.6,
+    accel_mps2=1.5, alpha_radps2=3.0, tau_v_s=0.2, tau_w_s=0.2, laser_x_m=0.0, front_m=0.3, rear_m=0.3,
+    width_m=0.6,
 )
 
 

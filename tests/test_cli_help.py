@@ -51,6 +51,18 @@ def test_help_shows_every_character_of_the_source(name: str, columns: int) -> No
         assert visible(text) in shown, f"{name} --help loses part of: {text!r}"
 
 
+@pytest.mark.parametrize("columns", [250, 80])
+def test_scenario_generate_help_shows_every_character_and_the_group_lists_it(columns: int) -> None:
+    fn = cli.generate
+    helps = [getattr(p.default, "help", None) for p in get_params_from_function(fn).values()]
+    shown = visible(rendered(["scenario", "generate", "--help"], columns))
+    for text in [fn.__doc__ or "", *(h for h in helps if h)]:
+        assert visible(text) in shown, f"scenario generate --help loses part of: {text!r}"
+    group = visible(rendered(["scenario", "--help"], 250))
+    assert visible((fn.__doc__ or "").strip().split("\n\n")[0]) in group
+    assert visible("scenario") in visible(rendered(["--help"], 250))
+
+
 def test_the_brackets_the_markup_used_to_eat_are_shown() -> None:
     assert "[scanmatch.idc] / [scanmatch.kiss]" in " ".join(rendered(["scanmatch", "--help"], 250).split())
     assert "'x y theta [stop|forward|reverse]'" in rendered(["run", "--help"], 250)

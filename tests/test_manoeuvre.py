@@ -104,7 +104,8 @@ def test_nothing_to_manoeuvre_when_the_chair_already_heads_the_wanted_way_with_r
 
 def _dead_end_run(tmp_path: Path, nodes: int, time_limit_s: float) -> SimOutcome:
     """The chair drives into the side passage (the way to its goal, as far as it can see), finds it a
-    dead end, and must come out and go round. Localisation by perfect odometry: the manoeuvre alone."""
+    dead end, and must come out and go round. Localisation by perfect odometry and the exact motion model
+    (no drive lag, no slip): the manoeuvre alone."""
     doc = {"name": "t_junction_dead_end", "preset": "wheelchair", "start": [1.0, 0.0, 0.0],
            "goal": [4.2, -6.5], "time_limit": time_limit_s,
            "world": {"walls": {"room_n": [-3.0, 3.0, 10.0, 3.0], "room_s": [-3.0, -8.0, 10.0, -8.0],
@@ -113,7 +114,7 @@ def _dead_end_run(tmp_path: Path, nodes: int, time_limit_s: float) -> SimOutcome
     cfg = apply_overrides(preset("wheelchair"), {"scanmatch": {"method": "odom"},
                                                   "supervisor": {"manoeuvre_nodes": nodes}})
     return simulate_scenario(parse_scenario(doc, "test.yaml"), out_dir=tmp_path / f"run{nodes}", cfg=cfg,
-                             seed=0, perfect_odometry=True, figures=False)
+                             seed=0, perfect_odometry=True, figures=False, ideal_dynamics=True)
 
 
 def test_closed_loop_the_chair_comes_out_of_a_dead_end_side_passage_only_with_the_manoeuvre(

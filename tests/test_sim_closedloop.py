@@ -37,8 +37,9 @@ def shapes_of(s: Any, t: float = 0.0) -> Shapes:
 
 def drive(s: Any, cfg: Any, cmd: tuple[float, float, float], until_s: float, *,
           pose: tuple[float, float, float] | None = None) -> ClosedLoop:
-    """The robot already moving at ``cmd`` (no acceleration phase), advanced until ``until_s``."""
-    loop = ClosedLoop(s, cfg, seed=0)
+    """The robot already moving at ``cmd`` (no acceleration phase), advanced until ``until_s``; the exact
+    motion model (no lag, no slip), so contacts have known answers."""
+    loop = ClosedLoop(s, cfg, seed=0, ideal_dynamics=True)
     if pose is not None:
         loop.pose = np.array(pose, dtype=np.float64)
     loop.vel = loop.cmd = cmd
@@ -417,7 +418,7 @@ def test_a_door_closing_instantly_ahead_of_a_moving_robot_is_hit(delay_s: float)
     # waited); the simulator must see it all the same.
     s = spec({"walls": {"far": [30.0, -5.0, 30.0, 5.0], "w": [2.0, -2.0, 2.0, 2.0]}},
              events=[{"at": 1.0, "close": "w"}])
-    loop = ClosedLoop(s, XR4000, seed=0)
+    loop = ClosedLoop(s, XR4000, seed=0, ideal_dynamics=True)  # the exact motion: a known contact time
     loop.world.door_delay[[e.id for e in s.elements].index("w")] = delay_s
     loop.vel = loop.cmd = (0.5, 0.0, 0.0)
     loop._advance(round(6.0 * 1e9))
@@ -496,8 +497,9 @@ def test_the_run_directory_is_published_with_its_figures_and_report(tmp_path: Pa
 def test_odom_twist_in_the_log_is_the_measured_velocity(tmp_path: Path) -> None:
     from rosbags.highlevel import AnyReader
 
+    # the exact motion model: the body moves as the wheels, so the truth's speed checks the reported one
     out = simulate_scenario("gnd_fig2_person_crossing", out_dir=tmp_path / "run", seed=0, time_limit_s=3.0,
-                            figures=False)
+                            figures=False, ideal_dynamics=True)
     odom, truth = [], []
     with AnyReader([out.out_dir / "log.mcap"]) as reader:
         for conn, _, raw in reader.messages():

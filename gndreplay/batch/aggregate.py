@@ -3,7 +3,8 @@ against the ``AGGREGATE_KEYS`` thresholds (``min_success_rate``, ...).
 
 Rates are fractions of the runs that completed (an "error" run, e.g. a crash or a worker time-out, is
 counted apart: it already makes the batch exit 2); the mean time to goal is over the successes, the
-clearance the smallest of any run, the stack p99 latency the worst run's.
+clearance the smallest of any run, the stack p99 latency the worst run's; the mean challenge metric is over
+the runs that have one (an optimal path exists), a failure counting 0.
 """
 
 from __future__ import annotations
@@ -81,6 +82,9 @@ def _metrics(done: Sequence[InputResult]) -> dict[str, float]:
     times = [r.metrics["time_to_goal_s"] for r in done if "time_to_goal_s" in r.metrics]
     if times:
         out["mean_time_to_goal_s"] = statistics.fmean(times)
+    scores = [r.metrics["challenge_metric"] for r in done if "challenge_metric" in r.metrics]
+    if scores:
+        out["mean_challenge_metric"] = statistics.fmean(scores)
     for name, pick in (("clearance_m", min), ("stack_p99_ms", max)):
         values = [r.metrics[name] for r in done if name in r.metrics]
         if values:

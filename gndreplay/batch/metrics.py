@@ -117,7 +117,10 @@ def relation_metrics(stats: RelationStats) -> dict[str, float]:
 #: ever in range) gives no metric. ``goal_missed``: the stack reported GOAL_REACHED and stopped with the true
 #: axle outside the goal tolerance (its localisation error), apart from the time-outs; ``takeovers``: onsets
 #: of an active navigation mode other than the desired one; ``local_ticks_pct``: share of ticks local
-#: navigation was the active mode [%].
+#: navigation was the active mode [%]; ``optimal_path_m``: the robot's inscribed circle's shortest path from
+#: the start to the goal in the static world at t = 0; ``challenge_metric``: the navigation-challenge metric,
+#: success * OT / clip(time to goal, 2 OT, 8 OT), OT the optimal path at 2 m/s (0 for a failure; none without
+#: an optimal path; ``gndreplay.sim.score``).
 SCENARIO_METRICS: Mapping[str, str] = {
     "success": "outcome == success",
     "collisions": "outcome == collision",
@@ -129,6 +132,8 @@ SCENARIO_METRICS: Mapping[str, str] = {
     "time_to_goal_s": "time_to_goal_s",
     "clearance_m": "min_clearance_m",
     "path_length_m": "path_length_m",
+    "optimal_path_m": "optimal_path_m",
+    "challenge_metric": "challenge_metric",
     "security_time_pct": "time_inside_security_pct",
     "sim_ms_per_step": "sim_ms_per_step",
     "stack_ms_per_tick": "stack_ms_per_tick",
@@ -137,7 +142,8 @@ _OUTCOME_COUNTS = {"success": "success", "collisions": "collision", "goal_missed
                    "timeouts": "timeout"}
 #: Metrics of one scenario over its seeds (runs that did not end in an error): the fractions of runs that
 #: reached the goal, collided, stopped short of it (goal missed), timed out; the mean time to goal of the
-#: successes; the smallest clearance.
+#: successes; the smallest clearance; the mean challenge metric (a failure counts 0; runs without an optimal
+#: path apart).
 AGGREGATE_METRICS: tuple[str, ...] = (
     "success_rate",
     "collision_rate",
@@ -145,6 +151,7 @@ AGGREGATE_METRICS: tuple[str, ...] = (
     "timeout_rate",
     "mean_time_to_goal_s",
     "min_clearance_m",
+    "mean_challenge_metric",
 )
 
 

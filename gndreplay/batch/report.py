@@ -63,6 +63,8 @@ METRIC_COLUMNS: tuple[str, ...] = (
     "time_to_goal_s",
     "clearance_m",
     "path_length_m",
+    "optimal_path_m",
+    "challenge_metric",
     "security_time_pct",
     "sim_ms_per_step",
     "stack_ms_per_tick",
@@ -98,6 +100,8 @@ _MD_SCENARIO_METRICS: tuple[tuple[str, str], ...] = (
     ("time s", "time_to_goal_s"),
     ("clearance m", "clearance_m"),
     ("path m", "path_length_m"),
+    ("optimal m", "optimal_path_m"),
+    ("challenge", "challenge_metric"),
     ("ATE m", "ate_m"),
     ("stack p99 ms", "stack_p99_ms"),
     ("takeovers", "takeovers"),
@@ -113,6 +117,7 @@ _AGGREGATE_COLUMNS: tuple[str, ...] = (
     "mean_time_to_goal_s",
     "clearance_m",
     "stack_p99_ms",
+    "mean_challenge_metric",
 )
 SCENARIO_CSV_COLUMNS: tuple[str, ...] = (
     "scenario",
@@ -142,6 +147,8 @@ def _cell(metric: str, value: float | None) -> str:
         return "nan"
     if metric.endswith(("_ms", "_rate")) or "_ms_per_" in metric:
         return f"{value:.3f}"
+    if metric.endswith("challenge_metric"):
+        return f"{value:.4f}"
     if metric.endswith(("_m", "_deg")):
         return f"{value:.4f}"
     if metric.endswith(("_s", "_pct")):
@@ -285,15 +292,17 @@ def summary_md(
                   "Status: the worst of the scenario's runs and its thresholds over seeds; rates are of the "
                   "completed runs (errors apart); time: mean of the successes; clearance: the smallest of "
                   "any run; stack p99: the worst run's; goal missed: the stack stopped at the goal it "
-                  "believed, the true axle outside the tolerance.", "", *_table(
+                  "believed, the true axle outside the tolerance; challenge: the mean navigation-challenge "
+                  "metric, a failure counting 0.", "", *_table(
             ["scenario", "status", "runs", "success", "collisions", "goal missed", "time-outs", "errors",
-             "mean time s", "min clearance m", "stack p99 ms", "notes"],
-            ["---", "---", *("---:" for _ in range(9)), "---"],
+             "mean time s", "min clearance m", "stack p99 ms", "challenge", "notes"],
+            ["---", "---", *("---:" for _ in range(10)), "---"],
             [[a.label, _status(a.status), str(a.runs), _pct(a.successes, a.runs - a.errors),
               str(a.collisions), str(a.goal_missed), str(a.timeouts), str(a.errors),
               _cell("mean_time_to_goal_s", a.metrics.get("mean_time_to_goal_s")),
               _cell("clearance_m", a.metrics.get("clearance_m")),
-              _cell("stack_p99_ms", a.metrics.get("stack_p99_ms")), "; ".join(a.failures)]
+              _cell("stack_p99_ms", a.metrics.get("stack_p99_ms")),
+              _cell("mean_challenge_metric", a.metrics.get("mean_challenge_metric")), "; ".join(a.failures)]
              for a in aggregates],
         )]
     return "\n".join(lines) + "\n"

@@ -45,6 +45,7 @@ class SimOptions:
         latency_s: seconds from a scan to its command taking effect; None: the stack's measured time (not
             deterministic).
         perfect_odometry: no odometry drift.
+        ideal_dynamics: the exact motion model (no response lag, no slip).
         time_limit_s: overrides every scenario's own time limit (None: the scenario's).
         figures: draw each run's figures (fig_world.png and the run figures).
         config: TOML overriding the preset (``--config``), or None.
@@ -58,6 +59,7 @@ class SimOptions:
     perfect_odometry: bool = False
     time_limit_s: float | None = None
     figures: bool = True
+    ideal_dynamics: bool = False
     config: Path | None = None
     preset: str | None = None
     overrides: CliOverrides | None = None
@@ -97,6 +99,7 @@ def run_scenario(job: Job, run_dir: Path, sim: SimOptions) -> ScenarioRun:
         perfect_odometry=sim.perfect_odometry,
         time_limit_s=sim.time_limit_s,
         figures=sim.figures,
+        ideal_dynamics=sim.ideal_dynamics,
     )
     data = _read_json(Path(out.out_dir) / SUMMARY_FILE)
     return ScenarioRun(Path(out.out_dir), int(data.get("ticks", out.ticks)), data)

@@ -138,6 +138,7 @@ SWEEP_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("match failures", "match_failures", "sum"),
     ("ATE m (mean)", "ate_m", "mean"),
     ("stack p99 ms (worst)", "stack_p99_ms", "max"),
+    ("mean challenge", "challenge_metric", "mean"),
 )
 
 

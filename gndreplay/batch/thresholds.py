@@ -34,9 +34,9 @@ a log) is not checked; a metric that is nan (relations given but none matched) f
 errors are the exception: a limit on them asks for a measurement only the truth gives, so an input without
 ground truth fails it, saying so (``ate_m = false`` in its ``[inputs]`` table switches the check off for
 it): a CI gate on accuracy never passes for want of truth. ``AGGREGATE_KEYS`` (``min_success_rate``,
-``collision_rate``, ``goal_missed_rate``, ``timeout_rate``, ``mean_time_to_goal_s``) bound a scenario's
-aggregate over its seeds. ``relations`` and ``goal`` apply to logs only (a scenario has its own goal and
-ground truth).
+``collision_rate``, ``goal_missed_rate``, ``timeout_rate``, ``mean_time_to_goal_s``,
+``min_mean_challenge_metric``) bound a scenario's aggregate over its seeds. ``relations`` and ``goal`` apply
+to logs only (a scenario has its own goal and ground truth).
 
 A limit is a non-negative number (an integer for a count) no larger than its metric can be
 (``limit_bound``: a fraction at most 1, a latency at most an hour, a distance at most the readers' 1e6 m);
@@ -79,6 +79,7 @@ MIN_KEYS: Mapping[str, str] = {
     "min_success": "success",
     "min_clearance_m": "clearance_m",
     "min_success_rate": "success_rate",
+    "min_mean_challenge_metric": "mean_challenge_metric",
 }
 #: Keys checked on a scenario's aggregate over its seeds (not on single runs).
 AGGREGATE_KEYS: tuple[str, ...] = (
@@ -87,13 +88,14 @@ AGGREGATE_KEYS: tuple[str, ...] = (
     "goal_missed_rate",
     "timeout_rate",
     "mean_time_to_goal_s",
+    "min_mean_challenge_metric",
 )
 _MAX_KEYS: tuple[str, ...] = (
     *LATENCY_METRICS,
     *COUNT_METRICS,
     *(m for m in RELATION_METRICS if m != "relations_matched"),
     *TRUTH_METRICS,
-    *(m for m in SCENARIO_METRICS if m not in ("success", "clearance_m")),
+    *(m for m in SCENARIO_METRICS if m not in ("success", "clearance_m", "challenge_metric")),
     *(k for k in AGGREGATE_KEYS if k not in MIN_KEYS),
 )
 #: Every threshold key, in the order failures are listed.
@@ -255,6 +257,8 @@ def limit_bound(key: str) -> tuple[float, str]:
         return 1.0, "is a fraction of the runs, from 0 to 1"
     if key == "min_success":
         return 1.0, "must be 0 or 1 (a run reaches its goal or not)"
+    if key == "min_mean_challenge_metric":
+        return 0.5, "is a challenge metric, from 0 to 0.5"
     if key in _INTEGER_KEYS:
         return _MAX_COUNT, f"must be a count of at most {_MAX_COUNT:g}"
     for suffix, hi, unit in _UNIT_BOUNDS:

@@ -5,15 +5,19 @@
 world advances in pieces of at most ``SimParams.dt_s``, also cut at every event and at the moment the new
 command takes effect (scan time + latency):
 
-- the velocity moves toward the command by at most the robot's acceleration limits times the piece's
-  duration, then stays constant over the piece, so the robot moves along an exact arc (SE(2) exponential);
+- the wheel velocity follows the command through the drive's first-order response within the robot's
+  acceleration limits (:mod:`.dynamics`; with ``ideal_dynamics`` it moves toward the command at those
+  limits), then stays constant over the piece; the body moves with it corrupted by slip and skid (not with
+  ``ideal_dynamics``), along an exact arc (SE(2) exponential);
 - collision is continuous: conservative advancement with the exact clearance between the real footprint
   and every element, divided by an upper bound of the closing speed (the fastest footprint point plus the
   fastest moving element); no tunnelling whatever the speed, and the first contact ends the run with the
   contact point and the element's id;
 - movers walk their paths and, with ``yield_m > 0``, wait while a step would bring them closer than that
   to the footprint; door leaves wait likewise (0.3 m), as the people moving them would;
-- wheel odometry drifts (``OdometryNoise``), the laser is ray cast (exact circles, thick walls) with noise.
+- wheel odometry integrates the wheels' motion, so slip shows as its drift, and drifts more
+  (``OdometryNoise``); the laser is ray cast (exact circles, thick walls) with noise, one scan per tick at
+  its period.
 
 Navigation modes: the scenario's ``mode`` / ``local`` override the configuration's
 (:func:`navigation_config`). In teleop mode the operator of :mod:`.teleop` gives the command of each scan
@@ -55,6 +59,7 @@ from ..io.userfile import check_number
 from ..pipeline.stack import TickResult
 from ..report.rundir import recorded_flags
 from ..types import Command, Flag, Pose2D, Scan, Subgoal, Tick
+from .dynamics import SlipNoise, SlipState, next_velocity, speed_bound
 from .geometry import (
     Clearance,
     Shapes,
@@ -64,13 +69,14 @@ from .geometry import (
     max_point_speed,
 )
 from .scenario import DEFAULT_T0_NS, OdometryNoise, check_seed
-from .scenario_file import DEFAULT_YIELD_M, MAX_TIME_S, MIN_TIME_LIMIT_S, ScenarioSpec
+from .scenario_file import DEFAULT_YIELD_M, MAX_TIME_S, MIN_TIME_LIMIT_S, Element, ScenarioSpec
+from .score import OptimalPath, challenge_metric, optimal_path, optimal_time_s
 from .teleop import TeleopDriver
 from .world import LaserModel, add_laser_noise
 
 __all__ = [
     "ClosedLoop", "SimParams", "SimRecord", "arc_step", "configure_scenario", "navigation_config",
-    "scenario_navigation",
+    "scenario_navigation", "static_shapes",
 ]
 
 F64 = NDArray[np.float64]
@@ -93,6 +99,7 @@ class SimParams:
         goal_settle_s: how long the robot must stand still with the stack reporting GOAL_REACHED, outside the
             goal tolerance, before the run ends as ``goal_missed`` (the stop must be the stack's final one,
             not a pause while it decelerates or the corrected pose settles).
+        slip: slip and skid of the executed motion (not with ideal dynamics).
     """
 
     dt_s: float = 0.01
@@ -102,6 +109,7 @@ class SimParams:
     t0_ns: int = DEFAULT_T0_NS
     max_iterations: int = 10_000
     goal_settle_s: float = 1.0
+    slip: SlipNoise = SlipNoise()
 
 
 def arc_step(pose: F64, vx: float, vy: float, w: float, h: float) -> F64:
@@ -122,10 +130,6 @@ def _wrap(a: float) -> float:
     if -math.pi < a <= math.pi:
         return a
     return a - 2.0 * math.pi * math.floor((a + math.pi) / (2.0 * math.pi))
-
-
-def _toward(cur: float, target: float, step: float) -> float:
-    return cur + min(max(target - cur, -step), step)
 
 
 @dataclass(slots=True)
@@ -222,6 +226,22 @@ def configure_scenario(spec: ScenarioSpec, *, config: Path | None = None, preset
     return spec, configure(config, preset_name=preset or spec.preset, overrides=own)
 
 
+def static_shapes(elements: tuple[Element, ...], t_s: float, door_delay: F64) -> Shapes:
+    """The elements present at ``t_s`` as shapes, each door leaf as it stands ``door_delay`` [s] late."""
+    polys, pe, circles, ce = [], [], [], []
+    for i, e in enumerate(elements):
+        if e.circle is not None:
+            if e.present(t_s):
+                circles.append(e.circle)
+                ce.append(i)
+            continue
+        v = e.outline_at(t_s, t_s - door_delay[i])
+        if v is not None:
+            polys.append(v)
+            pe.append(i)
+    return Shapes.build(polys, pe, circles, ce)
+
+
 class _World:
     """The scenario's elements and movers over time; polygon snapshots cached between changes."""
 
@@ -255,18 +275,7 @@ class _World:
                tuple(self.elements[i].closed_fraction(t_s - self.door_delay[i]) for i in self._dynamic))
         hit = self._cache.get(key)
         if hit is None:
-            polys, pe, circles, ce = [], [], [], []
-            for i, e in enumerate(self.elements):
-                if e.circle is not None:
-                    if e.present(t_s):
-                        circles.append(e.circle)
-                        ce.append(i)
-                    continue
-                v = e.outline_at(t_s, t_s - self.door_delay[i])
-                if v is not None:
-                    polys.append(v)
-                    pe.append(i)
-            hit = Shapes.build(polys, pe, circles, ce)
+            hit = static_shapes(self.elements, t_s, self.door_delay)
             if len(self._cache) > 256:
                 self._cache.clear()
             self._cache[key] = hit
@@ -306,6 +315,7 @@ class ClosedLoop:
             measured time of that tick (then the run is not deterministic).
         perfect_odometry: odometry = ground truth.
         time_limit_s: overrides the scenario's time limit.
+        ideal_dynamics: the exact model: no response lag, no slip (see :mod:`.dynamics`).
 
     Raises:
         ConfigError: a seed out of ``check_seed``'s range, a latency above MAX_LATENCY_S or a time limit
@@ -315,7 +325,7 @@ class ClosedLoop:
 
     def __init__(self, spec: ScenarioSpec, cfg: Config, *, seed: int, latency_s: float | None = 0.0,
                  perfect_odometry: bool = False, time_limit_s: float | None = None,
-                 params: SimParams = SimParams()) -> None:
+                 params: SimParams = SimParams(), ideal_dynamics: bool = False) -> None:
         cfg = navigation_config(spec, cfg)
         check_seed(seed)
         if latency_s is not None:
@@ -341,9 +351,12 @@ class ClosedLoop:
         self.angles.flags.writeable = False
         self.period_ns = round(lc.period_s * NS)
         self.dt_ns = round(params.dt_s * NS)
-        laser_seq, odom_seq = np.random.SeedSequence(seed).spawn(2)
+        # spawn(3)[:2] equal spawn(2): the slip stream leaves the laser and odometry draws as they are
+        laser_seq, odom_seq, slip_seq = np.random.SeedSequence(seed).spawn(3)
         self.laser_rng = np.random.default_rng(laser_seq)
         self.odom_rng = np.random.default_rng(odom_seq)
+        self.ideal_dynamics = ideal_dynamics
+        self.slip = None if ideal_dynamics else SlipState(params.slip, np.random.default_rng(slip_seq))
         self.world = _World(spec)
         spec.check_endpoints(self.world, self.local, self.radius, params.contact_m)
         self.goal = spec.goal
@@ -372,11 +385,12 @@ class ClosedLoop:
         reach = self.radius if self.local is None else float(np.max(np.hypot(*self.local.T)))
         leaf = max((e.leaf_speed((a.t0_s + a.t1_s) / 2.0) for e in spec.elements for a in e.door),
                    default=0.0)
-        self._vmax = robot.vmax_mps + robot.wmax_radps * reach + leaf + max(
+        self._vmax = speed_bound(robot, reach, params.slip, ideal=ideal_dynamics) + leaf + max(
             (m.speed_mps for m in spec.movers), default=0.0)
         # (time ns, clearance m, the world's step key then)
         self._last_exact: tuple[int, float, tuple[Any, ...]] | None = None
         self._breaks = set(self.world.breaks_ns)
+        self._optimal: OptimalPath | None = None
 
     # ---- the two halves of the loop -------------------------------------------------------------------
 
@@ -569,25 +583,22 @@ class ClosedLoop:
                 t1 = min(t1, b)
             h = (t1 - self.t_ns) / NS
             t_s = self.t_ns / NS
-            # velocity: toward the (limited) command within the acceleration limits
+            # the wheels: toward the (limited) command; the body: the wheels' twist with slip
             cv, cvy, cw = self.cmd
             cw = max(-rob.wmax_radps, min(rob.wmax_radps, cw))
-            vx, vy, w = self.vel
             if self.holonomic:
                 sp = math.hypot(cv, cvy)
                 if sp > rob.vmax_mps:
                     cv, cvy = cv * rob.vmax_mps / sp, cvy * rob.vmax_mps / sp
-                dvx, dvy = cv - vx, cvy - vy
-                dn = math.hypot(dvx, dvy)
-                step = rob.accel_mps2 * h
-                if dn > step:
-                    dvx, dvy = dvx * step / dn, dvy * step / dn
-                vx, vy = vx + dvx, vy + dvy
             else:
                 cv = max(-rob.vmax_mps, min(rob.vmax_mps, cv))
-                vx, vy = _toward(vx, cv, rob.accel_mps2 * h), 0.0
-            w = _toward(w, cw, rob.alpha_radps2 * h)
-            self.vel = (vx, vy, w)
+            self.vel = next_velocity(self.vel, (cv, cvy, cw), h, rob, holonomic=self.holonomic,
+                                     ideal=self.ideal_dynamics)
+            if self.slip is None:
+                vx, vy, w = self.vel
+            else:
+                self.slip.advance(h)
+                vx, vy, w = self.slip.executed(*self.vel)
             self._hold_doors(t_s, h)
             # movers: from their positions now to their targets at t1, linearly
             start_xy = self.world.mover_xy.copy()
@@ -628,7 +639,9 @@ class ClosedLoop:
                 tau = h if step >= h - tau else tau + step
                 it += 1
             self.world.mover_xy = end_xy if self.outcome is None else self.world.mover_xy
-            self._odometry(start_pose, self.pose, tau)
+            # wheel odometry follows the wheels: with slip, their arc from the piece's start, not the body's
+            wheels = self.pose if self.slip is None else arc_step(start_pose, *self.vel, tau)
+            self._odometry(start_pose, wheels, tau)
             self.t_ns = t1 if self.outcome is None else self.t_ns + round(tau * NS)
             now = self.t_ns / NS
             self.rec.truth_t.append(now)
@@ -680,6 +693,15 @@ class ClosedLoop:
 
     # ---- the result ---------------------------------------------------------------------------------
 
+    def optimal_path(self) -> OptimalPath:
+        """The shortest path of the robot's inscribed circle from the start to the goal in the static world
+        at t = 0 (:mod:`.score`; computed once)."""
+        if self._optimal is None:
+            shapes = static_shapes(self.spec.elements, 0.0, np.zeros(len(self.spec.elements)))
+            self._optimal = optimal_path(shapes, (self.spec.start[0], self.spec.start[1]), self.goal,
+                                         self.cfg.robot.inscribed_radius_m)
+        return self._optimal
+
     def result(self) -> dict[str, Any]:
         """result.json: a pure function of (scenario, config, seed) with a fixed latency.
 
@@ -700,7 +722,11 @@ class ClosedLoop:
         ``navigation``: the desired ``mode``, ``selector``, ``local`` strategy, ``active_modes`` (ticks per
         active mode), ``takeovers`` (onsets of an active mode other than the desired one) and their
         ``takeover_reasons``, ``mode_stretches`` ([active mode, first tick s, last tick s] in order),
-        ``subgoals`` (how many) and the last ``subgoal_index``; ``teleop`` (script / track / None).
+        ``subgoals`` (how many) and the last ``subgoal_index``; ``teleop`` (script / track / None);
+        ``ideal_dynamics``; the challenge score (:mod:`.score`): ``optimal_path_m`` (the inscribed circle's
+        shortest path from the start to the goal in the static world at t = 0; None when there is none),
+        ``optimal_time_s`` (OT: that at 2 m/s) and ``challenge_metric`` (success * OT / clip(time to goal,
+        2 OT, 8 OT); None without an optimal path).
         """
         rec = self.rec
         truth = np.asarray(rec.truth, dtype=np.float64).reshape(-1, 3)
@@ -714,6 +740,8 @@ class ClosedLoop:
         dwdt = (float(np.mean(np.abs(np.diff(cmd[:, 3])) / (np.diff(cmd[:, 0]) / NS)))
                 if len(cmd) > 1 else 0.0)
         end = truth[-1]
+        best = self.optimal_path().length_m
+        ot = None if best is None else optimal_time_s(best)
         return {
             "scenario": self.spec.name,
             "source": self.spec.source,
@@ -759,6 +787,11 @@ class ClosedLoop:
                 "subgoals": len(self.spec.subgoals),
                 "subgoal_index": rec.subgoal_index,
             },
+            "ideal_dynamics": self.ideal_dynamics,
+            "optimal_path_m": best,
+            "optimal_time_s": ot,
+            "challenge_metric": None if ot is None else challenge_metric(
+                self.outcome == "success", self.end_t_s, ot),
         }
 
 

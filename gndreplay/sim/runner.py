@@ -78,6 +78,8 @@ class SimOutcome:
     active_modes: dict[str, int] = field(default_factory=dict)
     takeovers: int = 0
     goal_missed: dict[str, Any] | None = None
+    optimal_path_m: float | None = None
+    challenge_metric: float | None = None
 
     @property
     def success(self) -> bool:
@@ -223,6 +225,7 @@ def simulate_scenario(
     snapshots: SnapshotOptions | None = None,
     mcap: bool = False,
     mcap_grid: GridEvery = "change",
+    ideal_dynamics: bool = False,
 ) -> SimOutcome:
     """Run one scenario in closed loop and write its run directory.
 
@@ -243,6 +246,7 @@ def simulate_scenario(
         snapshots: write snapshots/ of the key events (``report.snapshots``); None: none.
         mcap: also write results.mcap (``report.mcap_export``; its robot-centred grid per ``mcap_grid``), from
             which ``gndreplay report --animate`` draws.
+        ideal_dynamics: the exact motion model: no response lag, no slip (``sim.dynamics``).
 
     Raises:
         ConfigError: a bad scenario file (one line naming the file and the key).
@@ -254,7 +258,7 @@ def simulate_scenario(
     cfg = cfg if cfg is not None else preset(spec.preset)
     warm_up_geometry()
     loop = ClosedLoop(spec, cfg, seed=seed, latency_s=latency_s, perfect_odometry=perfect_odometry,
-                      time_limit_s=time_limit_s, params=params or SimParams())
+                      time_limit_s=time_limit_s, params=params or SimParams(), ideal_dynamics=ideal_dynamics)
 
     def tick_done(r: Any) -> None:
         loop.on_tick(r)
@@ -265,6 +269,7 @@ def simulate_scenario(
                           mcap=mcap, config=loop.cfg, mcap_grid=mcap_grid)
     source = {"kind": "scenario", "scenario": scenario_ref(spec), "seed": seed, "latency_s": latency_s,
               "perfect_odometry": perfect_odometry, "time_limit_s": time_limit_s,
+              "ideal_dynamics": ideal_dynamics,
               "default_sim_params": params is None or params == SimParams()}
     summary = run_replay(loop.ticks(), loop.cfg, Path(out_dir), log=Path(spec.source),
                          options=RunOptions(goal_xy=spec.goal, subgoals=spec.subgoals), on_tick=tick_done,

@@ -28,6 +28,7 @@ from ..errors import ConfigError, OutputError
 from ..geometry import compose, wrap_angle
 from ..robot import WHEELCHAIR_ROBOT, RobotConfig
 from ..types import Command, Odometry, Pose2D, Scan, Tick
+from .dynamics import step_toward
 from .world import (
     LaserModel,
     MovingPolygon,
@@ -185,10 +186,6 @@ def _integrate(pose: F64, v: float, w: float, dt: float) -> F64:
                      float(wrap_angle(th1))])
 
 
-def _step_toward(current: float, target: float, max_step: float) -> float:
-    return current + min(max(target - current, -max_step), max_step)
-
-
 def follow_route(route: Sequence[ArrayLike], start: Pose2D, params: DriveParams) -> Trajectory:
     """Drive along each polyline of ``route`` in turn, stopping at its end.
 
@@ -254,8 +251,8 @@ def follow_route(route: Sequence[ArrayLike], start: Pose2D, params: DriveParams)
                 creep = min(0.02, params.vmax_mps)  # never stall short of the end
                 v_des = max(v_des, creep) if remaining > params.goal_tol_m else 0.0
                 w_des = v_des * kappa
-            v = _step_toward(v, v_des, dv)
-            w = _step_toward(w, w_des, dw)
+            v = step_toward(v, v_des, dv)
+            w = step_toward(w, w_des, dw)
             if abs(v) < 1e-9:
                 v = 0.0
             if abs(w) < 1e-9:
