@@ -260,16 +260,20 @@ def test_a_beesoft_map_reads_p_free_top_line_first_gz_or_not(tmp_path: Path) -> 
     v = np.ones((4, 5))
     v[0, 1] = 0.0  # the first line is the top row: y 0.3..0.4
     v[3, 4] = -1.0  # unknown, bottom right
-    v[2, 2] = 0.4  # P(occupied) 0.6: free at 0.65, occupied at 0.5
+    v[2, 2] = 0.4  # P(occupied) 0.6: between the default thresholds (unknown), free below free_thresh
     (tmp_path / "m.dat").write_text(beesoft(v))
     (tmp_path / "m.dat.gz").write_bytes(gzip.compress(beesoft(v).encode()))
     for name in ("m.dat", "m.dat.gz"):
         m = read_beesoft_map(tmp_path / name)
         assert m.resolution_m == 0.1 and m.occupied.shape == (4, 5)
-        assert m.occupied[3, 1] and m.occupied[0, 4] and not m.occupied[1, 2]
-        assert m.unknown is not None and m.unknown[0, 4]
-    assert read_beesoft_map(tmp_path / "m.dat", occupied_thresh=0.5).occupied[1, 2]
-    assert not read_beesoft_map(tmp_path / "m.dat", unknown="free").occupied[0, 4]
+        assert m.occupied[3, 1] and m.occupied[0, 4] and not m.occupied[0, 0]
+        assert m.unknown is not None and m.unknown[0, 4] and m.unknown[1, 2] and m.occupied[1, 2]
+    assert not read_beesoft_map(tmp_path / "m.dat", free_thresh=0.65).occupied[1, 2]
+    assert read_beesoft_map(tmp_path / "m.dat", occupied_thresh=0.5, free_thresh=0.5).occupied[1, 2]
+    free = read_beesoft_map(tmp_path / "m.dat", unknown="free")
+    assert not free.occupied[0, 4] and not free.occupied[1, 2]
+    with pytest.raises(ConfigError, match=r"m\.dat: free_thresh 0.7 is above occupied_thresh 0.65"):
+        read_beesoft_map(tmp_path / "m.dat", free_thresh=0.7)
 
 
 @pytest.mark.parametrize(("text", "says"), [
@@ -338,6 +342,9 @@ def test_an_sdf_world_reads_back_exactly_and_skips_the_rest_with_one_warning(
     for skipped in ("include model://sun", "plane ground/link/c", "mesh shelf/link/deco",
                     "non-static model cart", "roll/pitch ramp"):
         assert skipped in spec.world_warnings[0]
+    loop = ClosedLoop(spec, WHEELCHAIR, seed=0)
+    next(iter(loop.ticks()))
+    assert loop.result()["world_warnings"] == list(spec.world_warnings)  # result.json carries them
     sh = shapes_of(spec)
     # the shelf: model yaw 90 deg turns the link's offset (1, 0) to (0, 1); the box's 2 m runs along y
     assert ray(sh, (0.0, 1.0), EAST) == pytest.approx(4.0 - 0.25, abs=1e-12)

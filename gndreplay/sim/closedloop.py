@@ -726,7 +726,8 @@ class ClosedLoop:
         ``ideal_dynamics``; the challenge score (:mod:`.score`): ``optimal_path_m`` (the inscribed circle's
         shortest path from the start to the goal in the static world at t = 0; None when there is none),
         ``optimal_time_s`` (OT: that at 2 m/s) and ``challenge_metric`` (success * OT / clip(time to goal,
-        2 OT, 8 OT); None without an optimal path).
+        2 OT, 8 OT); None without an optimal path); ``world_warnings``: what the world's map or SDF files
+        held that the simulator skipped (one line per file).
         """
         rec = self.rec
         truth = np.asarray(rec.truth, dtype=np.float64).reshape(-1, 3)
@@ -792,6 +793,7 @@ class ClosedLoop:
             "optimal_time_s": ot,
             "challenge_metric": None if ot is None else challenge_metric(
                 self.outcome == "success", self.end_t_s, ot),
+            "world_warnings": list(self.spec.world_warnings),
         }
 
 

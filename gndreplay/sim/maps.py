@@ -60,8 +60,10 @@ MAX_MAP_YAML_BYTES = 64 * 1024
 MAX_RESOLUTION_M = 100.0
 MAX_ORIGIN_M = 1e5
 MAP_MODES = ("trinary", "scale", "raw")
-#: BeeSoft maps store P(free); a cell is occupied when 1 - value exceeds this (unless the scenario says).
+#: BeeSoft maps store P(free); with p = 1 - value a cell is occupied when p exceeds the first, free when p
+#: is below the second, unknown between (map_server's defaults; a scenario may set its own).
 BEESOFT_OCCUPIED_THRESH = 0.65
+BEESOFT_FREE_THRESH = 0.196
 _ROS_KEYS = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
 _HEADER_LINES = 100
 
@@ -178,14 +180,14 @@ def occupancy_edges(occupied: BoolGrid, resolution_m: float, origin: tuple[float
 # --------------------------------------------------------------------------------------------- reading
 
 
-def load_map(path: Path, *, unknown: Unknown = "occupied", occupied_thresh: float | None = None
-             ) -> OccupancyMap:
+def load_map(path: Path, *, unknown: Unknown = "occupied", occupied_thresh: float | None = None,
+             free_thresh: float | None = None) -> OccupancyMap:
     """A ROS map (``.yaml`` / ``.yml``) or a BeeSoft map (``.dat``, ``.dat.gz``) by its name.
 
     Args:
         unknown: what unknown cells and the ground beyond the map are.
-        occupied_thresh: a BeeSoft map's threshold on P(occupied) (default BEESOFT_OCCUPIED_THRESH); a ROS
-            map's is in its YAML file.
+        occupied_thresh, free_thresh: a BeeSoft map's thresholds on P(occupied) (default
+            BEESOFT_OCCUPIED_THRESH, BEESOFT_FREE_THRESH); a ROS map's are in its YAML file.
 
     Raises:
         ConfigError: one line naming the file.
@@ -193,11 +195,12 @@ def load_map(path: Path, *, unknown: Unknown = "occupied", occupied_thresh: floa
     path = Path(path)
     name = path.name.lower()
     if name.endswith((".yaml", ".yml")):
-        if occupied_thresh is not None:
-            raise ConfigError(f"{path}: occupied_thresh is the map file's own key for a ROS map")
+        if occupied_thresh is not None or free_thresh is not None:
+            raise ConfigError(f"{path}: a ROS map's occupied_thresh and free_thresh are its YAML file's own")
         return read_ros_map(path, unknown=unknown)
     if name.endswith((".dat", ".dat.gz")):
-        return read_beesoft_map(path, unknown=unknown, occupied_thresh=occupied_thresh)
+        return read_beesoft_map(path, unknown=unknown, occupied_thresh=occupied_thresh,
+                                free_thresh=free_thresh)
     raise ConfigError(f"{path}: not a map file (a ROS map's .yaml, or a BeeSoft .dat / .dat.gz)")
 
 
@@ -312,19 +315,24 @@ def ros_cell_values(pixels: NDArray[np.uint8], *, mode: str, negate: bool, occup
     return out
 
 
-def read_beesoft_map(path: Path, *, unknown: Unknown = "occupied", occupied_thresh: float | None = None
-                     ) -> OccupancyMap:
+def read_beesoft_map(path: Path, *, unknown: Unknown = "occupied", occupied_thresh: float | None = None,
+                     free_thresh: float | None = None) -> OccupancyMap:
     """A CMU BeeSoft map (``.dat``, or gzip-compressed ``.dat.gz``, recognised by content): header lines
     ``robot_specifications->KEY VALUE`` (``resolution`` in cm), then ``global_map[0]: W H`` and H lines of
     W values, each P(free) in [0, 1] or negative for unknown. Line k is the row at ``y = (H - 1 - k) *
     resolution``, value i the column at ``x = i * resolution`` (the first line is the top, as in an image);
-    a cell is occupied when ``1 - value > occupied_thresh``.
+    with ``p = 1 - value``, as a ROS map in trinary mode: occupied when ``p > occupied_thresh``, free when
+    ``p < free_thresh``, else unknown (the defaults are map_server's, 0.65 and 0.196: a cell the map is not
+    sure of is unknown, which ``unknown`` makes an obstacle or free ground).
 
     Raises:
         ConfigError: a missing header, a bad count or value, a too large map; one line naming the file.
     """
     path = Path(path)
     thresh = BEESOFT_OCCUPIED_THRESH if occupied_thresh is None else occupied_thresh
+    free_th = BEESOFT_FREE_THRESH if free_thresh is None else free_thresh
+    if free_th > thresh:
+        raise ConfigError(f"{path}: free_thresh {free_th:g} is above occupied_thresh {thresh:g}")
     data = read_bytes(path, "map file", MAX_MAP_BYTES)
     if data[:2] == b"\x1f\x8b":
         data = _gunzip(path, data)
@@ -371,8 +379,9 @@ def read_beesoft_map(path: Path, *, unknown: Unknown = "occupied", occupied_thre
         bad = values[~np.isfinite(values) | (values > 1.0)][0]
         raise ConfigError(f"{path}: map values are P(free) in [0, 1] or negative for unknown, got {bad!r}")
     grid = values.reshape(h, w)
-    unk = grid < 0.0
-    occupied = (~unk & (1.0 - grid > thresh)) | (unk & (unknown == "occupied"))
+    p = 1.0 - grid
+    unk = (grid < 0.0) | ((p <= thresh) & ~(p < free_th))
+    occupied = (~unk & (p > thresh)) | (unk & (unknown == "occupied"))
     return OccupancyMap(np.ascontiguousarray(occupied[::-1]), res, (0.0, 0.0, 0.0), unknown == "occupied",
                         str(path), np.ascontiguousarray(unk[::-1]))
 

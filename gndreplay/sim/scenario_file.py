@@ -13,7 +13,8 @@ Schema (unknown keys are errors; every error is one line naming the file and the
                                                 #   in an obstacle (a test of an impossible task)
     world:
       map: office.yaml                          # optional: a ROS map (or a BeeSoft .dat[.gz]), element "map";
-                                                #   or {file: f, unknown: occupied|free, occupied_thresh: p}
+                                                #   or {file: f, unknown: occupied|free, occupied_thresh: p,
+                                                #   free_thresh: p} (thresholds: a BeeSoft map's)
       sdf: office.world                         # optional: a Gazebo world's static boxes, cylinders, spheres
       walls:    {id: [x1, y1, x2, y2], ...}     # or [x1, y1, x2, y2, thickness]; default 0.1 m
       boxes:    {id: [cx, cy, length, width, theta], ...}
@@ -487,12 +488,14 @@ def _world_files(world: dict[str, Any], err: _Err, base: Path) -> tuple[list[Ele
     out: list[Element] = []
     notes: list[str] = []
     if "map" in world:
-        path, opts = _file_entry(world["map"], "world.map", err, base, ("file", "unknown", "occupied_thresh"))
+        path, opts = _file_entry(world["map"], "world.map", err, base,
+                                 ("file", "unknown", "occupied_thresh", "free_thresh"))
         unknown = _choice(opts.get("unknown", "occupied"), "world.map.unknown", err, ("occupied", "free"))
-        thresh = (_num(opts["occupied_thresh"], "world.map.occupied_thresh", err, (0.0, 1.0))
-                  if "occupied_thresh" in opts else None)
+        thresh, free = (_num(opts[k], f"world.map.{k}", err, (0.0, 1.0)) if k in opts else None
+                        for k in ("occupied_thresh", "free_thresh"))
         try:
-            grid = load_map(path, unknown="free" if unknown == "free" else "occupied", occupied_thresh=thresh)
+            grid = load_map(path, unknown="free" if unknown == "free" else "occupied", occupied_thresh=thresh,
+                            free_thresh=free)
         except ConfigError as e:
             raise err("world.map", str(e)) from None
         out.append(Element(MAP_ELEMENT_ID, "map", None, grid=grid, groups=grid.edges()))
