@@ -174,6 +174,9 @@ class NdParams:
         n_sectors: number of sectors (180 = 2 deg each, the ND+ code); a multiple of 4, so that 0, +-pi/2
             and pi are sector bisectors.
         security_m: security distance Ds [m] (the ND+ code's ``dsmax``, 0.5 m default).
+        security_time_s: Ds grows with the robot's top speed: the stack's reactor uses
+            ``security_m + security_time_s * vmax_mps`` (``scaled_security_m``) [s]. 0 (the default) keeps
+            the code's fixed Ds, tuned for bases of at most about 0.5 m/s.
         security_rear_ratio: rectangle only: security distance behind the rear edge as a fraction of Ds
             (the code's ``dsmin = dsmax / 4``).
         max_range_m: obstacle points farther than this [m] are ignored; a sector with none is free.
@@ -197,6 +200,7 @@ class NdParams:
     gap_m: float | None = None
     contact_m: float = 0.01
     commit_rad: float = 0.25 * math.pi
+    security_time_s: float = 0.0
 
     def __post_init__(self) -> None:
         if self.n_sectors < 8 or self.n_sectors % 4:
@@ -217,6 +221,8 @@ class NdParams:
             raise ConfigError(f"reactor.contact_m must be > 0, got {self.contact_m}")
         if not 0.0 <= self.commit_rad <= math.pi:
             raise ConfigError(f"reactor.commit_rad must be in [0, pi], got {self.commit_rad}")
+        if not self.security_time_s >= 0.0:
+            raise ConfigError(f"reactor.security_time_s must be >= 0, got {self.security_time_s}")
 
 
 @dataclass(frozen=True, slots=True)
