@@ -54,7 +54,7 @@ def door_case(angle_deg: float, offset_m: float, robot: RobotConfig, *, spare_m:
     y = APPROACH_Y_M - RUN_UP_M * math.sin(a) + offset_m * math.cos(a)
     top = WALL_Y_M + ROOM_DEPTH_M
     return {
-        "name": f"door_{angle_deg:g}deg_{offset_m:+g}m",
+        "name": f"door_{angle_deg:g}deg_{'m' if offset_m < 0 else 'p'}{abs(offset_m):g}m",
         "description": f"a door {spare_m:g} m wider than the robot, approached at {angle_deg:g} deg",
         "preset": preset_name,
         "start": [round(x, 6), round(y, 6), round(a, 6)],
@@ -74,9 +74,10 @@ def door_case(angle_deg: float, offset_m: float, robot: RobotConfig, *, spare_m:
 
 
 def run_case(angle_deg: float, offset_m: float, seed: int, out: Path, *, preset_name: str = "wheelchair",
-             planner: str | None = None, spare_m: float = 0.15) -> dict[str, Any]:
-    """One case in closed loop (default dynamics); its result.json numbers plus the case."""
-    cfg = configure(preset_name=preset_name, overrides=CliOverrides(planner=planner))
+             planner: str | None = None, spare_m: float = 0.15, sets: tuple[str, ...] = ()) -> dict[str, Any]:
+    """One case in closed loop (default dynamics); its result.json numbers plus the case. ``sets``:
+    ``--set`` pairs over the preset."""
+    cfg = configure(preset_name=preset_name, overrides=CliOverrides(planner=planner, sets=sets))
     doc = door_case(angle_deg, offset_m, cfg.robot, spare_m=spare_m, preset_name=preset_name)
     spec = parse_scenario(doc, f"{doc['name']}.yaml")
     res = simulate_scenario(spec, out_dir=out / f"{doc['name']}-{seed}", cfg=cfg, seed=seed, figures=False,
@@ -95,6 +96,8 @@ def main() -> None:
     ap.add_argument("--offsets", default="-0.4,0,0.4")
     ap.add_argument("--spare", type=float, default=0.15)
     ap.add_argument("--out", default="")
+    ap.add_argument("--set", dest="sets", action="append", default=[],
+                    help="section.key=value over the preset")
     a = ap.parse_args()
     out = Path(a.out or tempfile.mkdtemp(prefix="doors-"))
     print("| angle deg | offset m | seed | outcome | time s | longest stall s | traps | wall s |")
@@ -104,7 +107,8 @@ def main() -> None:
         for off in (float(s) for s in a.offsets.split(",")):
             for seed in range(a.seeds):
                 t0 = time.perf_counter()
-                r = run_case(ang, off, seed, out, preset_name=a.preset, planner=a.planner, spare_m=a.spare)
+                r = run_case(ang, off, seed, out, preset_name=a.preset, planner=a.planner, spare_m=a.spare,
+                             sets=tuple(a.sets))
                 ok = r["outcome"] == "success" and r["longest_stall_s"] <= STALL_BOUND_S
                 fails += not ok
                 ttg = r.get("time_to_goal_s")
