@@ -368,7 +368,7 @@ PresetOpt = Annotated[
     str | None,
     typer.Option(
         "--preset",
-        help="Robot and stack preset: wheelchair (default) or xr4000; a scenario has its own.",
+        help="Robot and stack preset: wheelchair (default), xr4000 or compact; a scenario has its own.",
         rich_help_panel=_CONFIG_PANEL,
         show_default=False,
     ),

@@ -35,7 +35,16 @@ from .pipeline.planners import PLANNERS, PlannerParams
 from .pipeline.stack import NAV_MODES, StackParams
 from .pipeline.supervisor import SupervisorParams
 from .pipeline.tunnel import TunnelParams
-from .robot import WHEELCHAIR_LASER, WHEELCHAIR_ROBOT, XR4000_LASER, XR4000_ROBOT, LaserConfig, RobotConfig
+from .robot import (
+    COMPACT_LASER,
+    COMPACT_ROBOT,
+    WHEELCHAIR_LASER,
+    WHEELCHAIR_ROBOT,
+    XR4000_LASER,
+    XR4000_ROBOT,
+    LaserConfig,
+    RobotConfig,
+)
 from .scanmatch import METHODS as MATCHER_METHODS
 from .scanmatch import IdcParams, KissParams
 
@@ -66,6 +75,7 @@ __all__ = [
     "parse_set",
     "preset",
     "range_of",
+    "scaled_to_robot",
     "validate_config",
 ]
 
@@ -144,13 +154,15 @@ class Config:
     navigation: NavigationConfig = NavigationConfig()
 
     def stack_params(self) -> StackParams:
-        """The sections the navigation stack needs."""
+        """The sections the navigation stack needs, with the constants that scale with the robot resolved
+        (``scaled_to_robot``)."""
+        planner, reactor, supervisor, follow = scaled_to_robot(self)
         return StackParams(
             robot=self.robot,
             grid=self.grid,
-            planner=self.planner,
-            reactor=self.reactor,
-            supervisor=self.supervisor,
+            planner=planner,
+            reactor=reactor,
+            supervisor=supervisor,
             cspace_margin_m=self.cspace.margin_m,
             unknown_is_free=self.cspace.unknown_is_free,
             nav_mode=self.navigation.mode,
@@ -159,8 +171,48 @@ class Config:
             cmd_timeout_s=self.navigation.cmd_timeout_s,
             selector_hold_s=self.navigation.selector_hold_s,
             local=self.navigation.local,
-            follow=self.navigation.follow,
+            follow=follow,
         )
+
+
+def _ticks(duration_s: float | None, ticks: int, period_s: float, least: int = 1) -> int:
+    """``ticks``, or ``duration_s`` in ticks of ``period_s`` (at least ``least``) when given."""
+    return ticks if duration_s is None else max(least, round(duration_s / period_s))
+
+
+def scaled_to_robot(cfg: Config) -> tuple[PlannerParams, NdParams, SupervisorParams, FollowParams]:
+    """The planner, reactor, supervisor and path-following sections with the robot-scaled keys resolved.
+
+    The papers' constants assumed a slow chair on a 5 Hz cycle; these keys scale them with the robot
+    (docs/robots.md). Each resolved value is written into its fixed key and the scaling key cleared, so a
+    section handed on holds the values in force:
+
+    * ``planner.lookahead_m`` and ``navigation.follow.lookahead_m``: at least ``lookahead_s * vmax_mps``;
+    * ``reactor.security_m``: plus ``security_time_s * vmax_mps``;
+    * ``supervisor.trap_window`` / ``unreachable_ticks`` / ``escape_ticks``: from ``trap_window_s`` /
+      ``unreachable_s`` / ``escape_s`` in ticks of ``laser.period_s`` when given.
+
+    With the scaling keys at their defaults (0, None) every section is returned unchanged.
+    """
+    vmax, period = cfg.robot.vmax_mps, cfg.laser.period_s
+    planner, reactor, sup = cfg.planner, cfg.reactor, cfg.supervisor
+    follow = cfg.navigation.follow
+    if planner.lookahead_s > 0.0:
+        ahead = max(planner.lookahead_m, planner.lookahead_s * vmax)
+        planner = dataclasses.replace(planner, lookahead_m=ahead, lookahead_s=0.0)
+    if follow.lookahead_s > 0.0:
+        follow = dataclasses.replace(follow, lookahead_m=max(follow.lookahead_m, follow.lookahead_s * vmax),
+                                     lookahead_s=0.0)
+    if reactor.security_time_s > 0.0:
+        reactor = dataclasses.replace(reactor, security_m=reactor.security_m + reactor.security_time_s * vmax,
+                                      security_time_s=0.0)
+    if (sup.trap_window_s, sup.unreachable_s, sup.escape_s) != (None, None, None):
+        sup = dataclasses.replace(
+            sup, trap_window=_ticks(sup.trap_window_s, sup.trap_window, period, sup.trap_count),
+            unreachable_ticks=_ticks(sup.unreachable_s, sup.unreachable_ticks, period),
+            escape_ticks=_ticks(sup.escape_s, sup.escape_ticks, period),
+            trap_window_s=None, unreachable_s=None, escape_s=None)
+    return planner, reactor, sup, follow
 
 
 PRESETS: dict[str, Config] = {
@@ -174,6 +226,21 @@ PRESETS: dict[str, Config] = {
     # 8 m) from anywhere in the zone. Braking (0.08 m from 0.5 m/s at 1.5 m/s^2) is far below either.
     # Cost on ACES (xr4000, goal 5 m ahead, median per tick): planner 0.29 -> 0.61 ms, stack 0.75 -> 1.20 ms.
     "xr4000": Config(preset="xr4000", robot=XR4000_ROBOT, laser=XR4000_LASER, grid=GRID_400),
+    # a small fast differential base (docs/robots.md): 0.508 x 0.43 m, 2 m/s, a 270 deg laser at 20 Hz.
+    # The papers' slow-chair constants scaled with speed (**choice** each): Ds 0.2 m + 0.2 s * vmax (0.6 m
+    # at 2 m/s), half of it behind (ND+'s perimeter needs Ds - rear Ds below the 0.508 m length); the
+    # look-ahead 1 s of
+    # travel (2 m); trap window 8 s, unreachable 5 s, escape 2 s at 0.15 vmax (0.6 m, the escape
+    # clearance) as the chair's 40 / 25 / 10 ticks at 5 Hz; the braking horizon includes the drive's lag.
+    # Grid 20 m (7.5 m, 3.75 s at 2 m/s to the zone's edge; braking from 2 m/s takes 1 m).
+    "compact": Config(
+        preset="compact", robot=COMPACT_ROBOT, laser=COMPACT_LASER, grid=GRID_400,
+        planner=PlannerParams(lookahead_s=1.0),
+        reactor=NdParams(security_m=0.2, security_time_s=0.2, security_rear_ratio=0.5),
+        supervisor=SupervisorParams(trap_window_s=8.0, unreachable_s=5.0, escape_s=2.0, escape_v_frac=0.15,
+                                    brake_lag=True),
+        navigation=NavigationConfig(follow=FollowParams(lookahead_s=1.0)),
+    ),
 }
 
 
@@ -273,6 +340,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (GridParams, "free_clip_m"): _nonneg(_RANGE_M),
     (CspaceConfig, "margin_m"): _nonneg(10.0),
     (RouteParams, "lookahead_m"): _pos(_LEN),
+    (RouteParams, "lookahead_s"): _nonneg(_TIME),
     (RouteParams, "route_keep_ratio"): Range(0.0, 10.0),
     (RouteParams, "route_keep_m"): _nonneg(_LEN),
     (Nf1Params, "escape_m"): _nonneg(_LEN),
@@ -296,6 +364,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (NdParams, "gap_m"): _pos(10.0),
     (NdParams, "contact_m"): _pos(1.0),
     (NdParams, "commit_rad"): Range(0.0, math.pi),
+    (NdParams, "security_time_s"): _nonneg(5.0),
     (SupervisorParams, "budget_match_s"): _pos(_TIME),
     (SupervisorParams, "budget_model_s"): _pos(_TIME),
     (SupervisorParams, "budget_planner_s"): _pos(_TIME),
@@ -312,6 +381,9 @@ RANGES: dict[tuple[type, str], Range] = {
     (SupervisorParams, "trap_w_frac"): _FRAC,
     (SupervisorParams, "unreachable_ticks"): _count(),
     (SupervisorParams, "escape_ticks"): _count(),
+    (SupervisorParams, "trap_window_s"): _pos(3600.0),
+    (SupervisorParams, "unreachable_s"): _pos(3600.0),
+    (SupervisorParams, "escape_s"): _pos(_TIME),
     (SupervisorParams, "escape_v_frac"): _FRAC,
     (SupervisorParams, "escape_clearance_m"): _nonneg(_LEN),
     (SupervisorParams, "manoeuvre_nodes"): _count(0, 100_000),
@@ -392,6 +464,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (FollowParams, "stop_v_mps"): _pos(10.0),
     (FollowParams, "deviation_m"): _pos(_LEN),
     (FollowParams, "lookahead_m"): _pos(_LEN),
+    (FollowParams, "lookahead_s"): _nonneg(_TIME),
     (FollowParams, "sample_m"): Range(0.001, 10.0),
     (FollowParams, "kappa_max"): _pos(1000.0),
     (FollowParams, "extend_m"): _pos(_LEN),

@@ -12,8 +12,8 @@ from numpy.typing import NDArray
 from . import detmath as dm
 
 __all__ = [
-    "CIRCLE_VERTICES", "WHEELCHAIR_LASER", "WHEELCHAIR_ROBOT", "XR4000_LASER", "XR4000_ROBOT", "LaserConfig",
-    "RobotConfig", "footprint_outline",
+    "CIRCLE_VERTICES", "COMPACT_LASER", "COMPACT_ROBOT", "WHEELCHAIR_LASER", "WHEELCHAIR_ROBOT",
+    "XR4000_LASER", "XR4000_ROBOT", "LaserConfig", "RobotConfig", "footprint_outline",
 ]
 
 
@@ -100,6 +100,13 @@ XR4000_ROBOT = RobotConfig(
     accel_mps2=1.5, alpha_radps2=3.0, tau_v_s=0.2, tau_w_s=0.2, laser_x_m=0.0, front_m=0.3, rear_m=0.3,
     width_m=0.6,
 )
+# a small fast outdoor-capable differential base (**choice**, a generic research platform of its class):
+# 0.508 x 0.43 m, turning about its centre, up to 2 m/s and 4 rad/s; accelerations and time constants of
+# a stiff geared base (2 m/s^2, 6 rad/s^2, 0.1 s), the laser 0.12 m ahead of the centre on the top plate
+COMPACT_ROBOT = RobotConfig(
+    shape="rectangle", width_m=0.43, front_m=0.254, rear_m=0.254, drive="differential", vmax_mps=2.0,
+    wmax_radps=4.0, accel_mps2=2.0, alpha_radps2=6.0, tau_v_s=0.1, tau_w_s=0.1, laser_x_m=0.12,
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,6 +138,8 @@ class LaserConfig:
 # the papers' SICK: 180 deg, 361 beams (0.5 deg), 32 m; 0.2 s on the chair, 0.15 s on the XR4000
 WHEELCHAIR_LASER = LaserConfig()
 XR4000_LASER = LaserConfig(period_s=0.15)
+# the compact base's 270 deg laser: 720 beams (0.375 deg), 30 m, 20 Hz
+COMPACT_LASER = LaserConfig(beams=720, fov_deg=270.0, max_range_m=30.0, period_s=0.05)
 
 
 CIRCLE_VERTICES = 32

@@ -41,7 +41,7 @@ def test_presets_match_the_papers() -> None:
 
 
 def test_unknown_preset() -> None:
-    with pytest.raises(ConfigError, match="unknown preset 'tank'; known: wheelchair, xr4000"):
+    with pytest.raises(ConfigError, match="unknown preset 'tank'; known: compact, wheelchair, xr4000"):
         preset("tank")
 
 

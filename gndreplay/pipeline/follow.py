@@ -99,6 +99,8 @@ class FollowParams:
         stop_v_mps: a stop subgoal is reached at rest: |v| at most this [m/s].
         deviation_m: regenerate the trajectory when the robot is farther than this from it [m].
         lookahead_m: ``FollowCommand.target_xy`` lies this far ahead along the trajectory [m].
+        lookahead_s: the stack uses ``max(lookahead_m, lookahead_s * vmax_mps)`` as ``lookahead_m`` [s];
+            0 (the default): the fixed distance.
         sample_m: spacing of the trajectory samples [m].
         kappa_max: largest curvature a spiral may have [1/m].
         extend_m: straight extension of the trajectory past the subgoal [m].
@@ -146,6 +148,7 @@ class FollowParams:
     turn_tol_rad: float = 0.1
     replace_search_m: float = 3.0
     horizon_m: float = 6.0
+    lookahead_s: float = 0.0
 
 
 @dataclass(frozen=True, slots=True, eq=False)

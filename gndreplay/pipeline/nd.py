@@ -79,6 +79,13 @@ of the wheelchair paper's reference [18]; the circle and the holonomic base are 
       ``_PASSAGE_V_FRAC * vmax``: ND+'s law scales it with the side clearance over Ds, which in a door
       barely wider than the chair is a crawl the scorecard counts as a stall (wheelchair_office_exit:
       0.02 m/s for 10 s in its 0.85 m door); the footprint sweeps below keep it off the jambs.
+    * Staged approach (``_stage_direction``): from the side (a corridor along the wall with the door) the
+      axis pursuit converges too late: the axle reached the axis with the front already at the jambs,
+      angled, and every correction swung a corner into a jamb (a door 0.15 m wider than the chair,
+      approached along its wall: traps until the time ran out). Off the axis, the chair first heads for
+      the staging point on the axis where a turn in place sweeps free of the wall, then turns in place to
+      the pursuit direction (within ``_ALIGN_RAD``, the turn rate falling with the error) and drives in.
+      Not between walls already (a corridor): there it only pursues the axis.
     * Motion law: the command is the first admissible arc of ``_admissible_drive`` (the law's arc, wider
       arcs with the same final heading, the turn in place, straight on, a small correction in place,
       reversing while turning, straight back), admissible when the real footprint swept along it does not
@@ -152,6 +159,14 @@ _REVERSE_FRAC = 0.3
 # side clearance / Ds, 0.02 m/s in a 0.85 m door for the 0.7 m chair (0.2 m in 10 s: a stall); the sweep
 # of the footprint along the arc (``_admissible_drive``) and the reflexive check keep the chair off the jambs
 _PASSAGE_V_FRAC = 0.25
+# the staged approach to a narrow passage (``_stage_direction``): the staging point lies the front corners'
+# swing radius plus _STAGE_CLEAR_M before the passage (a turn in place there sweeps free of its wall); the
+# chair heads for it while more than _STAGE_OFF_M off the axis, and aligns in place within _ALIGN_RAD
+_STAGE_CLEAR_M = 0.1
+_STAGE_NEAR_M = 0.1
+_STAGE_OFF_M = 0.1
+_ALIGN_RAD = 0.02
+_ALIGN_GAIN = 2.0
 
 
 class Situation(enum.Enum):
@@ -174,6 +189,9 @@ class NdParams:
         n_sectors: number of sectors (180 = 2 deg each, the ND+ code); a multiple of 4, so that 0, +-pi/2
             and pi are sector bisectors.
         security_m: security distance Ds [m] (the ND+ code's ``dsmax``, 0.5 m default).
+        security_time_s: Ds grows with the robot's top speed: the stack's reactor uses
+            ``security_m + security_time_s * vmax_mps`` (``scaled_security_m``) [s]. 0 (the default) keeps
+            the code's fixed Ds, tuned for bases of at most about 0.5 m/s.
         security_rear_ratio: rectangle only: security distance behind the rear edge as a fraction of Ds
             (the code's ``dsmin = dsmax / 4``).
         max_range_m: obstacle points farther than this [m] are ignored; a sector with none is free.
@@ -197,6 +215,7 @@ class NdParams:
     gap_m: float | None = None
     contact_m: float = 0.01
     commit_rad: float = 0.25 * math.pi
+    security_time_s: float = 0.0
 
     def __post_init__(self) -> None:
         if self.n_sectors < 8 or self.n_sectors % 4:
@@ -217,6 +236,8 @@ class NdParams:
             raise ConfigError(f"reactor.contact_m must be > 0, got {self.contact_m}")
         if not 0.0 <= self.commit_rad <= math.pi:
             raise ConfigError(f"reactor.commit_rad must be in [0, pi], got {self.commit_rad}")
+        if not self.security_time_s >= 0.0:
+            raise ConfigError(f"reactor.security_time_s must be >= 0, got {self.security_time_s}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -706,6 +727,40 @@ def _follow_axis(axis: tuple[float, float, float, float], lookahead_m: float) ->
     return wrap(dm.atan2(ty, tx))
 
 
+def _stage_direction(axis: tuple[float, float, float, float], robot: RobotConfig, dist: F64, ang: F64,
+                     half_width_m: float) -> tuple[float, bool]:
+    """The rectangular chair's direction towards a narrow passage, and whether to align in place first.
+
+    Pursuing the axis line alone (``_follow_axis``) converges over about one look-ahead of travel: from the
+    side (a corridor along the wall with the door) the axle reaches the axis with the front already at the
+    jambs, angled, and every correction swings a corner into a jamb. So the approach is staged: the staging
+    point lies on the axis where a turn in place sweeps free of the passage's wall (the front corners'
+    swing radius plus ``_STAGE_CLEAR_M`` before the pair's midpoint). Farther than the look-ahead before
+    it, or on the axis, the axis is pursued as before; off the axis within that reach, the chair heads for
+    the staging point itself; from there (or on the axis), before the front reaches the passage, it turns
+    in place to the pursuit direction when that is more than ``_ALIGN_RAD`` off, then drives on it.
+    A robot already between walls (an obstacle point beside its body within ``half_width_m`` of the axis:
+    a corridor, whose pairs all have this axis) only pursues it: stopping to align there would dither."""
+    cx, cy, nx, ny = axis
+    along = -(cx * nx + cy * ny)  # the rotation centre along the axis, from the pair's midpoint
+    lateral = cx * ny - cy * nx  # ... and across it
+    seen = np.isfinite(dist)
+    qx, qy = dist[seen] * dm.cos_a(ang[seen]) - cx, dist[seen] * dm.sin_a(ang[seen]) - cy
+    qa, qb = qx * nx + qy * ny, qy * nx - qx * ny
+    if np.any((qa >= along - robot.rear_m) & (qa <= along + robot.front_m) & (np.abs(qb) < half_width_m)):
+        return _follow_axis(axis, robot.front_m), False
+    hw = 0.5 * robot.width_m
+    stage = math.sqrt(robot.front_m * robot.front_m + hw * hw) + _STAGE_CLEAR_M
+    lookahead = robot.front_m
+    depth = max(along, -stage)  # the staging point, or the axis abreast of a robot already nearer
+    if -stage - lookahead <= along < -robot.front_m and abs(lateral) > _STAGE_OFF_M and math.hypot(
+            depth - along, lateral) > _STAGE_NEAR_M:
+        tx, ty = cx + depth * nx, cy + depth * ny
+        return wrap(dm.atan2(ty, tx)), False
+    theta = _follow_axis(axis, lookahead)
+    return theta, -stage - lookahead <= along < -robot.front_m and abs(theta) > _ALIGN_RAD
+
+
 def drive(theta: float, v_nd: float, robot: RobotConfig) -> tuple[float, float, float]:
     """(v, vy, w) for the base.
 
@@ -721,7 +776,8 @@ def drive(theta: float, v_nd: float, robot: RobotConfig) -> tuple[float, float, 
     return v_nd * (1.0 - abs(tc) / _HALF_PI), 0.0, w
 
 
-def _admissible_drive(theta: float, v_nd: float, robot: RobotConfig, points: F64) -> tuple[float, float]:
+def _admissible_drive(theta: float, v_nd: float, robot: RobotConfig, points: F64, *,
+                      align_first: bool = False) -> tuple[float, float]:
     """(v, w) for the rectangular differential chair: the first admissible of a list of arcs.
 
     An arc is admissible when the real footprint, moved along it until the chair faces ``theta`` (the
@@ -738,17 +794,21 @@ def _admissible_drive(theta: float, v_nd: float, robot: RobotConfig, points: F64
     nothing forward can go even ``_STEP_M`` (``_blocked_now``). This is the
     shape / kinematics abstraction in its simplest form: the turn a rectangle cannot make here (its
     corners would sweep a jamb or a wall) is not commanded; it drives on until it can, or backs out.
-    Nothing admissible: the paper law, left to the reflexive check."""
+    Nothing admissible: the paper law, left to the reflexive check. ``align_first``: the turn in place
+    towards theta comes first, whatever its size (the staged approach to a passage, ``_stage_direction``)."""
     law_v, _, law_w = drive(theta, v_nd, robot)
     if points.shape[0] == 0:
         return law_v, law_w
     turn = abs(min(max(theta, -math.pi), math.pi))
     sign = 1.0 if theta >= 0.0 else -1.0
-    candidates: list[tuple[float, float, bool]] = [(law_v, law_w, False)]
+    w_turn = 0.5 * robot.wmax_radps
+    # aligning: the turn rate falls with the error (half of it in 0.25 s), so a small one is not overshot
+    w_align = sign * min(w_turn, _ALIGN_GAIN * turn)
+    candidates: list[tuple[float, float, bool]] = [(0.0, w_align, True)] if align_first else []
+    candidates.append((law_v, law_w, False))
     for f in (0.5, 0.25):
         v, _, w = drive(theta * f, v_nd, robot)
         candidates.append((v, w, True))
-    w_turn = 0.5 * robot.wmax_radps
     v_back = -_REVERSE_FRAC * robot.vmax_mps
     if turn >= _SWEEP_MIN_TURN_RAD:  # a turn in place for a small correction would only dither
         candidates.append((0.0, sign * w_turn, True))
@@ -930,6 +990,7 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
         theta = _blend_away(theta_p, float(ang[obs]), float(ratio[obs]))
 
     axis: tuple[float, float, float, float] | None = None
+    align = False
     if robot.shape == "rectangle" and robot.drive == "differential" and abs(beta) <= _HALF_PI and (
             region.kind is not _Kind.GOAL or goal_r > robot.front_m):  # a goal within reach: steer to it
         axis = _passage_axis(dist, ang, left_side, beta,
@@ -937,12 +998,12 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
                              reach_m=robot.front_m + robot.rear_m + params.security_m,
                              behind_m=robot.rear_m + 0.5 * params.security_m, front_m=robot.front_m)
         if axis is not None:
-            theta = _follow_axis(axis, robot.front_m)
+            theta, align = _stage_direction(axis, robot, dist, ang, 0.5 * geo.gap_m + params.security_m)
     v_nd = robot.vmax_mps * min(c_l, c_r)
     if axis is not None:  # along a passage the swept-footprint checks, not the side clearance, bound it
         v_nd = max(v_nd, _PASSAGE_V_FRAC * robot.vmax_mps)
     if robot.shape == "rectangle" and robot.drive == "differential":
-        v, w = _admissible_drive(theta, v_nd, robot, pts)
+        v, w = _admissible_drive(theta, v_nd, robot, pts, align_first=align)
         vy = 0.0
     else:
         v, vy, w = drive(theta, v_nd, robot)

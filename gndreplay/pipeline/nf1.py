@@ -1161,6 +1161,15 @@ class Nf1Planner:
             start = (int(start_rc[0]), int(start_rc[1]))
             out = keep_route(free, start, goal, new, held, cell_m=self.cell_m, route=route,
                              unknown_cost=p.unknown_cost, costly=unknown)
+            if out is new and _rejoin(free, start, held) is None:
+                # the held route is blocked: keep it if it clears every obstacle by one cell less
+                # (hysteresis on the C-space radius, so a door barely wider than the robot that one
+                # noisy jamb cell closes for a tick does not send the route round a detour and back)
+                loose = free_cspace(grid_cells, cell_m=self.cell_m,
+                                    inflate_m=max(self.inflate_m - self.cell_m, 0.0),
+                                    unknown_is_free=self.unknown_is_free)
+                out = keep_route(loose, start, goal, new, held, cell_m=self.cell_m, route=route,
+                                 unknown_cost=p.unknown_cost, costly=unknown)
         if out.n_escape == 0:
             self._held = (out.path_cells.astype(np.int64), goal)
         return out

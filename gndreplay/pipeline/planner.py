@@ -27,6 +27,10 @@ class RouteParams:
     Attributes:
         lookahead_m: the instantaneous direction points at the point this far along the tightened path
             [m] (GND: "the first metre"); the stack puts the reactor's target this far along it.
+        lookahead_s: the look-ahead grows with the robot's top speed: the stack uses
+            ``max(lookahead_m, lookahead_s * vmax_mps)`` (``scaled_lookahead_m``). 0 (the default) keeps
+            the papers' fixed metre, a slow chair's 2-3 s of travel; a fast base needs more to see a turn
+            coming.
         route_keep_ratio, route_keep_m: hysteresis on the route (the planner remembers the route it
             returned): the previous route, followed on from the robot, is kept while every segment of
             it is still free, it still ends at the goal cell (or, for a goal beyond the grid, on a free
@@ -44,10 +48,13 @@ class RouteParams:
     lookahead_m: float = 1.0
     route_keep_ratio: float = 0.1
     route_keep_m: float = 0.3
+    lookahead_s: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.lookahead_m > 0.0:
             raise ValueError(f"lookahead_m must be > 0, got {self.lookahead_m!r}")
+        if not self.lookahead_s >= 0.0:
+            raise ValueError(f"lookahead_s must be >= 0, got {self.lookahead_s!r}")
         if not self.route_keep_ratio >= 0.0:
             raise ValueError(f"route_keep_ratio must be >= 0, got {self.route_keep_ratio!r}")
         if not self.route_keep_m >= 0.0:

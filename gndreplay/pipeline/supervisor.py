@@ -104,6 +104,13 @@ class SupervisorParams:
             unreachable: GND's ROTATE for one full turn in place (to look around), then stop, until a plan
             exists again (**choice**: 25, 5 s for the wheelchair's 5 Hz laser).
         escape_ticks: how many ticks the escape motion lasts once triggered.
+        trap_window_s, unreachable_s, escape_s: the three tick counts above as durations [s]; when given,
+            the configuration turns each into ticks of its laser period (``Config.stack_params``:
+            ``max(1, round(duration / period_s))``, the trap window at least ``trap_count``). None (the
+            default): the counts as given, which assume the papers' 5 Hz cycle.
+        brake_lag: the braking horizon (``braking_time_s``) also covers the drive's lag: a first-order
+            response of time constant tau brakes tau later than commanded, so the horizon grows by
+            ``max(tau_v_s, tau_w_s)``. False (the default): the papers' horizon (reaction and ramp).
         escape_v_frac: escape speed, and speed of the safety check's short reverse, as a fraction of vmax
             (**choice**: 0.3).
         escape_clearance_m: free distance the raw scan must show ahead/behind to escape that way.
@@ -158,6 +165,10 @@ class SupervisorParams:
     doubt_window_s: float = 300.0
     doubt_tol_m: float = 0.05
     doubt_tol_frac: float = 0.1
+    trap_window_s: float | None = None
+    unreachable_s: float | None = None
+    escape_s: float | None = None
+    brake_lag: bool = False
 
 
 def doubt_transforms(corrected: NDArray[np.float64], odom: NDArray[np.float64],
@@ -254,13 +265,16 @@ def footprint_signed_distance(points_xy: NDArray[np.float64], robot: RobotConfig
 
 def braking_time_s(v_mps: float, vy_mps: float, w_radps: float, robot: RobotConfig,
                    params: SupervisorParams) -> float:
-    """Time [s] the command sweeps at full twist: reaction_s, plus half the braking time.
+    """Time [s] the command sweeps at full twist: reaction_s (plus the drive's lag with ``brake_lag``),
+    plus half the braking time.
 
     The command is held for reaction_s, then v and w ramp down together to zero (the path stays on the
     commanded arc) at the robot's limits, in max(|v| / accel, |w| / alpha); a linear ramp covers half the
     distance and angle the full twist would in that time."""
     speed = math.hypot(v_mps, vy_mps)
     brake = max(speed / robot.accel_mps2, abs(w_radps) / robot.alpha_radps2)
+    if params.brake_lag:
+        return params.reaction_s + max(robot.tau_v_s, robot.tau_w_s) + 0.5 * brake
     return params.reaction_s + 0.5 * brake
 
 

@@ -176,11 +176,12 @@ def decision_geometry(grid: RobotCentredGrid, pose: Pose2D, command: Command,
     """ND+'s diagram of the grid's occupied cells within the reactor's range at ``pose`` (what GND's reactor
     sees), and the robot-frame poses (P, 3) x, y, theta of the footprint along the command's arc over the
     reflexive check's braking horizon ((0, 3) for a still command)."""
-    diagram = nd_diagram(grid.occupied_points(pose, cfg.reactor.max_range_m), cfg.robot, cfg.reactor)
+    stack = cfg.stack_params()  # the reactor and supervisor with the robot-scaled keys in force
+    diagram = nd_diagram(grid.occupied_points(pose, stack.reactor.max_range_m), cfg.robot, stack.reactor)
     c = command
     if c.v_mps == 0.0 and c.vy_mps == 0.0 and c.w_radps == 0.0:
         return diagram, np.zeros((0, 3))
-    t_end = braking_time_s(c.v_mps, c.vy_mps, c.w_radps, cfg.robot, cfg.supervisor)
+    t_end = braking_time_s(c.v_mps, c.vy_mps, c.w_radps, cfg.robot, stack.supervisor)
     return diagram, np.column_stack(arc_poses(c.v_mps, c.vy_mps, c.w_radps, t_end, cfg.robot))
 
 

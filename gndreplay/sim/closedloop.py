@@ -361,6 +361,7 @@ class ClosedLoop:
         spec.check_endpoints(self.world, self.local, self.radius, params.contact_m)
         self.goal = spec.goal
         self.goal_tol = cfg.supervisor.goal_tolerance_m
+        self._security_m = cfg.stack_params().reactor.security_m  # ND+'s Ds in force (robot-scaled)
         self.driver = None if spec.teleop is None or self.nav_mode != "teleop" else TeleopDriver(
             spec.teleop, wmax_radps=robot.wmax_radps, accel_mps2=robot.accel_mps2, tolerance_m=self.goal_tol)
         # state
@@ -614,7 +615,7 @@ class ClosedLoop:
             if self.t_ns in self._breaks or (self._last_exact is not None and (
                     self._last_exact[2] != key or self.world.step_key((t1 - 1) / NS) != key)):
                 self._last_exact = None  # the world changed by a step: the old clearance bounds nothing
-            sec = self.cfg.reactor.security_m
+            sec = self._security_m
             if self._last_exact is not None:
                 lb = self._last_exact[1] - self._vmax * (t1 - self._last_exact[0]) / NS
                 if lb > sec and world_speed <= self._vmax:
@@ -734,7 +735,7 @@ class ClosedLoop:
         tt = np.asarray(rec.truth_t, dtype=np.float64)
         path = float(np.sum(np.hypot(*np.diff(truth[:, :2], axis=0).T))) if len(truth) > 1 else 0.0
         clear = np.asarray(rec.clearance, dtype=np.float64).reshape(-1, 2)
-        sec = self.cfg.reactor.security_m
+        sec = self._security_m
         total = float(clear[:, 0].sum())
         inside = float(clear[clear[:, 1] < sec, 0].sum())
         cmd = np.asarray(rec.cmd, dtype=np.float64).reshape(-1, 4)

@@ -5,7 +5,7 @@ Schema (unknown keys are errors; every error is one line naming the file and the
 
     name: u_trap
     description: free text                      # optional
-    preset: wheelchair                          # or xr4000
+    preset: wheelchair                          # or xr4000, compact (``config.PRESETS``)
     start: [x, y, theta]                        # m, m, rad
     goal: [x, y]
     time_limit: 120                             # s
@@ -77,6 +77,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import detmath as dm
+from ..config import PRESETS
 from ..errors import FOLLOW_NEEDS_SUBGOALS, ConfigError, did_you_mean
 from ..io.subgoals import MAX_ABS_SUBGOAL_M, MAX_ABS_THETA_RAD
 from ..io.userfile import brief, check_number, load_yaml, parse_yaml
@@ -152,7 +153,7 @@ _KINDS = ("walls", "boxes", "circles", "polygons")
 _FILES = ("map", "sdf")
 _EXPECT = ("reachable", "unreachable")
 MAP_ELEMENT_ID = "map"
-_PRESETS = ("wheelchair", "xr4000")
+_PRESETS = tuple(PRESETS)
 _NAME = re.compile(rf"[A-Za-z0-9][A-Za-z0-9_.-]{{0,{MAX_ID_CHARS - 1}}}")
 _Bounds = tuple[float, float]
 _POS: _Bounds = (-MAX_ABS_SUBGOAL_M, MAX_ABS_SUBGOAL_M)
