@@ -18,6 +18,7 @@ with the mode selector disabled (the desired mode's command goes out: the driver
 
     .venv/bin/python benchmarks/scenarios.py [--seeds 20] [--scenarios a,b] [--presets wheelchair,xr4000]
         [--jobs 1] [--out DIR] [--jsonl FILE] [--no-selector | --compare-selector] [--ideal-dynamics]
+        [--set robot.vmax_mps=0.5 ...]
     .venv/bin/python benchmarks/scenarios.py --table-from FILE      # the table of the runs so far
     .venv/bin/python benchmarks/scenarios.py --scenarios teleop_into_wall --seeds 5 --compare-selector
 """
@@ -41,14 +42,16 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 from gndreplay.config import CliOverrides, Config, configure
 from gndreplay.sim import resolve_scenario, shipped_scenarios, simulate_scenario
 
-# scenario, preset, planner ("-": not GND), selector on, seed, output folder, ideal dynamics
-Task = tuple[str, str, str, bool, int, str, bool]
+# scenario, preset, planner ("-": not GND), selector on, seed, output folder, ideal dynamics, --set pairs
+Task = tuple[str, str, str, bool, int, str, bool, tuple[str, ...]]
 NO_PLANNER = "-"
 
 
-def config(preset_name: str, planner: str, selector: bool = True) -> Config:
-    """The preset with the planner chosen ("-": the preset's own), the mode selector on or off."""
-    chosen = CliOverrides(planner=None if planner == NO_PLANNER else planner, no_selector=not selector)
+def config(preset_name: str, planner: str, selector: bool = True, sets: tuple[str, ...] = ()) -> Config:
+    """The preset with the planner chosen ("-": the preset's own), the mode selector on or off and the
+    ``--set`` pairs (e.g. ``robot.vmax_mps=0.5``)."""
+    chosen = CliOverrides(planner=None if planner == NO_PLANNER else planner, no_selector=not selector,
+                          sets=sets)
     return configure(preset_name=preset_name, overrides=chosen)
 
 
@@ -59,11 +62,11 @@ def planners_of(name: str, planners: list[str]) -> list[str]:
 
 def one(args: Task) -> dict[str, Any]:
     """One run (in this process or a worker): the outcome and the timings."""
-    name, preset_name, planner, selector, seed, out, ideal = args
+    name, preset_name, planner, selector, seed, out, ideal, sets = args
     t0 = time.perf_counter()
     tag = "" if selector else "-nosel"
     o = simulate_scenario(name, out_dir=Path(out) / f"{name}-{preset_name}-{planner}{tag}-{seed}",
-                          cfg=config(preset_name, planner, selector), seed=seed, figures=False,
+                          cfg=config(preset_name, planner, selector, sets), seed=seed, figures=False,
                           overwrite=True, ideal_dynamics=ideal)
     c = o.collision or {}
     miss = o.goal_missed or {}
@@ -106,7 +109,10 @@ def main() -> None:
     sel.add_argument("--compare-selector", action="store_true",
                      help="run every row with the mode selector on and off, side by side")
     ap.add_argument("--ideal-dynamics", action="store_true", help="the exact motion model (no lag, no slip)")
+    ap.add_argument("--set", action="append", default=[], dest="sets",
+                    help="a configuration override for every run, e.g. robot.vmax_mps=0.5 (repeatable)")
     a = ap.parse_args()
+    sets = tuple(a.sets)
     selectors = [True, False] if a.compare_selector else [not a.no_selector]
     names = [s for s in a.scenarios.split(",") if s] or list(shipped_scenarios())
     presets = [p for p in a.presets.split(",") if p]
@@ -115,14 +121,14 @@ def main() -> None:
     if a.table_from:
         rows = [json.loads(line) for line in Path(a.table_from).read_text().splitlines() if line.strip()]
         tasks = [(r["scenario"], r["preset"], r.get("planner", "nf1"), r.get("selector", True), r["seed"], "",
-                  r.get("ideal_dynamics", False)) for r in rows]
+                  r.get("ideal_dynamics", False), tuple(r.get("sets", ()))) for r in rows]
         table(names, presets, [*planners, NO_PLANNER], [True, False], tasks, rows,
               f"from {a.table_from}: {len(rows)} runs")
         return
     warm(out, presets, planners, names)
     # seed-major order: stopped early, the runs so far cover every row equally
-    tasks = [(n, p, k, on, s, out, a.ideal_dynamics) for s in range(a.seeds) for n in names for p in presets
-             for k in planners_of(n, planners) for on in selectors]
+    tasks = [(n, p, k, on, s, out, a.ideal_dynamics, sets) for s in range(a.seeds) for n in names
+             for p in presets for k in planners_of(n, planners) for on in selectors]
     t0 = time.perf_counter()
     log = open(a.jsonl, "a") if a.jsonl else None  # noqa: SIM115
     results: list[dict[str, Any]] = []
@@ -132,7 +138,7 @@ def main() -> None:
         results.append(r)
         if log is not None:
             row = {"scenario": t[0], "preset": t[1], "planner": t[2], "selector": t[3], "seed": t[4],
-                   "ideal_dynamics": t[6], **r}
+                   "ideal_dynamics": t[6], "sets": list(t[7]), **r}
             log.write(json.dumps(row) + "\n")
             log.flush()
         print(f"\r{len(results)}/{len(tasks)} {t[0]} {t[1]} {t[2]} {'' if t[3] else 'no selector '}"
@@ -149,6 +155,7 @@ def main() -> None:
     wall = time.perf_counter() - t0
     table(names, presets, [*planners, NO_PLANNER], selectors, tasks, results,
           f"{a.seeds} seeds per row, latency 0 s, {'ideal dynamics' if a.ideal_dynamics else 'dynamics on'}, "
+          f"{' '.join(sets) + ', ' if sets else ''}"
           f"{a.jobs} process(es), total wall {wall:.0f} s")
 
 
