@@ -55,7 +55,8 @@ LOG = "nope.clf"  # options are checked before the log is opened
     (["simulate", "u_trap", "--set", "reactor.x=1"], ("--set 'reactor.x=1': unknown key 'reactor.x'",)),
     (["batch", LOG, "--set", "grid.cell_m=nan"], ("--set 'grid.cell_m=nan'",)),
     (["run", LOG, "--preset", "wheelchar"],
-     ("--preset: expected one of wheelchair, xr4000, got 'wheelchar' (did you mean 'wheelchair'?)",)),
+     ("--preset: expected one of compact, wheelchair, xr4000, got 'wheelchar' "
+      "(did you mean 'wheelchair'?)",)),
     (["run", LOG, "--planner", "tunel"], ("--planner: expected one of nf1, tunnel, got 'tunel' "
                                           "(did you mean 'tunnel'?)",)),
     (["run", LOG, "--mode", "gdn"], ("--mode: expected one of gnd, teleop, follow, local, got 'gdn' "
