@@ -13,7 +13,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from ..errors import did_you_mean
+from .cspace import free_cspace
+from .model import UNKNOWN
 from .nf1 import Nf1Params, Nf1Planner
 from .planner import Planner, RouteParams
 from .tunnel import TunnelParams, TunnelPlanner, warm_up_planners
@@ -84,8 +88,14 @@ def _warm_up_tunnel(settings: TunnelParams, size_cells: int) -> None:
     warm_up_planners(settings, size_cells=size_cells)
 
 
+def _warm_up_nf1(settings: Nf1Params, size_cells: int) -> None:
+    """The whole-grid C-space of NF1's route hysteresis (``cspace.free_cspace``): computed only on a tick
+    whose held route the followed C-space blocks, which the stack's synthetic scans do not produce."""
+    free_cspace(np.full((8, 8), UNKNOWN, dtype=np.uint8), cell_m=0.05, inflate_m=0.1, unknown_is_free=True)
+
+
 PLANNERS: dict[str, PlannerSpec] = {
-    "nf1": PlannerSpec("nf1", _nf1, follows_grid=True),
+    "nf1": PlannerSpec("nf1", _nf1, _warm_up_nf1, follows_grid=True),
     "tunnel": PlannerSpec("tunnel", _tunnel, _warm_up_tunnel, follows_grid=True),
 }
 """Planner kinds (``[planner] kind``, ``--planner``) and how each is made."""
