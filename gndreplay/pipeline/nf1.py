@@ -65,6 +65,7 @@ from .planner import PlanResult, RouteParams
 __all__ = [
     "Nf1Params",
     "Nf1Planner",
+    "StepCosts",
     "descend",
     "frontier_seeds",
     "keep_route",
@@ -76,6 +77,7 @@ __all__ = [
     "resolve_goal",
     "route_cost",
     "shifted_route",
+    "step_costs",
     "tighten",
 ]
 
@@ -285,42 +287,47 @@ def _seeded_unit(
 
 @njit(cache=True)
 def _dijkstra_seeded(
-    free: NDArray[np.bool_], costly: NDArray[np.bool_], cost: float, seeds: NDArray[np.int64],
-    seed_vals: NDArray[np.float32], sink_r: int, sink_c: int, early_exit: bool, diagonal: bool,
+    free: NDArray[np.bool_], classes: NDArray[np.uint8], factors: NDArray[np.float64],
+    seeds: NDArray[np.int64], seed_vals: NDArray[np.float32], sink_r: int, sink_c: int, early_exit: bool,
+    diagonal: bool,
 ) -> tuple[NDArray[np.float32], NDArray[np.int32]]:
     """Wave from several seed cells, each starting at its own value (``seeds`` flat indices sorted by
-    ``seed_vals``), where a step into a ``costly`` cell (UNKNOWN) is ``cost`` times as long: exact
-    Dijkstra on five FIFO queues, the sorted seeds and one per step length (1, sqrt(2)) x (known, costly).
-    As in ``_seeded_unit`` each queue receives increasing values, so the smallest head is always the next
-    cell (no heap). A single seed of value 0 is the plain weighted wave. Returns the values and, for each
-    cell, the flat index of the seed whose wave labelled it (-1 where unreached)."""
+    ``seed_vals``), where a step into a cell of class k (``classes``, ``StepCosts``) is ``factors[k]`` times
+    as long: exact Dijkstra on 2 K + 1 FIFO queues, one per step length (1, sqrt(2)) x class and the sorted
+    seeds. As in ``_seeded_unit`` each queue receives increasing values, so the smallest head is always the
+    next cell (no heap). A single seed of value 0 is the plain weighted wave. Returns the values and, for
+    each cell, the flat index of the seed whose wave labelled it (-1 where unreached)."""
     h, w = free.shape
     n = h * w
     f = free.ravel()
-    u = costly.ravel()
+    u = classes.ravel()
     dist = np.full(n, np.inf, dtype=np.float32)
     src = np.full(n, -1, dtype=np.int32)
     done = np.zeros(n, dtype=np.bool_)
     ns = seeds.shape[0]
+    nq = 2 * factors.shape[0] + 1  # the seeds' queue is the last
     cap = max(4 * n + 1, ns)  # a popped cell pushes each of its <= 4 neighbours of one step kind once
-    qi = np.empty((5, cap), dtype=np.int32)
-    qv = np.empty((5, cap), dtype=np.float32)
-    head = np.zeros(5, dtype=np.int64)
-    tail = np.zeros(5, dtype=np.int64)
-    steps = np.array([1.0, DIAG_LEN, cost, DIAG_LEN * cost], dtype=np.float32)
+    qi = np.empty((nq, cap), dtype=np.int32)
+    qv = np.empty((nq, cap), dtype=np.float32)
+    head = np.zeros(nq, dtype=np.int64)
+    tail = np.zeros(nq, dtype=np.int64)
+    steps = np.empty(nq - 1, dtype=np.float32)
+    for k in range(factors.shape[0]):
+        steps[2 * k] = factors[k]
+        steps[2 * k + 1] = DIAG_LEN * factors[k]
     sink = sink_r * w + sink_c if sink_r >= 0 else -1
     for k in range(ns):
         g = seeds[k]
         if seed_vals[k] < dist[g]:
             dist[g] = seed_vals[k]
             src[g] = g
-        qi[4, k] = g
-        qv[4, k] = seed_vals[k]
-    tail[4] = ns
+        qi[nq - 1, k] = g
+        qv[nq - 1, k] = seed_vals[k]
+    tail[nq - 1] = ns
     nk = 8 if diagonal else 4
     while True:
         best = -1
-        for k in range(5):
+        for k in range(nq):
             if head[k] < tail[k] and (best < 0 or qv[k, head[k]] < qv[best, head[best]]):
                 best = k
         if best < 0:
@@ -349,7 +356,7 @@ def _dijkstra_seeded(
                 continue
             if k >= 4 and not (f[i + dr * w] and f[i + dc]):  # no corner cutting
                 continue
-            qk = (1 if k >= 4 else 0) + (2 if u[j] else 0)
+            qk = (1 if k >= 4 else 0) + 2 * np.int64(u[j])
             d = dist[i] + steps[qk]
             if d < dist[j]:
                 dist[j] = d
@@ -360,6 +367,47 @@ def _dijkstra_seeded(
     return dist.reshape(h, w), src.reshape(h, w)
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class StepCosts:
+    """What a step into each cell costs, for the weighted wave: a step into a cell of class k costs
+    ``factors[k]`` times a step into a plain free cell (class 0, factor 1). Built by ``step_costs``.
+
+    Attributes:
+        classes: (H, W) uint8 class of each cell, C-contiguous.
+        factors: (K,) float64 factor of each class; factors[0] == 1.
+    """
+
+    classes: NDArray[np.uint8]
+    factors: NDArray[np.float64]
+
+    def of(self, rows: NDArray[np.integer], cols: NDArray[np.integer]) -> NDArray[np.float64]:
+        """The factor of each of these cells."""
+        return self.factors[self.classes[rows, cols]]
+
+
+def step_costs(
+    unknown: NDArray[np.bool_] | None, unknown_cost: float, avoid: NDArray[np.bool_] | None = None,
+    avoid_cost: float = 1.0,
+) -> StepCosts | None:
+    """Step costs from two masks: UNKNOWN cells at ``unknown_cost``, cells to avoid (the route the robot was
+    trapped on, ``RouteParams.avoid_cost``) at ``avoid_cost``, a cell in both at the product. None when
+    every step costs the same (the papers' NF1, the unit-step kernels)."""
+    use_u = unknown is not None and unknown_cost != 1.0
+    use_a = avoid is not None and avoid_cost != 1.0 and bool(avoid.any())
+    if not (use_u or use_a):
+        return None
+    if use_u and use_a:
+        assert unknown is not None and avoid is not None
+        classes = unknown.astype(np.uint8) + 2 * avoid.astype(np.uint8)
+        factors = [1.0, unknown_cost, avoid_cost, unknown_cost * avoid_cost]
+    else:
+        mask = unknown if use_u else avoid
+        assert mask is not None
+        classes = mask.astype(np.uint8)
+        factors = [1.0, unknown_cost if use_u else avoid_cost]
+    return StepCosts(np.ascontiguousarray(classes), np.array(factors, dtype=np.float64))
+
+
 def _wave(
     free: NDArray[np.bool_],
     goal_r: int,
@@ -368,16 +416,15 @@ def _wave(
     sink_c: int,
     early_exit: bool,
     diagonal: bool,
-    costly: NDArray[np.bool_] | None = None,
-    cost: float = 1.0,
+    costs: StepCosts | None = None,
 ) -> NDArray[np.float32]:
     """Wavefront from the goal over free cells (C-contiguous ``free``); the sink (robot) cell, if >= 0, may
-    be labelled although not free but never expands. With ``costly`` (C-contiguous, UNKNOWN cells) and
-    ``cost`` != 1, a step into a costly cell is that much longer."""
-    if costly is not None and cost != 1.0:
+    be labelled although not free but never expands. With ``costs`` a step into a cell costs its class's
+    factor."""
+    if costs is not None:
         seed = np.array([goal_r * free.shape[1] + goal_c], dtype=np.int64)
-        return _dijkstra_seeded(free, costly, cost, seed, np.zeros(1, dtype=np.float32), sink_r, sink_c,
-                                early_exit, diagonal)[0]
+        return _dijkstra_seeded(free, costs.classes, costs.factors, seed, np.zeros(1, dtype=np.float32),
+                                sink_r, sink_c, early_exit, diagonal)[0]
     if diagonal:  # exact Dijkstra with steps 1 and sqrt(2), the goal its one seed
         seed = np.array([goal_r * free.shape[1] + goal_c], dtype=np.int64)
         return _seeded_unit(free, seed, np.zeros(1, dtype=np.float32), sink_r, sink_c, early_exit, True)[0]
@@ -844,7 +891,7 @@ def frontier_seeds(
 
 def _frontier_goal(
     free: NDArray[np.bool_], start: tuple[int, int], goal_rc_float: NDArray[np.float64], params: Nf1Params,
-    cell_m: float, costly: NDArray[np.bool_] | None,
+    cell_m: float, costs: StepCosts | None,
 ) -> tuple[int, int] | None:
     """The free border cell to plan to for a goal beyond the grid (``Nf1Params.frontier_goal``): the seed
     of ``frontier_seeds`` whose wave labels the robot cell (or, when the robot cell is C-obstacle, the cell
@@ -853,8 +900,8 @@ def _frontier_goal(
     seeds, values = frontier_seeds(free, start, goal_rc_float, diagonal)
     if seeds.size == 0:
         return None
-    if costly is not None and params.unknown_cost != 1.0:
-        nf, src = _dijkstra_seeded(free, costly, params.unknown_cost, seeds, values, start[0], start[1],
+    if costs is not None:
+        nf, src = _dijkstra_seeded(free, costs.classes, costs.factors, seeds, values, start[0], start[1],
                                    params.early_exit, diagonal)
     else:
         nf, src = _seeded_unit(free, seeds, values, start[0], start[1], params.early_exit, diagonal)
@@ -902,6 +949,8 @@ def plan(
     params: Nf1Params = Nf1Params(),
     lookahead_m: float = _ROUTE.lookahead_m,
     unknown: ArrayLike | None = None,
+    avoid: ArrayLike | None = None,
+    avoid_cost: float = 1.0,
 ) -> PlanResult:
     """Plan from the robot cell to the goal: NF1 wave, steepest descent, string pulling, direction.
 
@@ -916,6 +965,8 @@ def plan(
         lookahead_m: the direction points at the point this far along the tightened path [m] (> 0).
         unknown: (H, W) bool, True on UNKNOWN cells: a step into one costs ``params.unknown_cost`` (None:
             every step into a free cell costs the same, the papers' NF1).
+        avoid: (H, W) bool, True on cells to avoid (the route a trap was detected on,
+            ``RouteParams.avoid_cost``): a step into one costs ``avoid_cost`` (None: no such cells).
     Returns:
         PlanResult; ``ok`` False with GOAL_IN_OBSTACLE (goal cell not free) or PLANNER_NO_PATH (the wave
         from the goal does not reach the robot, even through the escape; for a goal beyond the grid with
@@ -933,12 +984,14 @@ def plan(
     g = np.asarray(goal_rc_float, dtype=np.float64).reshape(2)
     if not np.all(np.isfinite(g)):
         raise ValueError(f"goal_rc_float must be finite, got {g.tolist()}")
-    costly = None if unknown is None else _as_free(unknown)
-    if costly is not None and costly.shape != f.shape:
-        raise ValueError(f"unknown has shape {costly.shape}, free has {f.shape}")
+    masks = {name: None if a is None else _as_free(a) for name, a in (("unknown", unknown), ("avoid", avoid))}
+    for name, mask in masks.items():
+        if mask is not None and mask.shape != f.shape:
+            raise ValueError(f"{name} has shape {mask.shape}, free has {f.shape}")
+    costs = step_costs(masks["unknown"], params.unknown_cost, masks["avoid"], avoid_cost)
     diagonal = params.connectivity == 8
     if params.frontier_goal and not _inside(g, f.shape):
-        goal_or_none, projected = _frontier_goal(f, start, g, params, cell_m, costly), True
+        goal_or_none, projected = _frontier_goal(f, start, g, params, cell_m, costs), True
         if goal_or_none is None:
             return _fail(Flag.PLANNER_NO_PATH, project_goal(start, g, f.shape), projected)
         goal = goal_or_none
@@ -946,8 +999,7 @@ def plan(
         goal, projected = resolve_goal(f, start, g, params.border_search_m / cell_m)
         if not f[goal]:
             return _fail(Flag.GOAL_IN_OBSTACLE, goal, projected)
-    nf = _wave(f, goal[0], goal[1], start[0], start[1], params.early_exit, diagonal, costly,
-               params.unknown_cost)
+    nf = _wave(f, goal[0], goal[1], start[0], start[1], params.early_exit, diagonal, costs)
     entry = start
     prefix = np.zeros((0, 2), dtype=np.int32)
     if not np.isfinite(nf[start]):
@@ -979,24 +1031,22 @@ def plan(
     )
 
 
-def route_cost(
-    waypoints: NDArray[np.float64], costly: NDArray[np.bool_] | None = None, unknown_cost: float = 1.0
-) -> float:
-    """Cost of a polyline of cell centres [cells]: its length, each segment weighted by ``1 + (unknown_cost
-    - 1) * k / n`` where k of the n cells it enters (its supercover walk, first cell excepted) are costly
-    (UNKNOWN): the wave's step cost, spread along the segment. Routes compared by ``Nf1Planner`` are
-    measured this way, whatever the wave's connectivity."""
+def route_cost(waypoints: NDArray[np.float64], costs: StepCosts | None = None) -> float:
+    """Cost of a polyline of cell centres [cells]: its length, each segment weighted by the mean step
+    factor (``StepCosts``) of the n cells it enters (its supercover walk, first cell excepted): the wave's
+    step cost, spread along the segment. Routes compared by ``Nf1Planner`` are measured this way, whatever
+    the wave's connectivity."""
     w = np.asarray(waypoints, dtype=np.float64)
     seg = np.diff(w, axis=0)
     lens = np.hypot(seg[:, 0], seg[:, 1])
-    if costly is None or unknown_cost == 1.0:
+    if costs is None:
         return float(lens.sum())
     cells = np.rint(w).astype(np.int64)
     total = 0.0
     for i, length in enumerate(lens):  # per segment (a handful), not per cell
         line = _line_cells(cells[i, 0], cells[i, 1], cells[i + 1, 0], cells[i + 1, 1])[1:]
-        frac = float(costly[line[:, 0], line[:, 1]].mean()) if line.shape[0] else 0.0
-        total += float(length) * (1.0 + (unknown_cost - 1.0) * frac)
+        factor = float(costs.of(line[:, 0], line[:, 1]).mean()) if line.shape[0] else 1.0
+        total += float(length) * factor
     return total
 
 
@@ -1045,13 +1095,12 @@ def keep_route(
     *,
     cell_m: float,
     route: RouteParams,
-    unknown_cost: float = 1.0,
-    costly: NDArray[np.bool_] | None = None,
+    costs: StepCosts | None = None,
 ) -> PlanResult:
     """Route hysteresis: ``new`` (this tick's plan, ok) unless the ``held`` route (its path cells in this
     grid, from the previous plan to the same goal) still holds and is not clearly worse: followed on from
     the robot (``_rejoin``) it is in free cells, it ends on the goal cell (a goal beyond the grid: on a free
-    border cell), and its cost (``route_cost`` with ``costly`` cells at ``unknown_cost`` + the straight line
+    border cell), and its cost (``route_cost`` with the wave's step ``costs`` + the straight line
     beyond the grid) is at most ``(1 + route.route_keep_ratio) * new cost + route.route_keep_m``. Then the
     held route's PlanResult (``cost_m`` its ``route_cost``; the wave's effort in ``nodes_expanded``; its
     direction ``route.lookahead_m`` along it)."""
@@ -1068,9 +1117,8 @@ def keep_route(
     if joined is None:
         return new
     raw, wp = joined
-    cost = unknown_cost
-    kept = route_cost(wp, costly, cost) + _beyond(wp[-1], goal_rc_float, new.goal_projected)
-    best = route_cost(new.waypoints_cells, costly, cost) + _beyond(
+    kept = route_cost(wp, costs) + _beyond(wp[-1], goal_rc_float, new.goal_projected)
+    best = route_cost(new.waypoints_cells, costs) + _beyond(
         new.waypoints_cells[-1], goal_rc_float, new.goal_projected)
     if kept > (1.0 + route.route_keep_ratio) * best + route.route_keep_m / cell_m:
         return new
@@ -1138,7 +1186,7 @@ class Nf1Planner:
 
     def plan(
         self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike,
-        offset_rc: tuple[int, int] | None = None,
+        offset_rc: tuple[int, int] | None = None, avoid: NDArray[np.bool_] | None = None,
     ) -> PlanResult:
         if offset_rc is None:
             free = free_cspace(grid_cells, cell_m=self.cell_m, inflate_m=self.inflate_m,
@@ -1148,19 +1196,19 @@ class Nf1Planner:
         p = self.params
         weighted = self.unknown_is_free and p.unknown_cost != 1.0
         unknown = (grid_cells == UNKNOWN) if weighted else None
+        route = self.route
         new = plan(free, start_rc, goal_rc_float, cell_m=self.cell_m, params=p,
-                   lookahead_m=self.route.lookahead_m, unknown=unknown)
+                   lookahead_m=route.lookahead_m, unknown=unknown, avoid=avoid, avoid_cost=route.avoid_cost)
         goal = np.asarray(goal_rc_float, dtype=np.float64).reshape(2)
         held = self._held_route(goal, free.shape)
         self._held = None
         if not new.ok:
             return new
         out = new
-        route = self.route
         if held is not None and (route.route_keep_ratio > 0.0 or route.route_keep_m > 0.0):
             start = (int(start_rc[0]), int(start_rc[1]))
-            out = keep_route(free, start, goal, new, held, cell_m=self.cell_m, route=route,
-                             unknown_cost=p.unknown_cost, costly=unknown)
+            costs = step_costs(unknown, p.unknown_cost, avoid, route.avoid_cost)
+            out = keep_route(free, start, goal, new, held, cell_m=self.cell_m, route=route, costs=costs)
             if out is new and _rejoin(free, start, held) is None:
                 # the held route is blocked: keep it if it clears every obstacle by one cell less
                 # (hysteresis on the C-space radius, so a door barely wider than the robot that one
@@ -1168,8 +1216,7 @@ class Nf1Planner:
                 loose = free_cspace(grid_cells, cell_m=self.cell_m,
                                     inflate_m=max(self.inflate_m - self.cell_m, 0.0),
                                     unknown_is_free=self.unknown_is_free)
-                out = keep_route(loose, start, goal, new, held, cell_m=self.cell_m, route=route,
-                                 unknown_cost=p.unknown_cost, costly=unknown)
+                out = keep_route(loose, start, goal, new, held, cell_m=self.cell_m, route=route, costs=costs)
         if out.n_escape == 0:
             self._held = (out.path_cells.astype(np.int64), goal)
         return out

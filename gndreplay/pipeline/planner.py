@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..types import Flag
 
-__all__ = ["PlanResult", "Planner", "RouteParams"]
+__all__ = ["AvoidMarks", "PlanResult", "Planner", "RouteParams"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,12 +43,24 @@ class RouteParams:
             state. Both 0: the papers' NF1, a pure function of the grid (**choice**: 0.1 and 0.3 m;
             measured: goal_in_obstacle, xr4000, seed 1, the first-metre direction flipped by about 95 deg
             and back on 4 single ticks with both 0, on none with these).
+        avoid_cost, avoid_m, avoid_s: what a detected trap teaches the planner (``AvoidMarks``): the first
+            ``avoid_m`` of the route the robot was following when the supervisor detected the trap, widened
+            by the robot's inner radius, costs ``avoid_cost`` times as much per step for ``avoid_s``
+            seconds (NF1; the tunnel planner plans without it). The trap escape alone backs the robot
+            off and hands it back to the same route into the same trap: a gap that the planner's disc
+            passes but the footprint cannot negotiate (a rectangle between two obstacles 0.1 m wider than
+            itself, angled) held it until the time ran out. A soft cost, not an obstacle: a passage that
+            is the only way stays on the route when the way round costs more. ``avoid_cost`` 1 turns
+            it off (the papers' GND).
     """
 
     lookahead_m: float = 1.0
     route_keep_ratio: float = 0.1
     route_keep_m: float = 0.3
     lookahead_s: float = 0.0
+    avoid_cost: float = 10.0
+    avoid_m: float = 2.0
+    avoid_s: float = 60.0
 
     def __post_init__(self) -> None:
         if not self.lookahead_m > 0.0:
@@ -59,6 +71,12 @@ class RouteParams:
             raise ValueError(f"route_keep_ratio must be >= 0, got {self.route_keep_ratio!r}")
         if not self.route_keep_m >= 0.0:
             raise ValueError(f"route_keep_m must be >= 0, got {self.route_keep_m!r}")
+        if not self.avoid_cost >= 1.0:
+            raise ValueError(f"avoid_cost must be >= 1, got {self.avoid_cost!r}")
+        if not self.avoid_m > 0.0:
+            raise ValueError(f"avoid_m must be > 0, got {self.avoid_m!r}")
+        if not self.avoid_s > 0.0:
+            raise ValueError(f"avoid_s must be > 0, got {self.avoid_s!r}")
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -132,11 +150,56 @@ class Planner(Protocol):
 
     def plan(
         self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike,
-        offset_rc: tuple[int, int] | None = None,
+        offset_rc: tuple[int, int] | None = None, avoid: NDArray[np.bool_] | None = None,
     ) -> PlanResult:
         """Plan on the robot-centred grid (UNKNOWN / FREE / OCCUPIED cells) from the robot cell to the goal
         (corner coordinates, see ``nf1.plan``). ``offset_rc``: the world cell of grid cell (0, 0), given by a
         caller that plans on one grid re-centred by whole cells tick after tick, so the planner may follow
         its C-space incrementally (``cspace.CSpaceTracker``); None computes it afresh. Optional: the stack
-        passes it only to planners registered with ``follows_grid`` (``planners.PlannerSpec``)."""
+        passes it only to planners registered with ``follows_grid`` (``planners.PlannerSpec``).
+        ``avoid``: cells whose steps cost ``RouteParams.avoid_cost`` (``AvoidMarks``; None: none); a
+        planner may plan without them (the tunnel planner does)."""
         ...
+
+
+class AvoidMarks:
+    """The routes traps were detected on (``RouteParams.avoid_cost``), held in world cells: each mark is
+    the first ``avoid_m`` of the route's raw cells, widened by ``radius_m``, and lasts ``avoid_s``. The
+    stack marks on a tick whose supervisor detected a trap and hands the planner the marks falling in the
+    grid (``mask``)."""
+
+    def __init__(self, route: RouteParams, *, cell_m: float, radius_m: float) -> None:
+        self.route = route
+        self.cell_m = cell_m
+        r = max(math.floor(radius_m / cell_m), 0)
+        dr, dc = np.mgrid[-r : r + 1, -r : r + 1]
+        inside = dr * dr + dc * dc <= r * r
+        self._disc = np.column_stack([dr[inside], dc[inside]]).astype(np.int64)
+        self._marks: list[tuple[int, NDArray[np.int64]]] = []  # (expiry stamp [ns], world cells)
+
+    def __bool__(self) -> bool:
+        return bool(self._marks)
+
+    def mark(self, path_cells: NDArray[np.int32], offset_rc: tuple[int, int], t_ns: int) -> None:
+        """Mark the first ``avoid_m`` of a route (raw grid cells from the robot on, ``PlanResult.path_cells``;
+        ``offset_rc`` the world cell of grid cell (0, 0)) until ``t_ns + avoid_s``."""
+        cells = np.asarray(path_cells, dtype=np.int64).reshape(-1, 2)
+        if cells.shape[0] == 0:
+            return
+        steps = np.hypot(*np.diff(cells, axis=0).T.astype(np.float64))
+        along = np.concatenate([[0.0], np.cumsum(steps)])
+        ahead = cells[along <= self.route.avoid_m / self.cell_m] + np.asarray(offset_rc, dtype=np.int64)
+        wide = np.unique((ahead[:, None, :] + self._disc[None, :, :]).reshape(-1, 2), axis=0)
+        self._marks.append((t_ns + round(self.route.avoid_s * 1e9), wide))
+
+    def mask(self, shape: tuple[int, int], offset_rc: tuple[int, int], t_ns: int) -> NDArray[np.bool_] | None:
+        """(rows, cols) bool of the grid whose cell (0, 0) is world cell ``offset_rc``: True on the cells of
+        the marks still held at ``t_ns`` (expired ones are dropped); None when there are none."""
+        self._marks = [m for m in self._marks if m[0] > t_ns]
+        if not self._marks:
+            return None
+        cells = np.concatenate([m[1] for m in self._marks]) - np.asarray(offset_rc, dtype=np.int64)
+        inside = (cells[:, 0] >= 0) & (cells[:, 0] < shape[0]) & (cells[:, 1] >= 0) & (cells[:, 1] < shape[1])
+        out = np.zeros(shape, dtype=np.bool_)
+        out[cells[inside, 0], cells[inside, 1]] = True
+        return out

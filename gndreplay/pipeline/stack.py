@@ -32,7 +32,7 @@ from .manoeuvre import warm_up_manoeuvre
 from .model import GridParams, RobotCentredGrid
 from .nd import NdMemory, NdParams, NdResult, Situation, nd_step
 from .nf1 import reaches_border
-from .planner import Planner, PlanResult
+from .planner import AvoidMarks, Planner, PlanResult
 from .planners import PLANNERS, PlannerGeometry, PlannerParams
 from .selector import ModeSelector, intention_xy, teleop_command
 from .supervision import GndGoal, Proposal, Supervisor
@@ -237,6 +237,8 @@ class NavigationStack:
         self.grid = RobotCentredGrid(params.grid)
         self._planner = make_planner(params)
         self._planner_follows_grid = PLANNERS[params.planner.kind].follows_grid
+        self._avoid = AvoidMarks(params.planner, cell_m=params.grid.cell_m,
+                                 radius_m=params.robot.inner_radius_m)
         self.supervisor = Supervisor(params.robot, params.supervisor, self.grid)
         # the planner's no path to a goal beyond the grid means no free border cell is reachable
         self._no_path_is_no_border = self._planner.no_path_is_no_border
@@ -286,7 +288,7 @@ class NavigationStack:
 
         t0 = time.perf_counter_ns()
         goal = np.asarray(goal_xy, dtype=np.float64)
-        planned = self._plan(pose, goal)
+        planned = self._plan(pose, goal, scan.t_ns)
         timings["planner"] = _ms(t0)
 
         t0 = time.perf_counter_ns()
@@ -322,6 +324,8 @@ class NavigationStack:
         )
         verdict = self.supervisor.supervise(proposal)
         timings["supervisor"] = _ms(t0)
+        if verdict.flags & Flag.TRAP_DETECTED and planned.ok and p.planner.avoid_cost != 1.0:
+            self._avoid.mark(planned.path_cells, self.grid.offset_cells, scan.t_ns)
         path = planned.waypoints_cells
         path_xy = self.grid.cells_to_world(path) if path.shape[0] else np.zeros((0, 2))
         return TickResult(
@@ -469,12 +473,15 @@ class NavigationStack:
                            + p.cspace_margin_m, unknown_is_free=p.unknown_is_free)
         return reaches_border(free, self.grid.robot_cell(pose))
 
-    def _plan(self, pose: Pose2D, goal: NDArray[np.float64]) -> PlanResult:
+    def _plan(self, pose: Pose2D, goal: NDArray[np.float64], t_ns: int) -> PlanResult:
+        """The planner on this tick's grid, with the routes of recent traps to avoid (``AvoidMarks``)."""
         start = self.grid.robot_cell(pose)
         goal_rc = self.grid.world_to_cell_float(goal[None, :])[0]
+        offset = self.grid.offset_cells
+        avoid = self._avoid.mask(self.grid.cells.shape, offset, t_ns) if self._avoid else None
         if self._planner_follows_grid:
-            return self._planner.plan(self.grid.cells, start, goal_rc, offset_rc=self.grid.offset_cells)
-        return self._planner.plan(self.grid.cells, start, goal_rc)
+            return self._planner.plan(self.grid.cells, start, goal_rc, offset_rc=offset, avoid=avoid)
+        return self._planner.plan(self.grid.cells, start, goal_rc, avoid=avoid)
 
     def _reactor_target(
         self, pose: Pose2D, goal: NDArray[np.float64], planned: PlanResult
