@@ -164,7 +164,7 @@ class Planner(Protocol):
 
 class AvoidMarks:
     """The routes traps were detected on (``RouteParams.avoid_cost``), held in world cells: each mark is
-    the first ``avoid_m`` of the route's raw cells, widened by ``radius_m``, and lasts ``avoid_s``. The
+    the first ``avoid_m`` of the course it followed, widened by ``radius_m``, and lasts ``avoid_s``. The
     stack marks on a tick whose supervisor detected a trap and hands the planner the marks falling in the
     grid (``mask``)."""
 
@@ -180,15 +180,18 @@ class AvoidMarks:
     def __bool__(self) -> bool:
         return bool(self._marks)
 
-    def mark(self, path_cells: NDArray[np.int32], offset_rc: tuple[int, int], t_ns: int) -> None:
-        """Mark the first ``avoid_m`` of a route (raw grid cells from the robot on, ``PlanResult.path_cells``;
-        ``offset_rc`` the world cell of grid cell (0, 0)) until ``t_ns + avoid_s``."""
-        cells = np.asarray(path_cells, dtype=np.int64).reshape(-1, 2)
-        if cells.shape[0] == 0:
+    def mark(self, planned: PlanResult, offset_rc: tuple[int, int], t_ns: int) -> None:
+        """Mark the first ``avoid_m`` of a route until ``t_ns + avoid_s``: the tightened path
+        (``PlanResult.waypoints_cells``, the course the reactor is given; the raw cells may wander round the
+        robot's own C-obstacle cell first), sampled every half cell. ``offset_rc``: the world cell of grid
+        cell (0, 0)."""
+        wp = np.asarray(planned.waypoints_cells, dtype=np.float64).reshape(-1, 2)
+        if wp.shape[0] == 0:
             return
-        steps = np.hypot(*np.diff(cells, axis=0).T.astype(np.float64))
-        along = np.concatenate([[0.0], np.cumsum(steps)])
-        ahead = cells[along <= self.route.avoid_m / self.cell_m] + np.asarray(offset_rc, dtype=np.int64)
+        along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(wp, axis=0).T))])
+        s = np.arange(0.0, min(self.route.avoid_m / self.cell_m, along[-1]) + 0.5, 0.5)
+        pts = np.column_stack([np.interp(s, along, wp[:, 0]), np.interp(s, along, wp[:, 1])])
+        ahead = np.rint(pts).astype(np.int64) + np.asarray(offset_rc, dtype=np.int64)
         wide = np.unique((ahead[:, None, :] + self._disc[None, :, :]).reshape(-1, 2), axis=0)
         self._marks.append((t_ns + round(self.route.avoid_s * 1e9), wide))
 

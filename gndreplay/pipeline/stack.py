@@ -325,7 +325,7 @@ class NavigationStack:
         verdict = self.supervisor.supervise(proposal)
         timings["supervisor"] = _ms(t0)
         if verdict.flags & Flag.TRAP_DETECTED and planned.ok and p.planner.avoid_cost != 1.0:
-            self._avoid.mark(planned.path_cells, self.grid.offset_cells, scan.t_ns)
+            self._avoid.mark(planned, self.grid.offset_cells, scan.t_ns)
         path = planned.waypoints_cells
         path_xy = self.grid.cells_to_world(path) if path.shape[0] else np.zeros((0, 2))
         return TickResult(
