@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from gndreplay.pipeline.cspace import free_cspace
 from gndreplay.pipeline.model import FREE, OCCUPIED, shift_cells
-from gndreplay.pipeline.nf1 import Nf1Params, Nf1Planner, plan, route_cost
+from gndreplay.pipeline.nf1 import Nf1Params, Nf1Planner, plan, route_cost, step_costs
 from gndreplay.pipeline.planner import PlanResult, RouteParams
 from gndreplay.types import Flag
 
@@ -136,8 +136,24 @@ def test_route_cost_weights_unknown_cells() -> None:
     unknown = np.zeros((1, 11), dtype=bool)
     assert route_cost(wp) == pytest.approx(10.0)
     unknown[0, 6:11] = True  # the last 5 of the 10 cells entered
-    assert route_cost(wp, unknown, 3.0) == pytest.approx(10.0 * (1 + 2.0 * 0.5))
-    assert route_cost(wp, unknown, 1.0) == pytest.approx(10.0)
+    assert route_cost(wp, step_costs(unknown, 3.0)) == pytest.approx(10.0 * (1 + 2.0 * 0.5))
+    assert step_costs(unknown, 1.0) is None
+
+
+def test_route_cost_weights_avoided_cells_and_both_at_the_product() -> None:
+    wp = np.array([[0.0, 0.0], [0.0, 10.0]])
+    unknown = np.zeros((1, 11), dtype=bool)
+    avoid = np.zeros((1, 11), dtype=bool)
+    unknown[0, 6:11] = True  # the last 5 of the 10 cells entered
+    avoid[0, 9:11] = True  # the last 2, both also unknown
+    costs = step_costs(unknown, 3.0, avoid, 10.0)
+    assert costs is not None
+    # 5 plain cells, 3 unknown at 3, 2 unknown and avoided at 30: the mean factor over the 10 entered
+    assert route_cost(wp, costs) == pytest.approx(10.0 * (5 * 1 + 3 * 3 + 2 * 30) / 10)
+    only_avoid = step_costs(None, 3.0, avoid, 10.0)
+    assert only_avoid is not None
+    assert route_cost(wp, only_avoid) == pytest.approx(10.0 * (8 + 2 * 10) / 10)
+    assert step_costs(unknown, 1.0, np.zeros_like(avoid), 10.0) is None  # nothing to avoid
 
 
 def test_bad_margins() -> None:

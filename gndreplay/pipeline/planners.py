@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import did_you_mean
 from .cspace import free_cspace
 from .model import UNKNOWN
-from .nf1 import Nf1Params, Nf1Planner
+from .nf1 import Nf1Params, Nf1Planner, plan
 from .planner import Planner, RouteParams
 from .tunnel import TunnelParams, TunnelPlanner, warm_up_planners
 
@@ -89,9 +89,16 @@ def _warm_up_tunnel(settings: TunnelParams, size_cells: int) -> None:
 
 
 def _warm_up_nf1(settings: Nf1Params, size_cells: int) -> None:
-    """The whole-grid C-space of NF1's route hysteresis (``cspace.free_cspace``): computed only on a tick
-    whose held route the followed C-space blocks, which the stack's synthetic scans do not produce."""
+    """What the stack's synthetic scans do not reach: the whole-grid C-space of NF1's route hysteresis
+    (``cspace.free_cspace``, computed only on a tick whose held route the followed C-space blocks) and the
+    weighted wave of a route to avoid (``RouteParams.avoid_cost``, only after a trap), to a goal in the grid
+    and to one beyond it."""
     free_cspace(np.full((8, 8), UNKNOWN, dtype=np.uint8), cell_m=0.05, inflate_m=0.1, unknown_is_free=True)
+    free = np.ones((8, 8), dtype=np.bool_)
+    avoid = np.zeros((8, 8), dtype=np.bool_)
+    avoid[2:6, 4] = True
+    for goal in ((4.5, 7.5), (4.5, 20.0)):
+        plan(free, (4, 1), goal, cell_m=0.05, params=settings, avoid=avoid, avoid_cost=2.0)
 
 
 PLANNERS: dict[str, PlannerSpec] = {
