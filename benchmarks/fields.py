@@ -10,6 +10,7 @@ goal of the successes and the mean optimal path. Runs are sequential in this pro
 
     .venv/bin/python benchmarks/fields.py --fields 10 --seeds 1 --preset xr4000 --vmax 0.5 --jobs 1
     .venv/bin/python benchmarks/fields.py --fields 50 --seeds 3 --preset xr4000 --vmax 2.0 --jobs 2
+    .venv/bin/python benchmarks/fields.py --fields 50 --preset compact --set planner.avoid_cost=1 --jobs 2
 """
 
 from __future__ import annotations
@@ -30,31 +31,33 @@ from gndreplay.config import CliOverrides, Config, configure
 from gndreplay.sim import load_scenario, simulate_scenario
 from gndreplay.sim.fields import generate_fields
 
-# field file, preset, vmax, seed, ideal dynamics, output folder
-Task = tuple[str, str, float, int, bool, str]
+# field file, preset, vmax, seed, ideal dynamics, output folder, --set pairs
+Task = tuple[str, str, float, int, bool, str, tuple[str, ...]]
 
 
-def config(preset_name: str, vmax: float) -> Config:
-    """The preset with its top speed set."""
-    return configure(preset_name=preset_name, overrides=CliOverrides(sets=(f"robot.vmax_mps={vmax!r}",)))
+def config(preset_name: str, vmax: float, sets: tuple[str, ...] = ()) -> Config:
+    """The preset with its top speed set, and the ``--set`` pairs."""
+    return configure(preset_name=preset_name,
+                     overrides=CliOverrides(sets=(f"robot.vmax_mps={vmax!r}", *sets)))
 
 
 def one(task: Task) -> dict[str, Any]:
     """One run: outcome, time, challenge metric, optimal path."""
-    path, preset_name, vmax, seed, ideal, out = task
+    path, preset_name, vmax, seed, ideal, out, sets = task
     t0 = time.perf_counter()
     spec = load_scenario(Path(path))
-    o = simulate_scenario(spec, out_dir=Path(out) / f"{spec.name}-{seed}", cfg=config(preset_name, vmax),
-                          seed=seed, figures=False, overwrite=True, ideal_dynamics=ideal)
+    o = simulate_scenario(spec, out_dir=Path(out) / f"{spec.name}-{seed}",
+                          cfg=config(preset_name, vmax, sets), seed=seed, figures=False, overwrite=True,
+                          ideal_dynamics=ideal)
     return {"field": spec.name, "seed": seed, "outcome": o.outcome, "t": o.time_to_goal_s,
             "metric": o.challenge_metric, "optimal": o.optimal_path_m, "clear": o.min_clearance_m,
             "wall": time.perf_counter() - t0}
 
 
-def warm(out: str, path: str, preset_name: str, vmax: float) -> None:
+def warm(out: str, path: str, preset_name: str, vmax: float, sets: tuple[str, ...]) -> None:
     """Compile every kernel with one short run (not timed)."""
-    simulate_scenario(load_scenario(Path(path)), out_dir=Path(out) / "warm", cfg=config(preset_name, vmax),
-                      seed=0, figures=False, time_limit_s=2.0, overwrite=True)
+    simulate_scenario(load_scenario(Path(path)), out_dir=Path(out) / "warm",
+                      cfg=config(preset_name, vmax, sets), seed=0, figures=False, time_limit_s=2.0, overwrite=True)
 
 
 def main() -> None:
@@ -66,20 +69,23 @@ def main() -> None:
     ap.add_argument("--vmax", type=float, default=0.5, help="robot.vmax_mps [m/s]")
     ap.add_argument("--ideal-dynamics", action="store_true", help="the exact motion model (no lag, no slip)")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes")
+    ap.add_argument("--set", action="append", default=[], dest="sets",
+                    help="a configuration override for every run, section.key=value (repeatable)")
     ap.add_argument("--out", default="", help="keep the fields and runs here (default: a temporary dir)")
     a = ap.parse_args()
     out = a.out or tempfile.mkdtemp(prefix="gndreplay-bench-fields-")
-    cfg = config(a.preset, a.vmax)
+    sets = tuple(a.sets)
+    cfg = config(a.preset, a.vmax, sets)
     folder, files = generate_fields(Path(out) / "fields", count=a.fields, seed=a.field_seed, robot=cfg.robot,
                                     preset_name=cfg.preset, overwrite=True)
     runs = str(Path(out) / "runs")
-    tasks: list[Task] = [(str(f), a.preset, a.vmax, s, a.ideal_dynamics, runs) for s in range(a.seeds)
+    tasks: list[Task] = [(str(f), a.preset, a.vmax, s, a.ideal_dynamics, runs, sets) for s in range(a.seeds)
                          for f in files]
-    warm(runs, str(files[0]), a.preset, a.vmax)
+    warm(runs, str(files[0]), a.preset, a.vmax, sets)
     t0 = time.perf_counter()
     results: list[dict[str, Any]] = []
     if a.jobs > 1:
-        first = (runs, str(files[0]), a.preset, a.vmax)
+        first = (runs, str(files[0]), a.preset, a.vmax, sets)
         with ProcessPoolExecutor(a.jobs, initializer=warm, initargs=first) as ex:
             results = list(ex.map(one, tasks))
     else:
@@ -90,6 +96,7 @@ def main() -> None:
     wall = time.perf_counter() - t0
     print(f"{a.fields} fields (seed {a.field_seed}) x {a.seeds} seeds, {a.preset} at vmax {a.vmax:g} m/s, "
           f"{'ideal dynamics' if a.ideal_dynamics else 'dynamics on'}, latency 0 s, {a.jobs} process(es), "
+          f"{'set ' + ' '.join(sets) + ', ' if sets else ''}"
           f"wall {wall:.0f} s; fields in {folder}\n")
     print("| field | seed | outcome | time s | optimal m | challenge metric | min clearance m |")
     print("|---|---|---|---|---|---|---|")
