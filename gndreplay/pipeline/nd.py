@@ -816,9 +816,9 @@ def _admissible_drive(theta: float, v_nd: float, robot: RobotConfig, points: F64
         candidates.append((v_nd, 0.0, True))
     small_turn = 0.0 < turn < _SWEEP_MIN_TURN_RAD
     if small_turn:  # a small correction in place: only when nothing forward fits, and it opens the way
-        candidates.append((0.0, sign * w_turn, True))
+        candidates.append((0.0, w_align, True))
     if turn > _HALF_PI or _blocked_now(points, law_v, law_w, v_nd, robot):
-        candidates.extend([(v_back, sign * w_turn, True), (v_back, 0.0, True)])
+        candidates.extend([(v_back, w_align, True), (v_back, 0.0, True)])
     for v, w, whole in candidates:
         if v == 0.0 and w == 0.0:
             continue

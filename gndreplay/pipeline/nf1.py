@@ -1103,10 +1103,13 @@ def keep_route(
     border cell), and its cost (``route_cost`` with the wave's step ``costs`` + the straight line
     beyond the grid) is at most ``(1 + route.route_keep_ratio) * new cost + route.route_keep_m``. Then the
     held route's PlanResult (``cost_m`` its ``route_cost``; the wave's effort in ``nodes_expanded``; its
-    direction ``route.lookahead_m`` along it)."""
+    direction ``route.lookahead_m`` along it). Also when this tick's plan escapes from a robot cell in
+    C-obstacle: a robot at the jamb of a door barely wider than itself stands in C-obstacle, and the
+    escape's nearest free cell may lie behind it; the held route through the door is rejoined from the
+    robot cell as from any other."""
     h, w = free.shape
     end = held[-1]
-    if new.n_escape or held.shape[0] < 2 or not free[end[0], end[1]]:
+    if held.shape[0] < 2 or not free[end[0], end[1]]:
         return new
     if new.goal_projected:
         if not (end[0] in (0, h - 1) or end[1] in (0, w - 1)):
