@@ -56,7 +56,7 @@ def one(task: Task) -> dict[str, Any]:
 
 def warm(out: str, path: str, preset_name: str, vmax: float, sets: tuple[str, ...]) -> None:
     """Compile every kernel with one short run (not timed)."""
-    simulate_scenario(load_scenario(Path(path)), out_dir=Path(out) / "warm",
+    simulate_scenario(load_scenario(Path(path)), out_dir=Path(out) / f"warm-{os.getpid()}",
                       cfg=config(preset_name, vmax, sets), seed=0, figures=False, time_limit_s=2.0,
                       overwrite=True)
 

@@ -89,7 +89,7 @@ def warm(out: str, presets: list[str], planners: list[str], names: list[str]) ->
     for mode, name in first.items():
         for p in presets:
             for k in planners if mode == "gnd" else [NO_PLANNER]:
-                simulate_scenario(name, out_dir=Path(out) / f"warm-{mode}-{p}-{k}", cfg=config(p, k), seed=0,
+                simulate_scenario(name, out_dir=Path(out) / f"warm-{os.getpid()}-{mode}-{p}-{k}", cfg=config(p, k), seed=0,
                                   figures=False, time_limit_s=2.0, overwrite=True)
 
 

@@ -991,14 +991,17 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
 
     axis: tuple[float, float, float, float] | None = None
     align = False
-    if robot.shape == "rectangle" and robot.drive == "differential" and abs(beta) <= _HALF_PI and (
+    rect_diff = robot.shape == "rectangle" and robot.drive == "differential"
+    if (rect_diff or situation is Situation.LS2) and abs(beta) <= _HALF_PI and (
             region.kind is not _Kind.GOAL or goal_r > robot.front_m):  # a goal within reach: steer to it
         axis = _passage_axis(dist, ang, left_side, beta,
                              min_width_m=geo.gap_m, max_width_m=geo.gap_m + 2.0 * params.security_m,
                              reach_m=robot.front_m + robot.rear_m + params.security_m,
                              behind_m=robot.rear_m + 0.5 * params.security_m, front_m=robot.front_m)
-        if axis is not None:
+        if axis is not None and rect_diff:
             theta, align = _stage_direction(axis, robot, dist, ang, 0.5 * geo.gap_m + params.security_m)
+        elif axis is not None:
+            theta = _follow_axis(axis, robot.front_m + robot.rear_m)
     v_nd = robot.vmax_mps * min(c_l, c_r)
     if axis is not None:  # along a passage the swept-footprint checks, not the side clearance, bound it
         v_nd = max(v_nd, _PASSAGE_V_FRAC * robot.vmax_mps)
