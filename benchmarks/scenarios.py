@@ -89,8 +89,10 @@ def warm(out: str, presets: list[str], planners: list[str], names: list[str]) ->
     for mode, name in first.items():
         for p in presets:
             for k in planners if mode == "gnd" else [NO_PLANNER]:
-                simulate_scenario(name, out_dir=Path(out) / f"warm-{os.getpid()}-{mode}-{p}-{k}", cfg=config(p, k), seed=0,
-                                  figures=False, time_limit_s=2.0, overwrite=True)
+                # one folder per process: the pool's workers warm up at the same time
+                folder = Path(out) / f"warm-{os.getpid()}-{mode}-{p}-{k}"
+                simulate_scenario(name, out_dir=folder, cfg=config(p, k), seed=0, figures=False,
+                                  time_limit_s=2.0, overwrite=True)
 
 
 def main() -> None:
