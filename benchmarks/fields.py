@@ -16,6 +16,7 @@ goal of the successes and the mean optimal path. Runs are sequential in this pro
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import statistics
 import sys
@@ -51,6 +52,7 @@ def one(task: Task) -> dict[str, Any]:
                           ideal_dynamics=ideal)
     return {"field": spec.name, "seed": seed, "outcome": o.outcome, "t": o.time_to_goal_s,
             "metric": o.challenge_metric, "optimal": o.optimal_path_m, "clear": o.min_clearance_m,
+            "passage": o.narrowest_passage_m,
             "wall": time.perf_counter() - t0}
 
 
@@ -99,11 +101,12 @@ def main() -> None:
           f"{'ideal dynamics' if a.ideal_dynamics else 'dynamics on'}, latency 0 s, {a.jobs} process(es), "
           f"{'set ' + ' '.join(sets) + ', ' if sets else ''}"
           f"wall {wall:.0f} s; fields in {folder}\n")
-    print("| field | seed | outcome | time s | optimal m | challenge metric | min clearance m |")
-    print("|---|---|---|---|---|---|---|")
+    print("| field | seed | outcome | time s | optimal m | challenge metric | min clearance m "
+          "| narrowest passage m |")
+    print("|---|---|---|---|---|---|---|---|")
     for r in results:
         print(f"| {r['field']} | {r['seed']} | {r['outcome']} | {_f(r['t'], 1)} | {_f(r['optimal'], 2)} "
-              f"| {_f(r['metric'], 3)} | {_f(r['clear'], 3)} |")
+              f"| {_f(r['metric'], 3)} | {_f(r['clear'], 3)} | {_f(r['passage'], 2)} |")
     n = len(results)
     count = {k: sum(r["outcome"] == k for r in results) for k in ("success", "collision", "timeout",
                                                                   "goal_missed")}
@@ -114,6 +117,22 @@ def main() -> None:
           f"mean challenge metric {_f(statistics.fmean(metrics) if metrics else None, 4)}; mean time to goal "
           f"{_f(statistics.fmean(times) if times else None, 1)} s; mean optimal path "
           f"{_f(statistics.fmean(r['optimal'] for r in results if r['optimal']), 2)} m")
+
+    _by_passage(results, cfg.robot.width_m if cfg.robot.shape == "rectangle" else 2.0 * cfg.robot.radius_m)
+
+
+def _by_passage(results: list[dict[str, Any]], width_m: float) -> None:
+    """Outcomes per band of the field's narrowest passage less the robot's width (the play it leaves)."""
+    bands = [(0.0, 0.1), (0.1, 0.2), (0.2, math.inf)]
+    print(f"\n| play: narrowest passage - robot width ({width_m:g} m) | runs | success | time-outs "
+          f"| goals missed | collisions |")
+    print("|---|---|---|---|---|---|")
+    for lo, hi in bands:
+        rows = [r for r in results if r["passage"] is not None and lo <= r["passage"] - width_m < hi]
+        n = {k: sum(r["outcome"] == k for r in rows)
+             for k in ("success", "timeout", "goal_missed", "collision")}
+        name = f"{lo:g} to {hi:g} m" if math.isfinite(hi) else f"{lo:g} m or more"
+        print(f"| {name} | {len(rows)} | {n['success']} | {n['timeout']} | {n['goal_missed']} | {n['collision']} |")
 
 
 def _f(value: float | None, digits: int) -> str:

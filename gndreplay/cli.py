@@ -1422,17 +1422,21 @@ def _warn_matcher(run_dir: Path) -> None:
 
 
 def _print_simulation(result: SimOutcome, title: str) -> None:
-    """One line: how the scenario run ended, its path (and the optimal one), clearance, challenge metric, and
-    where it was written."""
+    """One line: how the scenario run ended, its path (and the optimal one), clearance, the narrowest passage
+    on the way, challenge metric, and where it was written; a warning when the robot does not fit that
+    passage."""
     c = result.collision
     what = (f"collision with {c['object']} at {c['t_s']:.2f} s" if c else
             f"{result.outcome} at {result.end_time_s:.1f} s")
     typer.echo(
         f"{title}: {what}; path {result.path_length_m:.1f} m (optimal "
         f"{_num(result.optimal_path_m, '{:.1f}')} m), min clearance "
-        f"{_num(result.min_clearance_m, '{:.3f}')} m, challenge metric "
+        f"{_num(result.min_clearance_m, '{:.3f}')} m, narrowest passage "
+        f"{_num(result.narrowest_passage_m, '{:.2f}')} m, challenge metric "
         f"{_num(result.challenge_metric, '{:.3f}')} -> {result.out_dir}"
     )
+    if result.passage_warning is not None:
+        typer.echo(f"gndreplay: warning: {title}: {result.passage_warning}", err=True)
 
 
 def _list_scenarios(*, given: bool) -> None:

@@ -64,9 +64,15 @@ Differences from ALGORITHMS.md / the released code, and why
       round each tick as it turned and dithered in place.
     * Not ported (the supervisor owns them): the code's front emergency stop, and the rectangular robot's
       rear "cutting" correction, which needs the previous velocities.
+    * A narrow passage in LS2 (any robot): when a left / right pair of obstacle points narrower than
+      W + 2 Ds lies on the way, the direction pursues the passage axis one robot length ahead
+      (``_follow_axis``) and the speed is at least ``_PASSAGE_V_FRAC * vmax``. The LS2 law weighs the two
+      sides' clearance ratios; with both a few centimetres (the XR4000 in a 0.8 m narrowing) it swung by
+      tens of degrees on a centimetre's difference, every sideways motion was refused by the reflexive
+      check and the robot turned on the spot; the ratio-scaled speed was a crawl.
 
 Rectangular differential chair (a simple stand-in for the shape / kinematics abstraction
-of the wheelchair paper's reference [18]; the circle and the holonomic base are unchanged)
+of the wheelchair paper's reference [18]; the circle and the holonomic base only as above)
     * Passages: while the region direction is ahead, when a left / right pair of obstacle points narrower
       than W + 2 Ds lies on the way (the region direction crosses it) or around the body, the direction
       pursues the passage axis (``_passage_axis``, ``_follow_axis``): the axle reaches the axis, and the
@@ -100,7 +106,9 @@ of the wheelchair paper's reference [18]; the circle and the holonomic base are 
       (wheelchair_office_exit's 0.85 m door: 6-10 s stalls there in all 20 seeds). When nothing forward is
       admissible, the small correction in place comes before reversing, if the turn sweeps free and
       straight on is free once turned; a turn that does not open the way is not made (it would only be
-      undone next tick).
+      undone next tick). It and the turn while reversing slow with the error (``_ALIGN_GAIN``): at half of
+      wmax a 2 deg correction overshot to the other side each tick, and the chair rocked between creeping
+      forward and reversing at the jambs.
     * ``min_clearance_m`` is the exact distance to the footprint.
 """
 

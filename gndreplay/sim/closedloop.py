@@ -70,7 +70,7 @@ from .geometry import (
 )
 from .scenario import DEFAULT_T0_NS, OdometryNoise, check_seed
 from .scenario_file import DEFAULT_YIELD_M, MAX_TIME_S, MIN_TIME_LIMIT_S, Element, ScenarioSpec
-from .score import OptimalPath, challenge_metric, optimal_path, optimal_time_s
+from .score import CELL_M, OptimalPath, challenge_metric, narrowest_passage_m, optimal_path, optimal_time_s
 from .teleop import TeleopDriver
 from .world import LaserModel, add_laser_noise
 
@@ -698,10 +698,28 @@ class ClosedLoop:
         """The shortest path of the robot's inscribed circle from the start to the goal in the static world
         at t = 0 (:mod:`.score`; computed once)."""
         if self._optimal is None:
-            shapes = static_shapes(self.spec.elements, 0.0, np.zeros(len(self.spec.elements)))
-            self._optimal = optimal_path(shapes, (self.spec.start[0], self.spec.start[1]), self.goal,
-                                         self.cfg.robot.inscribed_radius_m)
+            self._optimal = optimal_path(self._static_world(), (self.spec.start[0], self.spec.start[1]),
+                                         self.goal, self.cfg.robot.inscribed_radius_m)
         return self._optimal
+
+    def narrowest_passage(self) -> tuple[float | None, str | None]:
+        """The narrowest passage on the widest way from the start to the goal in the static world at t = 0
+        (:func:`.score.narrowest_passage_m`), and a warning when it is narrower than the robot plus the
+        reflexive check's margin on each side (no robot with those margins crosses it, whatever the stack
+        does)."""
+        width = narrowest_passage_m(self._static_world(), (self.spec.start[0], self.spec.start[1]), self.goal)
+        robot = self.cfg.robot
+        body = 2.0 * robot.radius_m if robot.shape == "circle" else robot.width_m
+        need = body + 2.0 * self.cfg.supervisor.emergency_margin_m
+        if width is None or width >= need:
+            return width, None
+        return width, (f"the narrowest passage on the way to the goal is {width:.2f} m wide (to about "
+                       f"{CELL_M:g} m): the robot is {body:.2f} m wide and keeps "
+                       f"{self.cfg.supervisor.emergency_margin_m:g} m on each side, so it needs {need:.2f} m")
+
+    def _static_world(self) -> Shapes:
+        """The static world at t = 0: every element present then, door leaves as they stand, no mover."""
+        return static_shapes(self.spec.elements, 0.0, np.zeros(len(self.spec.elements)))
 
     def result(self) -> dict[str, Any]:
         """result.json: a pure function of (scenario, config, seed) with a fixed latency.
@@ -727,8 +745,11 @@ class ClosedLoop:
         ``ideal_dynamics``; the challenge score (:mod:`.score`): ``optimal_path_m`` (the inscribed circle's
         shortest path from the start to the goal in the static world at t = 0; None when there is none),
         ``optimal_time_s`` (OT: that at 2 m/s) and ``challenge_metric`` (success * OT / clip(time to goal,
-        2 OT, 8 OT); None without an optimal path); ``world_warnings``: what the world's map or SDF files
-        held that the simulator skipped (one line per file).
+        2 OT, 8 OT); None without an optimal path), ``narrowest_passage_m`` (the narrowest passage on the
+        widest way to the goal, :func:`.score.narrowest_passage_m`; None without a way) and
+        ``passage_warning`` (a line when it is narrower than the robot plus the reflexive check's margins,
+        else None); ``world_warnings``: what the world's map or SDF files held that the simulator skipped
+        (one line per file).
         """
         rec = self.rec
         truth = np.asarray(rec.truth, dtype=np.float64).reshape(-1, 3)
@@ -744,6 +765,7 @@ class ClosedLoop:
         end = truth[-1]
         best = self.optimal_path().length_m
         ot = None if best is None else optimal_time_s(best)
+        passage, passage_warning = self.narrowest_passage()
         return {
             "scenario": self.spec.name,
             "source": self.spec.source,
@@ -794,6 +816,8 @@ class ClosedLoop:
             "optimal_time_s": ot,
             "challenge_metric": None if ot is None else challenge_metric(
                 self.outcome == "success", self.end_t_s, ot),
+            "narrowest_passage_m": passage,
+            "passage_warning": passage_warning,
             "world_warnings": list(self.spec.world_warnings),
         }
 

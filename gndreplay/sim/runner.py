@@ -80,6 +80,8 @@ class SimOutcome:
     goal_missed: dict[str, Any] | None = None
     optimal_path_m: float | None = None
     challenge_metric: float | None = None
+    narrowest_passage_m: float | None = None
+    passage_warning: str | None = None
 
     @property
     def success(self) -> bool:

@@ -33,8 +33,8 @@ from ..pipeline.nf1 import descend, nf1_wavefront, tighten
 from .geometry import Shapes
 
 __all__ = [
-    "CELL_M", "CHALLENGE_SPEED_MPS", "MAX_CELLS", "OptimalPath", "challenge_metric", "optimal_path",
-    "optimal_time_s", "rasterise",
+    "CELL_M", "CHALLENGE_SPEED_MPS", "MAX_CELLS", "PASSAGE_MAX_M", "OptimalPath", "challenge_metric",
+    "narrowest_passage_m", "optimal_path", "optimal_time_s", "rasterise",
 ]
 
 F64 = NDArray[np.float64]
@@ -45,6 +45,9 @@ MAX_CELLS = 4_000_000
 #: The navigation challenge's reference speed [m/s]: OT = optimal length / this.
 CHALLENGE_SPEED_MPS = 2.0
 _MARGIN_M = 0.5
+#: The widest passage ``narrowest_passage_m`` tells apart [m] (wider ones are reported as this).
+PASSAGE_MAX_M = 4.0
+_PASSAGE_STEPS = 12  # bisection steps: a 4 m range to 1 mm, far below the grid's cell
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,34 +116,86 @@ def _extent(shapes: Shapes, points: F64) -> tuple[float, float, float, float]:
     return float(x.min()), float(y.min()), float(x.max()), float(y.max())
 
 
+@dataclass(frozen=True, slots=True)
+class _Grid:
+    """The world rasterised around the start and the goal: obstacle cells, the grid's corner and cell, the
+    start's and the goal's cells."""
+
+    obstacle: NDArray[np.bool_]
+    x_lo: float
+    y_lo: float
+    cell: float
+    start_rc: tuple[int, int]
+    goal_rc: tuple[int, int]
+
+
+def _grid(shapes: Shapes, ends: F64, radius_m: float, cell_m: float) -> tuple[_Grid | None, float]:
+    """The grid of a circle of ``radius_m`` (the world, the start and the goal with ``2 r + 0.5 m`` around)
+    and its cell; no grid when it would need cells coarser than the radius."""
+    x_lo, y_lo, x_hi, y_hi = _extent(shapes, ends)
+    pad = 2.0 * radius_m + _MARGIN_M
+    x_lo, y_lo, x_hi, y_hi = x_lo - pad, y_lo - pad, x_hi + pad, y_hi + pad
+    cell = max(cell_m, math.sqrt((x_hi - x_lo) * (y_hi - y_lo) / MAX_CELLS))
+    if cell > radius_m:
+        return None, cell
+    shape = (math.ceil((y_hi - y_lo) / cell), math.ceil((x_hi - x_lo) / cell))
+    obstacle = rasterise(shapes, (x_lo, y_lo), shape, cell)
+    rc = np.floor((ends[:, ::-1] - np.array([y_lo, x_lo])) / cell).astype(np.int64)
+    ends_rc = (int(rc[0, 0]), int(rc[0, 1])), (int(rc[1, 0]), int(rc[1, 1]))
+    return _Grid(obstacle, x_lo, y_lo, cell, *ends_rc), cell
+
+
 def optimal_path(shapes: Shapes, start_xy: tuple[float, float], goal_xy: tuple[float, float],
                  radius_m: float, *, cell_m: float = CELL_M) -> OptimalPath:
     """The shortest path of a circle of ``radius_m`` from ``start_xy`` to ``goal_xy`` among ``shapes``
     (see the module docstring)."""
     ends = np.array([start_xy, goal_xy], dtype=np.float64).reshape(2, 2)
-    x_lo, y_lo, x_hi, y_hi = _extent(shapes, ends)
-    pad = 2.0 * radius_m + _MARGIN_M
-    x_lo, y_lo, x_hi, y_hi = x_lo - pad, y_lo - pad, x_hi + pad, y_hi + pad
-    cell = max(cell_m, math.sqrt((x_hi - x_lo) * (y_hi - y_lo) / MAX_CELLS))
+    g, cell = _grid(shapes, ends, radius_m, cell_m)
     none = OptimalPath(None, cell, np.zeros((0, 2)))
-    if cell > radius_m:
+    if g is None:
         return none
-    shape = (math.ceil((y_hi - y_lo) / cell), math.ceil((x_hi - x_lo) / cell))
-    obstacle = rasterise(shapes, (x_lo, y_lo), shape, cell)
     r_cells = radius_m / cell
-    free = squared_distance_cells(obstacle) >= r_cells * r_cells
-    rc = np.floor((ends[:, ::-1] - np.array([y_lo, x_lo])) / cell).astype(np.int64)
-    start_rc, goal_rc = (int(rc[0, 0]), int(rc[0, 1])), (int(rc[1, 0]), int(rc[1, 1]))
-    nf = nf1_wavefront(free, goal_rc, connectivity=8, robot_rc=start_rc, early_exit=True)
-    raw = descend(nf, free, start_rc)
+    free = squared_distance_cells(g.obstacle) >= r_cells * r_cells
+    nf = nf1_wavefront(free, g.goal_rc, connectivity=8, robot_rc=g.start_rc, early_exit=True)
+    raw = descend(nf, free, g.start_rc)
     if raw.shape[0] == 0:
         return none
     cells = tighten(raw, free).astype(np.float64)
-    xy = np.column_stack([x_lo + (cells[:, 1] + 0.5) * cell, y_lo + (cells[:, 0] + 0.5) * cell])
+    xy = np.column_stack([g.x_lo + (cells[:, 1] + 0.5) * cell, g.y_lo + (cells[:, 0] + 0.5) * cell])
     xy[0], xy[-1] = ends[0], ends[1]
     if len(xy) == 1:
         xy = ends
     return OptimalPath(float(np.sum(np.hypot(*np.diff(xy, axis=0).T))), cell, xy)
+
+
+def narrowest_passage_m(shapes: Shapes, start_xy: tuple[float, float], goal_xy: tuple[float, float], *,
+                        max_width_m: float = PASSAGE_MAX_M, cell_m: float = CELL_M) -> float | None:
+    """The width of the narrowest passage on the widest way from ``start_xy`` to ``goal_xy``: twice the
+    largest radius of a circle that travels between them (the maximin clearance over all paths, by the
+    optimal path's grid and its clearance rule, so within about a cell), ``max_width_m`` when a circle that
+    wide passes, None when no way is open at all. What a robot's width must fit: a failure to cross a world
+    whose narrowest passage is no wider than the robot plus its safety margins is the world's, not the
+    stack's. The start's and the goal's own cells count as free."""
+    ends = np.array([start_xy, goal_xy], dtype=np.float64).reshape(2, 2)
+    g, _ = _grid(shapes, ends, 0.5 * max_width_m, cell_m)
+    if g is None:
+        return None
+    d2 = squared_distance_cells(g.obstacle)
+
+    def passes(r_cells: float) -> bool:
+        nf = nf1_wavefront(d2 >= r_cells * r_cells, g.goal_rc, connectivity=8, robot_rc=g.start_rc,
+                           early_exit=True)
+        return bool(np.isfinite(nf[g.start_rc]))
+
+    lo, hi = 0.0, 0.5 * max_width_m / g.cell
+    if passes(hi):
+        return max_width_m
+    if not passes(lo):
+        return None
+    for _ in range(_PASSAGE_STEPS):  # bisection on the radius: lo passes, hi does not
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if passes(mid) else (lo, mid)
+    return 2.0 * lo * g.cell
 
 
 def optimal_time_s(length_m: float) -> float:
