@@ -132,7 +132,8 @@ def _by_passage(results: list[dict[str, Any]], width_m: float) -> None:
         n = {k: sum(r["outcome"] == k for r in rows)
              for k in ("success", "timeout", "goal_missed", "collision")}
         name = f"{lo:g} to {hi:g} m" if math.isfinite(hi) else f"{lo:g} m or more"
-        print(f"| {name} | {len(rows)} | {n['success']} | {n['timeout']} | {n['goal_missed']} | {n['collision']} |")
+        print(f"| {name} | {len(rows)} | {n['success']} | {n['timeout']} | {n['goal_missed']} "
+              f"| {n['collision']} |")
 
 
 def _f(value: float | None, digits: int) -> str:
