@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from gndreplay.pipeline.nd import NdMemory, NdParams, nd_step
+from gndreplay.pipeline.nd import _ALIGN_GAIN, NdMemory, NdParams, _admissible_drive, nd_step
 from gndreplay.pipeline.supervisor import SupervisorParams, footprint_signed_distance, safe_command
 from gndreplay.robot import WHEELCHAIR_ROBOT, XR4000_ROBOT, RobotConfig
 
@@ -275,3 +275,16 @@ def test_chair_off_the_door_axis_at_the_jambs_enters_without_rocking(front_x: fl
     assert abs(pose[0]) < 0.05
     assert min(vs) >= 0.0  # no backing off, so no forward / backward alternation
     assert min_clear > 0.03
+
+
+@pytest.mark.parametrize("theta", [0.03, -0.03, 0.1])
+def test_a_small_correction_while_backing_off_turns_by_the_error_not_at_half_wmax(theta: float) -> None:
+    """A wall 3 cm before the chair's front: nothing forward fits, so it backs off while turning towards
+    theta. The turn rate follows the error (``_ALIGN_GAIN`` x theta, at most half of wmax): at half of wmax
+    (0.25 rad/s) a 2 deg correction turned 3 deg in one 0.2 s tick, overshot to the other side, and the
+    chair rocked at the jambs of a door 0.15 m wider than itself, creeping and reversing for 15-30 s."""
+    ys = np.arange(-1.0, 1.01, 0.02)
+    wall_ahead = np.column_stack([np.full(ys.size, CHAIR.front_m + 0.03), ys])
+    v, w = _admissible_drive(theta, 0.1, CHAIR, wall_ahead)
+    assert v < 0.0
+    assert w == pytest.approx(math.copysign(min(_ALIGN_GAIN * abs(theta), 0.5 * CHAIR.wmax_radps), theta))

@@ -161,3 +161,26 @@ def test_bad_margins() -> None:
         RouteParams(route_keep_ratio=-0.1)
     with pytest.raises(ValueError, match="route_keep_m"):
         RouteParams(route_keep_m=-1.0)
+
+
+def test_the_held_route_through_a_door_is_kept_from_a_robot_cell_in_c_obstacle() -> None:
+    """A door whose C-space is one cell wide; a noisy hit extends a jamb by one cell, which closes the
+    door in the C-space (not one cell less: the route hysteresis on the C-space radius keeps the route
+    through it), while the robot stands beside that jamb, its own cell C-obstacle (its plan escapes to a
+    free neighbour). The held route is rejoined from the robot cell as from any other: the way round the
+    wall's far end (a detour of some 5 m) is not taken."""
+    cells = np.full((60, 80), FREE, dtype=np.uint8)
+    cells[30, :71] = OCCUPIED
+    cells[30, 20:25] = FREE  # the door: jambs at columns 19 and 25, C-space free on column 22 only
+    goal = (45.5, 22.5)
+    p = planner()
+    first = p.plan(cells, (20, 22), goal)
+    assert first.ok and first.direction_rad == pytest.approx(math.pi / 2, abs=0.05)  # through the door
+    noisy = cells.copy()
+    noisy[30, 20] = OCCUPIED
+    strict = free_cspace(noisy, cell_m=CELL_M, inflate_m=INFLATE_M)
+    assert not strict[29, 22] and not strict[30, 22]  # the robot cell C-obstacle, the door shut
+    afresh = plan(strict, (29, 22), goal, cell_m=CELL_M)
+    assert afresh.ok and afresh.n_escape == 1 and afresh.length_m > 5.0  # round the wall's far end
+    kept = p.plan(noisy, (29, 22), goal)
+    assert kept.ok and kept.length_m < 1.5 and kept.direction_rad == pytest.approx(math.pi / 2, abs=0.1)

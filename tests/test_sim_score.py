@@ -20,8 +20,15 @@ from gndreplay.config import preset
 from gndreplay.sim.closedloop import static_shapes
 from gndreplay.sim.fields import GOAL_AHEAD_M, draw_field, generate_fields
 from gndreplay.sim.geometry import Shapes, wall_vertices
-from gndreplay.sim.scenario_file import load_scenario
-from gndreplay.sim.score import CELL_M, challenge_metric, optimal_path, optimal_time_s
+from gndreplay.sim.scenario_file import load_scenario, parse_scenario
+from gndreplay.sim.score import (
+    CELL_M,
+    PASSAGE_MAX_M,
+    challenge_metric,
+    narrowest_passage_m,
+    optimal_path,
+    optimal_time_s,
+)
 
 runner = CliRunner()
 
@@ -73,6 +80,54 @@ def test_a_wall_with_a_gap_costs_the_analytic_detour_within_the_grid_error() -> 
     in_room = optimal_path(gap_room, (0.0, 0.0), (10.0, 0.0), r).length_m
     assert in_room == pytest.approx(best.length_m, abs=CELL_M)
     assert optimal_path(gap_room, (0.0, 0.0), (10.0, 0.0), 1.05).length_m is None  # too wide for the gap
+
+
+@pytest.mark.parametrize("gap", [0.5, 0.62, 0.8, 1.13])
+def test_the_narrowest_passage_is_the_gap_within_a_cell(gap: float) -> None:
+    """A closed room split by a wall with a gap of ``gap`` (the only way) and a wider way round it that a
+    second wall closes: the narrowest passage is the gap, to the grid's cell; opened, the way round wins."""
+    frame = [(-1.0, -3.0, 11.0, -3.0), (-1.0, 3.0, 11.0, 3.0), (-1.0, -3.0, -1.0, 3.0),
+             (11.0, -3.0, 11.0, 3.0)]
+    wall = [(5.0, -3.0, 5.0, 1.0), (5.0, 1.0 + gap, 5.0, 3.0)]
+    w = narrowest_passage_m(walls(*wall, *frame), (0.0, 0.0), (10.0, 0.0))
+    assert w == pytest.approx(gap, abs=1.5 * CELL_M)
+    # a second way, 2 m wide, through the wall's lower part: the widest way's narrowest passage is 2 m
+    wide = [(5.0, -3.0, 5.0, -2.5), (5.0, -0.5, 5.0, 1.0), (5.0, 1.0 + gap, 5.0, 3.0)]
+    assert narrowest_passage_m(walls(*wide, *frame), (0.0, 0.0), (10.0, 0.0)) == pytest.approx(
+        2.0, abs=1.5 * CELL_M)
+    shut = [(5.0, -3.0, 5.0, 3.0)]
+    assert narrowest_passage_m(walls(*shut, *frame), (0.0, 0.0), (10.0, 0.0)) is None
+    assert narrowest_passage_m(walls(), (0.0, 0.0), (10.0, 0.0)) == PASSAGE_MAX_M  # open ground
+
+
+def test_result_json_warns_when_the_robot_does_not_fit_the_way(tmp_path: Path) -> None:
+    from gndreplay.config import CliOverrides, configure
+    from gndreplay.sim import simulate_scenario
+
+    doc = {"name": "slot", "start": [0.0, 0.0, 0.0], "goal": [6.0, 0.0], "time_limit": 0.5,
+           "world": {"walls": {"s": [-1.0, -2.0, 7.0, -2.0], "n": [-1.0, 2.0, 7.0, 2.0],
+                               "w": [-1.0, -2.0, -1.0, 2.0], "e": [7.0, -2.0, 7.0, 2.0],
+                               "lo": [3.0, -2.0, 3.0, -0.36], "hi": [3.0, 0.36, 3.0, 2.0]}}}
+    spec = parse_scenario(doc, "slot.yaml")
+    fits = simulate_scenario(spec, out_dir=tmp_path / "xr", figures=False,
+                             cfg=configure(preset_name="xr4000", overrides=CliOverrides()))
+    tight = simulate_scenario(spec, out_dir=tmp_path / "chair", figures=False,
+                              cfg=configure(preset_name="wheelchair", overrides=CliOverrides()))
+    assert fits.narrowest_passage_m == pytest.approx(0.72, abs=1.5 * CELL_M) and fits.passage_warning is None
+    assert tight.passage_warning is not None and "0.70 m wide" in tight.passage_warning
+    res = json.loads((tmp_path / "chair" / "result.json").read_text())
+    assert res["passage_warning"] == tight.passage_warning and res["narrowest_passage_m"] == pytest.approx(
+        tight.narrowest_passage_m)
+    cli = runner.invoke(app, ["simulate", str(_write(tmp_path / "slot.yaml", doc)), "--no-figures", "--out",
+                              str(tmp_path / "cli")])
+    assert "narrowest passage" in cli.stdout and "warning:" in cli.stderr and "needs 0.74 m" in cli.stderr
+
+
+def _write(path: Path, doc: dict[str, object]) -> Path:
+    import yaml
+
+    path.write_text(yaml.safe_dump(doc))
+    return path
 
 
 def test_the_challenge_metric_edge_cases() -> None:

@@ -182,9 +182,11 @@ def narrowest_passage_m(shapes: Shapes, start_xy: tuple[float, float], goal_xy: 
         return None
     d2 = squared_distance_cells(g.obstacle)
 
+    open_cells = ~g.obstacle
+
     def passes(r_cells: float) -> bool:
-        nf = nf1_wavefront(d2 >= r_cells * r_cells, g.goal_rc, connectivity=8, robot_rc=g.start_rc,
-                           early_exit=True)
+        nf = nf1_wavefront(open_cells & (d2 >= r_cells * r_cells), g.goal_rc, connectivity=8,
+                           robot_rc=g.start_rc, early_exit=True)
         return bool(np.isfinite(nf[g.start_rc]))
 
     lo, hi = 0.0, 0.5 * max_width_m / g.cell
