@@ -374,6 +374,8 @@ RANGES: dict[tuple[type, str], Range] = {
     (SupervisorParams, "budget_reactor_s"): _pos(_TIME),
     (SupervisorParams, "rotate_w_frac"): _FRAC,
     (SupervisorParams, "goal_tolerance_m"): _pos(_LEN),
+    (SupervisorParams, "goal_arrive_frac"): _FRAC,
+    (SupervisorParams, "goal_settle_s"): _nonneg(_TIME),
     (SupervisorParams, "stale_scan_s"): _pos(3600.0),
     (SupervisorParams, "reaction_s"): _nonneg(_TIME),
     (SupervisorParams, "emergency_margin_m"): _nonneg(10.0),

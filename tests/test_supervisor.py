@@ -8,7 +8,7 @@ import pytest
 from gndreplay import detmath as dm
 from gndreplay.pipeline.model import FREE, OCCUPIED, UNKNOWN, GridParams, RobotCentredGrid
 from gndreplay.pipeline.selector import swept_area_occupied
-from gndreplay.pipeline.supervision import TrapDetector
+from gndreplay.pipeline.supervision import GoalArrival, TrapDetector
 from gndreplay.pipeline.supervisor import (
     Mode,
     SafeCommand,
@@ -548,3 +548,36 @@ def test_arc_poses_span_the_horizon_evenly() -> None:
     assert th[0] == 0.0 and th[-1] == 0.8 * 0.7
     assert np.allclose(np.diff(th), th[-1] / (th.size - 1))
     assert np.allclose(np.hypot(px, py), 2.0 * (0.5 / 0.8) * np.abs(np.sin(th / 2.0)))  # chord of the arc
+
+
+def _arrive(arrival: GoalArrival, x: float, t_s: float, goal: tuple[float, float] = (10.0, 0.0)) -> bool:
+    """The robot at (x, 0) heading +x, the goal ``goal`` in the world, at ``t_s``."""
+    pose = Pose2D(x, 0.0, 0.0)
+    return arrival.update(pose, np.array([goal[0] - x, goal[1]]), round(t_s * 1e9))
+
+
+def test_the_goal_is_reached_within_half_the_tolerance_and_stays_reached_within_it() -> None:
+    """Within the 0.3 m tolerance the robot drives on to 0.15 m (a stop on the tolerance's edge hands the
+    whole pose error to the task), then the goal stays reached while the estimate jitters within 0.3 m."""
+    a = GoalArrival(SupervisorParams())
+    assert not _arrive(a, 9.5, 0.0)  # 0.5 m: outside
+    assert not _arrive(a, 9.72, 0.2)  # 0.28 m: within the tolerance, still getting closer
+    assert not _arrive(a, 9.8, 0.4)
+    assert _arrive(a, 9.86, 0.6)  # 0.14 m
+    assert _arrive(a, 9.75, 0.8)  # 0.25 m: the pose estimate jumped back, still reached
+    assert not _arrive(a, 9.65, 1.0)  # 0.35 m: out of the tolerance, not reached
+    assert not _arrive(a, 9.72, 1.2)
+    papers = GoalArrival(SupervisorParams(goal_arrive_frac=1.0))
+    assert not _arrive(papers, 9.5, 0.0) and _arrive(papers, 9.72, 0.2)  # the papers: the edge
+
+
+def test_a_goal_the_robot_cannot_get_closer_to_is_reached_after_the_settling_time() -> None:
+    """A goal beside an obstacle: the robot stops 0.25 m from it; no 2 cm of progress for 1 s reaches it.
+    A goal moved is a new goal."""
+    a = GoalArrival(SupervisorParams())
+    t = 0.0
+    for x in (9.70, 9.74, 9.75, 9.75, 9.751, 9.75):
+        assert not _arrive(a, x, t)
+        t += 0.2
+    assert _arrive(a, 9.75, 1.2)  # 1.0 s after 9.74 m, the last 2 cm of progress (0.26 m)
+    assert not _arrive(a, 9.75, 1.4, goal=(10.0, 0.1))  # the goal moved 10 cm: settle again

@@ -372,7 +372,7 @@ class NavigationStack:
         reflexive = p.selector or desired == "local"  # local navigation has no selector to switch off
         points = self.supervisor.obstacles(p.selector_margin_m) if reflexive else None
         if desired == "local" or done:
-            done = done or math.hypot(goal_rel[0], goal_rel[1]) <= p.supervisor.goal_tolerance_m
+            done = done or self.supervisor.at_goal(goal_rel)
         elif p.selector:
             assert points is not None
             active, why = self._selector.select(desired, (v, vy, w), points.near_xy, points.grid_xy,

@@ -253,6 +253,46 @@ class _Sensed:
     odom: Pose2D
 
 
+_GOAL_PROGRESS_M = 0.02
+"""Progress towards the goal that restarts ``GoalArrival``'s settling time [m]."""
+_GOAL_MOVED_M = 0.01
+"""A goal that moves this far in the world is a new goal for ``GoalArrival`` [m]."""
+
+
+class GoalArrival:
+    """Whether the goal is reached, tick by tick (``SupervisorParams.goal_arrive_frac``, ``goal_settle_s``):
+    within goal_arrive_frac x goal_tolerance_m of it at once; within goal_tolerance_m once the distance has
+    not shrunk by ``_GOAL_PROGRESS_M`` for goal_settle_s (the robot cannot get closer: a goal beside an
+    obstacle). Once reached it stays reached while the robot is within the tolerance of the same goal, so
+    the pose estimate's jitter about the inner radius does not restart the robot."""
+
+    def __init__(self, params: SupervisorParams) -> None:
+        self.params = params
+        self._goal: tuple[float, float] | None = None  # world goal of the last tick
+        self._best = math.inf  # the smallest distance within the tolerance so far
+        self._since_ns = 0  # when it last shrank by _GOAL_PROGRESS_M
+        self._reached = False
+
+    def update(self, pose: Pose2D, goal_xy: NDArray[np.float64], t_ns: int) -> bool:
+        """``goal_xy`` in the robot frame of ``pose`` at tick time ``t_ns``: is the goal reached?"""
+        p = self.params
+        c, s = dm.cos(pose.theta), dm.sin(pose.theta)
+        world = (pose.x + c * goal_xy[0] - s * goal_xy[1], pose.y + s * goal_xy[0] + c * goal_xy[1])
+        d = math.hypot(goal_xy[0], goal_xy[1])
+        moved = self._goal is None or math.hypot(world[0] - self._goal[0], world[1] - self._goal[1]) > (
+            _GOAL_MOVED_M)
+        self._goal = world
+        if moved or d > p.goal_tolerance_m:
+            self._best, self._reached = math.inf, False
+            if d > p.goal_tolerance_m:
+                return False
+        if d < self._best - _GOAL_PROGRESS_M:
+            self._best, self._since_ns = d, t_ns
+        settled = (t_ns - self._since_ns) * 1e-9 >= p.goal_settle_s
+        self._reached = self._reached or d <= p.goal_arrive_frac * p.goal_tolerance_m or settled
+        return self._reached
+
+
 class Supervisor:
     """GND's rules after the reactor and the reflexive loop, with the state they carry between ticks.
 
@@ -294,6 +334,7 @@ class Supervisor:
         self._prev_theta: float | None = None
         self._rotate_sign = 0.0  # turn direction of the previous tick's ROTATE (0: not rotating)
         self._looking = False  # the last reflexive check replaced the command by the blind side's turn first
+        self._arrival = GoalArrival(params)
 
     def observe(self, scan: Scan, pose: Pose2D, odom: Pose2D) -> None:
         """Start a tick: its scan (whose stamp is the tick's time), corrected pose and odometry pose. Times
@@ -353,10 +394,15 @@ class Supervisor:
                 w = 0.0
         if p.enforce_budgets and flags & Flag.REACTOR_OVER_BUDGET:
             v, vy, w = 0.0, 0.0, 0.0
-        if math.hypot(gnd.goal_xy[0], gnd.goal_xy[1]) <= p.goal_tolerance_m:
+        if self.at_goal(gnd.goal_xy):
             mode, v, vy, w = Mode.GOAL, 0.0, 0.0, 0.0
             flags |= Flag.GOAL_REACHED
         return mode, v, vy, w, flags, unreachable
+
+    def at_goal(self, goal_xy: NDArray[np.float64]) -> bool:
+        """Whether this tick's goal (robot frame) is reached (``GoalArrival``); once per tick."""
+        s = self._now()
+        return self._arrival.update(s.pose, goal_xy, s.scan.t_ns)
 
     def _unreachable(self, no_way: bool, pose: Pose2D) -> bool:
         """True once, for unreachable_ticks in a row, the tick has had no way to the goal (``GndGoal``):

@@ -84,7 +84,13 @@ class SupervisorParams:
             result, so replays are deterministic; True applies the papers' exception path (a planner over
             budget counts as a planner failure, a reactor over budget stops the vehicle for the tick).
         rotate_w_frac: turn rate of ROTATE, as a fraction of wmax (**choice**: 0.5).
-        goal_tolerance_m: distance at which the goal counts as reached.
+        goal_tolerance_m: distance within which the goal counts as reached (the task's tolerance).
+        goal_arrive_frac, goal_settle_s: when, within the tolerance, the robot stops (``supervision.
+            GoalArrival``): at once within goal_arrive_frac x goal_tolerance_m, else once its distance has
+            not shrunk by 2 cm for goal_settle_s (a goal beside an obstacle). **Choice**: 0.5 and 1 s. The
+            papers stop at the tolerance's edge, which hands the whole pose error to the result: the
+            compact base at 0.5 m/s stopped believing it was 0.3 m from the goal and was 0.31 to 0.44 m
+            from it in 15 of 150 obstacle-field runs. 1.0 is the papers' rule.
         stale_scan_s: a scan older than this at tick time (gap to the previous scan) stops the robot.
         reaction_s: time the command is held before braking starts in the swept-area check (**choice**:
             0.3 s, more than a scan period of both presets).
@@ -147,6 +153,8 @@ class SupervisorParams:
     enforce_budgets: bool = False
     rotate_w_frac: float = 0.5
     goal_tolerance_m: float = 0.3
+    goal_arrive_frac: float = 0.5
+    goal_settle_s: float = 1.0
     stale_scan_s: float = 1.0
     reaction_s: float = 0.3
     emergency_margin_m: float = 0.02
