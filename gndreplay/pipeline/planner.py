@@ -150,15 +150,15 @@ class Planner(Protocol):
 
     def plan(
         self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike,
-        offset_rc: tuple[int, int] | None = None, avoid: NDArray[np.bool_] | None = None,
+        offset_rc: tuple[int, int] | None = None,
     ) -> PlanResult:
         """Plan on the robot-centred grid (UNKNOWN / FREE / OCCUPIED cells) from the robot cell to the goal
         (corner coordinates, see ``nf1.plan``). ``offset_rc``: the world cell of grid cell (0, 0), given by a
         caller that plans on one grid re-centred by whole cells tick after tick, so the planner may follow
         its C-space incrementally (``cspace.CSpaceTracker``); None computes it afresh. Optional: the stack
         passes it only to planners registered with ``follows_grid`` (``planners.PlannerSpec``).
-        ``avoid``: cells whose steps cost ``RouteParams.avoid_cost`` (``AvoidMarks``; None: none); a
-        planner may plan without them (the tunnel planner does)."""
+        A planner registered with ``avoids`` also takes ``avoid``: (H, W) bool, the cells whose steps
+        cost ``RouteParams.avoid_cost`` (``AvoidMarks``; None: none)."""
         ...
 
 

@@ -61,12 +61,15 @@ class PlannerSpec:
             and the grid's side in cells (``stack.warm_up``).
         follows_grid: the planner's ``plan`` takes ``offset_rc``, the grid's world cell, and follows its
             C-space from tick to tick (``planner.Planner``); a planner without it is asked without it.
+        avoids: the planner's ``plan`` takes ``avoid``, the cells of routes the robot was trapped on
+            (``planner.AvoidMarks``); a planner without it plans without them.
     """
 
     section: str
     build: Callable[[Any, PlannerGeometry], Planner]
     warm_up: Callable[[Any, int], None] = _no_warm_up
     follows_grid: bool = False
+    avoids: bool = False
 
 
 def _nf1(settings: Nf1Params, geometry: PlannerGeometry) -> Planner:
@@ -102,7 +105,7 @@ def _warm_up_nf1(settings: Nf1Params, size_cells: int) -> None:
 
 
 PLANNERS: dict[str, PlannerSpec] = {
-    "nf1": PlannerSpec("nf1", _nf1, _warm_up_nf1, follows_grid=True),
+    "nf1": PlannerSpec("nf1", _nf1, _warm_up_nf1, follows_grid=True, avoids=True),
     "tunnel": PlannerSpec("tunnel", _tunnel, _warm_up_tunnel, follows_grid=True),
 }
 """Planner kinds (``[planner] kind``, ``--planner``) and how each is made."""

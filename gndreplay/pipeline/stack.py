@@ -15,7 +15,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -237,6 +237,7 @@ class NavigationStack:
         self.grid = RobotCentredGrid(params.grid)
         self._planner = make_planner(params)
         self._planner_follows_grid = PLANNERS[params.planner.kind].follows_grid
+        self._planner_avoids = PLANNERS[params.planner.kind].avoids
         self._avoid = AvoidMarks(params.planner, cell_m=params.grid.cell_m,
                                  radius_m=params.robot.inner_radius_m)
         self.supervisor = Supervisor(params.robot, params.supervisor, self.grid)
@@ -324,7 +325,8 @@ class NavigationStack:
         )
         verdict = self.supervisor.supervise(proposal)
         timings["supervisor"] = _ms(t0)
-        if verdict.flags & Flag.TRAP_DETECTED and planned.ok and p.planner.avoid_cost != 1.0:
+        if verdict.flags & Flag.TRAP_DETECTED and planned.ok and self._planner_avoids and (
+                p.planner.avoid_cost != 1.0):
             self._avoid.mark(planned, self.grid.offset_cells, scan.t_ns)
         path = planned.waypoints_cells
         path_xy = self.grid.cells_to_world(path) if path.shape[0] else np.zeros((0, 2))
@@ -477,11 +479,12 @@ class NavigationStack:
         """The planner on this tick's grid, with the routes of recent traps to avoid (``AvoidMarks``)."""
         start = self.grid.robot_cell(pose)
         goal_rc = self.grid.world_to_cell_float(goal[None, :])[0]
-        offset = self.grid.offset_cells
-        avoid = self._avoid.mask(self.grid.cells.shape, offset, t_ns) if self._avoid else None
+        kw: dict[str, Any] = {}
         if self._planner_follows_grid:
-            return self._planner.plan(self.grid.cells, start, goal_rc, offset_rc=offset, avoid=avoid)
-        return self._planner.plan(self.grid.cells, start, goal_rc, avoid=avoid)
+            kw["offset_rc"] = self.grid.offset_cells
+        if self._planner_avoids and self._avoid:
+            kw["avoid"] = self._avoid.mask(self.grid.cells.shape, self.grid.offset_cells, t_ns)
+        return self._planner.plan(self.grid.cells, start, goal_rc, **kw)
 
     def _reactor_target(
         self, pose: Pose2D, goal: NDArray[np.float64], planned: PlanResult

@@ -863,10 +863,8 @@ class TunnelPlanner:
 
     def plan(
         self, grid_cells: NDArray[np.uint8], start_rc: tuple[int, int], goal_rc_float: ArrayLike,
-        offset_rc: tuple[int, int] | None = None, avoid: NDArray[np.bool_] | None = None,
+        offset_rc: tuple[int, int] | None = None,
     ) -> PlanResult:
-        """``planner.Planner.plan``; the tunnel search plans without ``avoid`` (its tunnels have no step
-        costs)."""
         free = None if offset_rc is None else self._cspace.free(grid_cells, offset_rc)
         f, clear = _spaces(grid_cells, self.cell_m, self.radius_m, self.unknown_is_free, self.lookahead_m,
                            free)
