@@ -123,7 +123,7 @@ def main() -> None:
 
 def _by_passage(results: list[dict[str, Any]], width_m: float) -> None:
     """Outcomes per band of the field's narrowest passage less the robot's width (the play it leaves)."""
-    bands = [(0.0, 0.1), (0.1, 0.2), (0.2, math.inf)]
+    bands = [(-math.inf, 0.1), (0.1, 0.2), (0.2, math.inf)]  # a passage may measure a little below the width
     print(f"\n| play: narrowest passage - robot width ({width_m:g} m) | runs | success | time-outs "
           f"| goals missed | collisions |")
     print("|---|---|---|---|---|---|")
@@ -131,7 +131,8 @@ def _by_passage(results: list[dict[str, Any]], width_m: float) -> None:
         rows = [r for r in results if r["passage"] is not None and lo <= r["passage"] - width_m < hi]
         n = {k: sum(r["outcome"] == k for r in rows)
              for k in ("success", "timeout", "goal_missed", "collision")}
-        name = f"{lo:g} to {hi:g} m" if math.isfinite(hi) else f"{lo:g} m or more"
+        name = (f"{lo:g} m or more" if not math.isfinite(hi) else f"under {hi:g} m" if not math.isfinite(lo)
+                else f"{lo:g} to {hi:g} m")
         print(f"| {name} | {len(rows)} | {n['success']} | {n['timeout']} | {n['goal_missed']} "
               f"| {n['collision']} |")
 
