@@ -427,18 +427,3 @@ def test_other_sector_counts() -> None:
     res = nd_step(pts, (5.0, 0.0), XR4000_ROBOT, p)
     assert res.situation is Situation.LS2 and res.direction_rad == pytest.approx(-math.pi / 6)
 
-
-@pytest.mark.parametrize("centre", [0.1, 0.15, 0.2])
-def test_a_circle_in_a_narrow_passage_pursues_its_axis_at_a_floor_speed(centre: float) -> None:
-    """The XR4000 (0.6 m) before a passage 0.7 m wide whose axis lies ``centre`` to its left (CMU Wean
-    Hall's narrowing into its north hall): LS2, the direction is the pursuit of the axis one robot length
-    ahead, and the speed at least a quarter of vmax. The LS2 law weighs both sides' clearance ratios, a
-    few centimetres each there: it swung by tens of degrees, every sideways motion was refused by the
-    reflexive check, and the robot turned on the spot for the rest of its 900 s."""
-    robot = XR4000_ROBOT
-    left, right = centre + 0.35, centre - 0.35
-    pts = np.vstack([wall((0.2, left), (1.5, left)), wall((0.2, right), (1.5, right))])
-    res = nd_step(pts, (5.0, centre), robot)
-    assert res.situation is Situation.LS2
-    assert res.direction_rad == pytest.approx(math.atan2(centre, robot.front_m + robot.rear_m), abs=0.02)
-    assert math.hypot(res.v_mps, res.vy_mps) >= 0.25 * robot.vmax_mps - 1e-9

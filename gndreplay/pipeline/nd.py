@@ -64,15 +64,9 @@ Differences from ALGORITHMS.md / the released code, and why
       round each tick as it turned and dithered in place.
     * Not ported (the supervisor owns them): the code's front emergency stop, and the rectangular robot's
       rear "cutting" correction, which needs the previous velocities.
-    * A narrow passage in LS2 (any robot): when a left / right pair of obstacle points narrower than
-      W + Ds / 2 lies on the way, the direction pursues the passage axis one robot length ahead
-      (``_follow_axis``) and the speed is at least ``_PASSAGE_V_FRAC * vmax``. The LS2 law weighs the two
-      sides' clearance ratios; with both a few centimetres (the XR4000 in a 0.8 m narrowing) it swung by
-      tens of degrees on a centimetre's difference, every sideways motion was refused by the reflexive
-      check and the robot turned on the spot; the ratio-scaled speed was a crawl.
 
 Rectangular differential chair (a simple stand-in for the shape / kinematics abstraction
-of the wheelchair paper's reference [18]; the circle and the holonomic base only as above)
+of the wheelchair paper's reference [18]; the circle and the holonomic base are unchanged)
     * Passages: while the region direction is ahead, when a left / right pair of obstacle points narrower
       than W + 2 Ds lies on the way (the region direction crosses it) or around the body, the direction
       pursues the passage axis (``_passage_axis``, ``_follow_axis``): the axle reaches the axis, and the
@@ -167,9 +161,6 @@ _REVERSE_FRAC = 0.3
 # side clearance / Ds, 0.02 m/s in a 0.85 m door for the 0.7 m chair (0.2 m in 10 s: a stall); the sweep
 # of the footprint along the arc (``_admissible_drive``) and the reflexive check keep the chair off the jambs
 _PASSAGE_V_FRAC = 0.25
-# a passage narrower than W + this * Ds is followed along its axis by any robot in LS2: the LS2 law weighs
-# both sides' clearance ratios, which there are both below a quarter (``nd_step``)
-_LS2_PASSAGE_DS_FRAC = 1.0
 # the staged approach to a narrow passage (``_stage_direction``): the staging point lies the front corners'
 # swing radius plus _STAGE_CLEAR_M before the passage (a turn in place there sweeps free of its wall); the
 # chair heads for it while more than _STAGE_OFF_M off the axis, and aligns in place within _ALIGN_RAD
@@ -1002,19 +993,14 @@ def nd_step(obstacles_xy: ArrayLike, goal_xy: ArrayLike, robot: RobotConfig,
 
     axis: tuple[float, float, float, float] | None = None
     align = False
-    rect_diff = robot.shape == "rectangle" and robot.drive == "differential"
-    if (rect_diff or situation is Situation.LS2) and abs(beta) <= _HALF_PI and (
+    if robot.shape == "rectangle" and robot.drive == "differential" and abs(beta) <= _HALF_PI and (
             region.kind is not _Kind.GOAL or goal_r > robot.front_m):  # a goal within reach: steer to it
-        # the chair: every passage narrower than W + 2 Ds; any robot: one where the LS2 law is ill-posed
-        play = 2.0 * params.security_m if rect_diff else _LS2_PASSAGE_DS_FRAC * params.security_m
         axis = _passage_axis(dist, ang, left_side, beta,
-                             min_width_m=geo.gap_m, max_width_m=geo.gap_m + play,
+                             min_width_m=geo.gap_m, max_width_m=geo.gap_m + 2.0 * params.security_m,
                              reach_m=robot.front_m + robot.rear_m + params.security_m,
                              behind_m=robot.rear_m + 0.5 * params.security_m, front_m=robot.front_m)
-        if axis is not None and rect_diff:
+        if axis is not None:
             theta, align = _stage_direction(axis, robot, dist, ang, 0.5 * geo.gap_m + params.security_m)
-        elif axis is not None:
-            theta = _follow_axis(axis, robot.front_m + robot.rear_m)
     v_nd = robot.vmax_mps * min(c_l, c_r)
     if axis is not None:  # along a passage the swept-footprint checks, not the side clearance, bound it
         v_nd = max(v_nd, _PASSAGE_V_FRAC * robot.vmax_mps)
