@@ -42,7 +42,7 @@ STALL_BOUND_S = 10.0
 
 def door_width_m(robot: RobotConfig, spare_m: float) -> float:
     """The robot's width (a circle's diameter) plus ``spare_m``."""
-    return (2.0 * robot.radius_m if robot.shape == "circle" else robot.width_m) + spare_m
+    return 2.0 * robot.inner_radius_m + spare_m
 
 
 def door_case(angle_deg: float, offset_m: float, robot: RobotConfig, *, spare_m: float = 0.15,

@@ -118,7 +118,7 @@ def main() -> None:
           f"{_f(statistics.fmean(times) if times else None, 1)} s; mean optimal path "
           f"{_f(statistics.fmean(r['optimal'] for r in results if r['optimal']), 2)} m")
 
-    _by_passage(results, cfg.robot.width_m if cfg.robot.shape == "rectangle" else 2.0 * cfg.robot.radius_m)
+    _by_passage(results, 2.0 * cfg.robot.inner_radius_m)  # a rectangle's width, a circle's diameter
 
 
 def _by_passage(results: list[dict[str, Any]], width_m: float) -> None:

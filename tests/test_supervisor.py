@@ -552,8 +552,7 @@ def test_arc_poses_span_the_horizon_evenly() -> None:
 
 def _arrive(arrival: GoalArrival, x: float, t_s: float, goal: tuple[float, float] = (10.0, 0.0)) -> bool:
     """The robot at (x, 0) heading +x, the goal ``goal`` in the world, at ``t_s``."""
-    pose = Pose2D(x, 0.0, 0.0)
-    return arrival.update(pose, np.array([goal[0] - x, goal[1]]), round(t_s * 1e9))
+    return arrival.update(np.array([goal[0] - x, goal[1]]), goal, round(t_s * 1e9))
 
 
 def test_the_goal_is_reached_within_half_the_tolerance_and_stays_reached_within_it() -> None:

@@ -975,6 +975,19 @@ def plan(
         ValueError: bad array, robot cell outside the grid, non-finite goal, cell_m <= 0 or
             lookahead_m <= 0.
     """
+    f, start, g = _checked(free, start_rc, goal_rc_float, cell_m, lookahead_m)
+    masks = {name: None if a is None else _as_free(a) for name, a in (("unknown", unknown), ("avoid", avoid))}
+    for name, mask in masks.items():
+        if mask is not None and mask.shape != f.shape:
+            raise ValueError(f"{name} has shape {mask.shape}, free has {f.shape}")
+    costs = step_costs(masks["unknown"], params.unknown_cost, masks["avoid"], avoid_cost)
+    return _plan(f, start, g, costs, cell_m=cell_m, params=params, lookahead_m=lookahead_m)
+
+
+def _checked(
+    free: ArrayLike, start_rc: tuple[int, int], goal_rc_float: ArrayLike, cell_m: float, lookahead_m: float
+) -> tuple[NDArray[np.bool_], tuple[int, int], NDArray[np.float64]]:
+    """``plan``'s inputs checked: the C-contiguous free array, the robot cell, the goal as a (2,) array."""
     if not cell_m > 0.0:
         raise ValueError(f"cell_m must be > 0, got {cell_m!r}")
     if not lookahead_m > 0.0:
@@ -984,11 +997,14 @@ def plan(
     g = np.asarray(goal_rc_float, dtype=np.float64).reshape(2)
     if not np.all(np.isfinite(g)):
         raise ValueError(f"goal_rc_float must be finite, got {g.tolist()}")
-    masks = {name: None if a is None else _as_free(a) for name, a in (("unknown", unknown), ("avoid", avoid))}
-    for name, mask in masks.items():
-        if mask is not None and mask.shape != f.shape:
-            raise ValueError(f"{name} has shape {mask.shape}, free has {f.shape}")
-    costs = step_costs(masks["unknown"], params.unknown_cost, masks["avoid"], avoid_cost)
+    return f, start, g
+
+
+def _plan(
+    f: NDArray[np.bool_], start: tuple[int, int], g: NDArray[np.float64], costs: StepCosts | None, *,
+    cell_m: float, params: Nf1Params, lookahead_m: float,
+) -> PlanResult:
+    """``plan`` on checked inputs (``_checked``), with the wave's step costs."""
     diagonal = params.connectivity == 8
     if params.frontier_goal and not _inside(g, f.shape):
         goal_or_none, projected = _frontier_goal(f, start, g, params, cell_m, costs), True
@@ -1200,17 +1216,15 @@ class Nf1Planner:
         weighted = self.unknown_is_free and p.unknown_cost != 1.0
         unknown = (grid_cells == UNKNOWN) if weighted else None
         route = self.route
-        new = plan(free, start_rc, goal_rc_float, cell_m=self.cell_m, params=p,
-                   lookahead_m=route.lookahead_m, unknown=unknown, avoid=avoid, avoid_cost=route.avoid_cost)
-        goal = np.asarray(goal_rc_float, dtype=np.float64).reshape(2)
+        free, start, goal = _checked(free, start_rc, goal_rc_float, self.cell_m, route.lookahead_m)
+        costs = step_costs(unknown, p.unknown_cost, avoid, route.avoid_cost)  # the wave's and the routes'
+        new = _plan(free, start, goal, costs, cell_m=self.cell_m, params=p, lookahead_m=route.lookahead_m)
         held = self._held_route(goal, free.shape)
         self._held = None
         if not new.ok:
             return new
         out = new
         if held is not None and (route.route_keep_ratio > 0.0 or route.route_keep_m > 0.0):
-            start = (int(start_rc[0]), int(start_rc[1]))
-            costs = step_costs(unknown, p.unknown_cost, avoid, route.avoid_cost)
             out = keep_route(free, start, goal, new, held, cell_m=self.cell_m, route=route, costs=costs)
             if out is new and _rejoin(free, start, held) is None:
                 # the held route is blocked: keep it if it clears every obstacle by one cell less

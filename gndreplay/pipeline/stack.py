@@ -321,7 +321,8 @@ class NavigationStack:
         t0 = time.perf_counter_ns()
         proposal = Proposal(
             mode, Command(scan.t_ns, nd.v_mps, nd.w_radps, nd.vy_mps), flags,
-            want_rad=dm.atan2(target[1], target[0]), gnd=GndGoal(goal_rel, no_way),
+            want_rad=dm.atan2(target[1], target[0]),
+            gnd=GndGoal(goal_rel, no_way, (float(goal[0]), float(goal[1]))),
         )
         verdict = self.supervisor.supervise(proposal)
         timings["supervisor"] = _ms(t0)
@@ -374,7 +375,7 @@ class NavigationStack:
         reflexive = p.selector or desired == "local"  # local navigation has no selector to switch off
         points = self.supervisor.obstacles(p.selector_margin_m) if reflexive else None
         if desired == "local" or done:
-            done = done or self.supervisor.at_goal(goal_rel)
+            done = done or self.supervisor.at_goal(goal_rel, (float(goal[0]), float(goal[1])))
         elif p.selector:
             assert points is not None
             active, why = self._selector.select(desired, (v, vy, w), points.near_xy, points.grid_xy,

@@ -78,10 +78,12 @@ class GndGoal:
         goal_xy: the goal in the robot frame (ROTATE turns towards it; within goal_tolerance_m: GOAL).
         no_way: the planner found no path to the goal and ND+ towards the goal itself did not connect it
             either (``NavigationStack._no_way``): counted towards holding the goal unreachable.
+        world_xy: the goal in the corrected world frame (which goal it is, ``GoalArrival``).
     """
 
     goal_xy: NDArray[np.float64]
     no_way: bool
+    world_xy: tuple[float, float]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -273,11 +275,10 @@ class GoalArrival:
         self._since_ns = 0  # when it last shrank by _GOAL_PROGRESS_M
         self._reached = False
 
-    def update(self, pose: Pose2D, goal_xy: NDArray[np.float64], t_ns: int) -> bool:
-        """``goal_xy`` in the robot frame of ``pose`` at tick time ``t_ns``: is the goal reached?"""
+    def update(self, goal_xy: NDArray[np.float64], world: tuple[float, float], t_ns: int) -> bool:
+        """The goal at ``goal_xy`` in the robot frame, ``world`` in the world, at tick time ``t_ns``: is it
+        reached?"""
         p = self.params
-        c, s = dm.cos(pose.theta), dm.sin(pose.theta)
-        world = (pose.x + c * goal_xy[0] - s * goal_xy[1], pose.y + s * goal_xy[0] + c * goal_xy[1])
         d = math.hypot(goal_xy[0], goal_xy[1])
         moved = self._goal is None or math.hypot(world[0] - self._goal[0], world[1] - self._goal[1]) > (
             _GOAL_MOVED_M)
@@ -394,15 +395,15 @@ class Supervisor:
                 w = 0.0
         if p.enforce_budgets and flags & Flag.REACTOR_OVER_BUDGET:
             v, vy, w = 0.0, 0.0, 0.0
-        if self.at_goal(gnd.goal_xy):
+        if self.at_goal(gnd.goal_xy, gnd.world_xy):
             mode, v, vy, w = Mode.GOAL, 0.0, 0.0, 0.0
             flags |= Flag.GOAL_REACHED
         return mode, v, vy, w, flags, unreachable
 
-    def at_goal(self, goal_xy: NDArray[np.float64]) -> bool:
-        """Whether this tick's goal (robot frame) is reached (``GoalArrival``); once per tick."""
-        s = self._now()
-        return self._arrival.update(s.pose, goal_xy, s.scan.t_ns)
+    def at_goal(self, goal_xy: NDArray[np.float64], world_xy: tuple[float, float]) -> bool:
+        """Whether this tick's goal (``goal_xy`` in the robot frame, ``world_xy`` in the world) is reached
+        (``GoalArrival``); once per tick."""
+        return self._arrival.update(goal_xy, world_xy, self._now().scan.t_ns)
 
     def _unreachable(self, no_way: bool, pose: Pose2D) -> bool:
         """True once, for unreachable_ticks in a row, the tick has had no way to the goal (``GndGoal``):

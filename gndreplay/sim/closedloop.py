@@ -392,6 +392,7 @@ class ClosedLoop:
         self._last_exact: tuple[int, float, tuple[Any, ...]] | None = None
         self._breaks = set(self.world.breaks_ns)
         self._optimal: OptimalPath | None = None
+        self._static: Shapes | None = None
 
     # ---- the two halves of the loop -------------------------------------------------------------------
 
@@ -708,8 +709,7 @@ class ClosedLoop:
         reflexive check's margin on each side (no robot with those margins crosses it, whatever the stack
         does)."""
         width = narrowest_passage_m(self._static_world(), (self.spec.start[0], self.spec.start[1]), self.goal)
-        robot = self.cfg.robot
-        body = 2.0 * robot.radius_m if robot.shape == "circle" else robot.width_m
+        body = 2.0 * self.cfg.robot.inner_radius_m  # a rectangle's width, a circle's diameter
         need = body + 2.0 * self.cfg.supervisor.emergency_margin_m
         if width is None or width >= need:
             return width, None
@@ -718,8 +718,11 @@ class ClosedLoop:
                        f"{self.cfg.supervisor.emergency_margin_m:g} m on each side, so it needs {need:.2f} m")
 
     def _static_world(self) -> Shapes:
-        """The static world at t = 0: every element present then, door leaves as they stand, no mover."""
-        return static_shapes(self.spec.elements, 0.0, np.zeros(len(self.spec.elements)))
+        """The static world at t = 0: every element present then, door leaves as they stand, no mover
+        (built once: the optimal path and the narrowest passage both read it)."""
+        if self._static is None:
+            self._static = static_shapes(self.spec.elements, 0.0, np.zeros(len(self.spec.elements)))
+        return self._static
 
     def result(self) -> dict[str, Any]:
         """result.json: a pure function of (scenario, config, seed) with a fixed latency.

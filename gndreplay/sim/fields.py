@@ -28,7 +28,7 @@ from ..errors import ConfigError
 from ..fsutil import check_output_dir, resolve_output_dir, staging_dir
 from ..io.userfile import check_number
 from ..robot import RobotConfig
-from .geometry import Shapes
+from .geometry import Shapes, wall_vertices
 from .scenario import check_seed
 from .score import optimal_path
 
@@ -99,8 +99,6 @@ def _walls() -> dict[str, tuple[float, float, float, float]]:
 
 
 def _shapes(occupied: NDArray[np.bool_]) -> Shapes:
-    from .geometry import wall_vertices
-
     walls = [wall_vertices(*w, _WALL_M) for w in _walls().values()]
     circles = [tuple(c) for c in _cylinders(occupied).tolist()]
     return Shapes.build(walls, list(range(len(walls))), circles,
